@@ -1,0 +1,146 @@
+#include "bench/bench.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include "engine/camera.h"
+#include "engine/render.h"
+#include "engine/sampler.h"
+#include "engine/sampling.h"
+#include "engine/scene.h"
+
+namespace rf {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// A sphere of lat-long triangles, radius r at c, with a ripple so the BVH is not trivial.
+Mesh make_sphere(Vec3 c, float r, int n_theta, int n_phi, uint32_t material) {
+  Mesh m;
+  m.name = "generated-sphere";
+  m.material = material;
+  for (int i = 0; i <= n_theta; ++i) {
+    float th = kPi * float(i) / float(n_theta);
+    for (int j = 0; j < n_phi; ++j) {
+      float ph = 2 * kPi * float(j) / float(n_phi);
+      float rr = r * (1.0f + 0.03f * std::sin(9 * th) * std::sin(11 * ph));
+      m.positions.push_back(c + rr * Vec3(std::sin(th) * std::cos(ph), std::cos(th),
+                                          std::sin(th) * std::sin(ph)));
+    }
+  }
+  for (int i = 0; i < n_theta; ++i)
+    for (int j = 0; j < n_phi; ++j) {
+      uint32_t a = uint32_t(i * n_phi + j), b = uint32_t(i * n_phi + (j + 1) % n_phi);
+      uint32_t c2 = a + uint32_t(n_phi), d = b + uint32_t(n_phi);
+      if (i != 0) m.indices.insert(m.indices.end(), {a, b, c2});
+      if (i != n_theta - 1) m.indices.insert(m.indices.end(), {b, d, c2});
+    }
+  return m;
+}
+
+// Bare Embree loop: per pixel sample a camera ray and, where it hits, one cosine-distributed
+// bounce ray from the hit point; closest-hit queries only, no shading.
+double bare_embree_rays_per_second(const Renderer& r, int spp, uint64_t& rays_out) {
+  const Scene& s = r.scene();
+  PinholeCamera cam(s.camera, s.film.width, s.film.height);
+  std::atomic<uint64_t> rays{0};
+  auto t0 = Clock::now();
+  tbb::parallel_for(tbb::blocked_range<int>(0, s.film.height), [&](const auto& range) {
+    IndependentSampler sampler;
+    uint64_t local = 0;
+    for (int y = range.begin(); y < range.end(); ++y)
+      for (int x = 0; x < s.film.width; ++x)
+        for (int k = 0; k < spp; ++k) {
+          sampler.start_camera_sample(1, 0, 0, x, y, uint64_t(k));
+          Vec2 u = sampler.get_2d();
+          Ray ray = cam.generate_ray(float(x) + u.x, float(y) + u.y);
+          SurfaceHit hit;
+          ++local;
+          if (!r.accel().intersect(ray, hit)) continue;
+          Frame f = Frame::from_normal(dot(hit.ng, ray.d) < 0 ? hit.ng : -hit.ng);
+          Ray bounce = r.accel().spawn(hit, f.to_world(sample_cosine_hemisphere(sampler.get_2d())));
+          ++local;
+          r.accel().intersect(bounce, hit);
+        }
+    rays += local;
+  });
+  double secs = seconds_since(t0);
+  rays_out = rays;
+  return double(rays) / secs;
+}
+
+void bench_scene(const std::string& label, const Scene& scene, int spp) {
+  auto tb = Clock::now();
+  Renderer r(scene);
+  double build_s = seconds_since(tb);
+  size_t tris = 0;
+  for (const Mesh& m : scene.meshes) tris += m.triangle_count();
+
+  uint64_t bare_rays = 0;
+  double bare = bare_embree_rays_per_second(r, spp, bare_rays);
+
+  auto t0 = Clock::now();
+  Rect full{0, 0, scene.film.width, scene.film.height};
+  SampleBuffer b = r.render_task(full, 0, /*parallel=*/true);
+  double secs = seconds_since(t0);
+  double samples = double(b.total_samples());
+  double path_rays = double(b.rays) / secs;
+  std::printf(
+      "%-22s %9zu tris  BVH %.2f s | path: %8.3f Msamples/s %8.2f Mrays/s | bare Embree: "
+      "%8.2f Mrays/s | ratio %.3f\n",
+      label.c_str(), tris, build_s, samples / secs / 1e6, path_rays / 1e6, bare / 1e6,
+      path_rays / bare);
+}
+
+}  // namespace
+
+void add_bench_options(CLI::App& app, BenchOptions& o) {
+  app.add_option("--scene", o.scenes, "scene files to benchmark (default: scenes/cornell-box)");
+  app.add_option("--spp", o.spp, "samples per pixel per measurement");
+  app.add_option("--res", o.res, "square resolution");
+  app.add_option("--triangles", o.triangles, "triangles of the generated scene");
+  app.add_flag("!--no-generated", o.generated, "skip the generated scene");
+  app.add_flag("--quick", o.quick, "a tiny run that only checks the benchmark works");
+}
+
+int run_bench(const BenchOptions& in) {
+  BenchOptions o = in;
+  if (o.quick) o.spp = 1, o.res = 32, o.triangles = 20000;
+  std::vector<std::string> scenes = o.scenes;
+  std::string cornell = std::string(RAYFARM_SOURCE_DIR) + "/scenes/cornell-box/scene.json";
+  if (scenes.empty()) scenes.push_back(cornell);
+  std::printf("rayfarm bench: %d threads, %dx%d, %d spp, max depth from each scene\n",
+              tbb::this_task_arena::max_concurrency(), o.res, o.res, o.spp);
+  std::printf("(rays/s: path counts closest-hit and shadow rays; bare Embree casts a camera ray "
+              "and one diffuse bounce per sample, closest-hit only)\n");
+  SceneOverrides ov;
+  ov.width = ov.height = o.res;
+  ov.spp = uint64_t(o.spp);
+  ov.passes = 1;
+  for (const std::string& path : scenes) {
+    Scene s = load_scene(path, ov);
+    bench_scene(std::filesystem::path(path).parent_path().filename().string(), s, o.spp);
+  }
+  if (o.generated) {
+    Scene s = load_scene(cornell, ov);
+    // n_theta * n_phi * 2 - 2 * n_phi triangles, n_phi = 2 n_theta.
+    int n_theta = std::max(4, int(std::sqrt(double(o.triangles) / 4.0)));
+    s.meshes.push_back(make_sphere({0.0f, 0.8f, 0.3f}, 0.45f, n_theta, 2 * n_theta, s.meshes[0].material));
+    s.digest = "generated";
+    bench_scene("generated (cornell+sphere)", s, o.spp);
+  }
+  return 0;
+}
+
+}  // namespace rf

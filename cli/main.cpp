@@ -1,0 +1,251 @@
+// The rayfarm command line: render, merge, bench (the farm commands come with the coordinator).
+#include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "bench/bench.h"
+#include "engine/film.h"
+#include "engine/image_io.h"
+#include "engine/local_render.h"
+#include "engine/render.h"
+#include "engine/scene.h"
+
+namespace {
+
+// Thrown for bad command-line values that CLI11 cannot check by itself.
+struct UsageError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+std::pair<int, int> parse_resolution(const std::string& s) {
+  int w = 0, h = 0;
+  char x = 0, extra = 0;
+  if (std::sscanf(s.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
+    throw UsageError("--res: expected WIDTHxHEIGHT (e.g. 640x480), got '" + s + "'");
+  return {w, h};
+}
+
+std::pair<uint32_t, uint32_t> parse_pass_range(const std::string& s, uint32_t passes) {
+  unsigned a = 0, b = 0;
+  char dash = 0, extra = 0;
+  int n = std::sscanf(s.c_str(), "%u%c%u%c", &a, &dash, &b, &extra);
+  if (n == 1) b = a;
+  else if (n != 3 || dash != '-')
+    throw UsageError("--pass-range: expected FIRST-LAST (inclusive, e.g. 0-7), got '" + s + "'");
+  if (a > b) throw UsageError("--pass-range: first pass " + std::to_string(a) + " is after last " +
+                              std::to_string(b));
+  if (b >= passes)
+    throw UsageError("--pass-range: pass " + std::to_string(b) + " does not exist (the job has " +
+                     std::to_string(passes) + " passes, 0-" + std::to_string(passes - 1) + ")");
+  return {a, b + 1};
+}
+
+std::string human(double v) {
+  char buf[32];
+  if (v >= 1e9) std::snprintf(buf, sizeof buf, "%.2f G", v / 1e9);
+  else if (v >= 1e6) std::snprintf(buf, sizeof buf, "%.2f M", v / 1e6);
+  else if (v >= 1e3) std::snprintf(buf, sizeof buf, "%.2f k", v / 1e3);
+  else std::snprintf(buf, sizeof buf, "%.0f ", v);
+  return buf;
+}
+
+// Progress on stderr: a bar redrawn in place on a terminal, plain lines every 5 s otherwise.
+class ProgressPrinter {
+ public:
+  explicit ProgressPrinter(bool quiet) : quiet_(quiet), tty_(::isatty(2)) {}
+  void operator()(const rf::LocalProgress& p) {
+    if (quiet_ || p.tasks_total == 0) return;
+    double frac = double(p.tasks_done) / double(p.tasks_total);
+    if (tty_) {
+      int width = 30, filled = int(frac * width);
+      std::string bar(size_t(filled), '#');
+      bar.append(size_t(width - filled), '.');
+      std::fprintf(stderr, "\r[%s] %5.1f%%  passes %u/%u  relMSE %.3g  %.1f s   ", bar.c_str(),
+                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+      if (p.tasks_done == p.tasks_total) std::fprintf(stderr, "\n");
+    } else if (p.seconds - last_line_ >= 5.0 || p.tasks_done == p.tasks_total) {
+      if (p.tasks_done == p.tasks_total && done_printed_) return;
+      done_printed_ = p.tasks_done == p.tasks_total;
+      last_line_ = p.seconds;
+      std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s\n", 100 * frac,
+                   p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+    }
+  }
+
+ private:
+  bool quiet_, tty_;
+  double last_line_ = -1e9;
+  bool done_printed_ = false;
+};
+
+std::string png_path_for(const std::string& exr) {
+  std::filesystem::path p(exr);
+  p.replace_extension(".png");
+  return p.string();
+}
+
+void warn_nonfinite(const rf::SampleBuffer& b) {
+  if (b.nonfinite_samples)
+    spdlog::warn("{} NaN/Inf samples were dropped (counted as zero radiance)", b.nonfinite_samples);
+}
+
+void print_summary(const rf::SampleBuffer& frame, double seconds, uint64_t rays) {
+  double pixels = double(frame.rect.area());
+  double samples = double(frame.total_samples());
+  std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n",
+              pixels > 0 ? samples / pixels : 0.0, seconds, human(samples / seconds).c_str(),
+              human(double(rays) / seconds).c_str(), frame.rel_mse(), frame.header.passes.count());
+}
+
+struct RenderArgs {
+  std::string scene, output, partial, pass_range, res, integrator, filter;
+  std::optional<uint64_t> spp, seed;
+  std::optional<uint32_t> passes, frame;
+  std::optional<int> max_depth;
+  std::optional<double> noise_target;
+  int threads = 0, tile = 32;
+  float exposure = 0;
+  bool quiet = false;
+};
+
+int cmd_render(const RenderArgs& a) {
+  rf::SceneOverrides ov;
+  ov.spp = a.spp;
+  ov.passes = a.passes;
+  ov.seed = a.seed;
+  ov.frame = a.frame;
+  ov.max_depth = a.max_depth;
+  ov.noise_target = a.noise_target;
+  if (!a.integrator.empty()) ov.integrator = a.integrator;
+  if (!a.filter.empty()) ov.filter = a.filter;
+  if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
+  if (a.output.empty() && a.partial.empty()) throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
+  if (!a.partial.empty() && a.pass_range.empty())
+    throw UsageError("--partial needs --pass-range FIRST-LAST");
+
+  rf::Scene scene = rf::load_scene(a.scene, ov);
+  rf::LocalRenderOptions opt;
+  opt.tile_size = a.tile;
+  if (!a.pass_range.empty()) {
+    auto [p0, p1] = parse_pass_range(a.pass_range, scene.render.passes);
+    opt.first_pass = p0;
+    opt.pass_count = p1 - p0;
+    if (scene.render.noise_target > 0 && !a.partial.empty())
+      spdlog::warn("--noise-target is ignored for a partial render: the merge decides");
+  }
+  if (a.partial.empty()) opt.noise_target = scene.render.noise_target;
+  ProgressPrinter printer(a.quiet);
+  opt.progress = [&](const rf::LocalProgress& p) { printer(p); };
+
+  rf::Renderer renderer(scene);
+  rf::LocalRenderResult res = rf::render_local(renderer, opt);
+  warn_nonfinite(res.frame);
+  if (!a.partial.empty()) {
+    rf::write_buffer_file(a.partial, res.frame);
+    std::fprintf(stderr, "wrote %s (passes %s)\n", a.partial.c_str(),
+                 res.frame.header.passes.to_string().c_str());
+  }
+  if (!a.output.empty()) {
+    rf::write_exr(a.output, res.frame);
+    rf::write_png(png_path_for(a.output), res.frame, a.exposure);
+    std::fprintf(stderr, "wrote %s and %s\n", a.output.c_str(), png_path_for(a.output).c_str());
+  }
+  if (res.stopped_on_target)
+    std::fprintf(stderr, "noise target %.4g reached after %u of %u passes\n",
+                 scene.render.noise_target, res.passes_merged, scene.render.passes);
+  print_summary(res.frame, res.seconds, res.rays);
+  return 0;
+}
+
+int cmd_merge(const std::vector<std::string>& inputs, const std::string& output, float exposure) {
+  if (inputs.empty()) throw UsageError("merge: no input files");
+  rf::SampleBuffer acc = rf::read_buffer_file(inputs[0]);
+  for (size_t i = 1; i < inputs.size(); ++i) {
+    rf::SampleBuffer b = rf::read_buffer_file(inputs[i]);
+    try {
+      rf::merge_into(acc, b);
+    } catch (const rf::MergeError& e) {
+      throw rf::MergeError(inputs[i] + ": cannot merge into " + inputs[0] + " ...: " + e.what());
+    }
+  }
+  warn_nonfinite(acc);
+  std::string ext = std::filesystem::path(output).extension().string();
+  if (ext == ".rfb") {
+    rf::write_buffer_file(output, acc);
+  } else {
+    rf::write_exr(output, acc);
+    rf::write_png(png_path_for(output), acc, exposure);
+  }
+  std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
+               acc.header.passes.to_string().c_str(),
+               double(acc.total_samples()) / double(acc.rect.area()), acc.rel_mse(), output.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"rayfarm: a distributed batch renderer (render, merge, bench)"};
+  app.require_subcommand(1);
+  int threads = 0;
+  app.add_option("--threads", threads, "worker threads (default: all cores)");
+
+  RenderArgs ra;
+  auto* render = app.add_subcommand("render", "render a scene locally to EXR + PNG");
+  render->add_option("scene", ra.scene, "scene file (JSON)")->required();
+  render->add_option("-o,--output", ra.output, "output EXR (a PNG preview is written beside it)");
+  render->add_option("--spp", ra.spp, "samples per pixel (all passes)");
+  render->add_option("--passes", ra.passes, "number of passes (spp must be a multiple)");
+  render->add_option("--integrator", ra.integrator, "integrator name");
+  render->add_option("--seed", ra.seed, "job seed");
+  render->add_option("--frame", ra.frame, "frame number (selects the seed stream)");
+  render->add_option("--res", ra.res, "resolution WIDTHxHEIGHT");
+  render->add_option("--max-depth", ra.max_depth, "max scattering events");
+  render->add_option("--filter", ra.filter, "pixel filter (box)");
+  render->add_option("--threads", threads, "worker threads (default: all cores)");
+  render->add_option("--noise-target", ra.noise_target, "stop when relMSE <= this");
+  render->add_option("--pass-range", ra.pass_range, "render only passes FIRST-LAST (inclusive)");
+  render->add_option("--partial", ra.partial, "write the sample buffer (.rfb) of the pass range");
+  render->add_option("--tile-size", ra.tile, "tile size in pixels")->check(CLI::PositiveNumber);
+  render->add_option("--exposure", ra.exposure, "PNG exposure in stops");
+  render->add_flag("-q,--quiet", ra.quiet, "no progress output");
+
+  std::vector<std::string> merge_inputs;
+  std::string merge_output;
+  float merge_exposure = 0;
+  auto* merge = app.add_subcommand("merge", "merge partial sample buffers (.rfb) into an image");
+  merge->add_option("inputs", merge_inputs, "partial results")->required();
+  merge->add_option("-o,--output", merge_output, "output .exr (plus .png) or .rfb")->required();
+  merge->add_option("--exposure", merge_exposure, "PNG exposure in stops");
+
+  rf::BenchOptions bo;
+  auto* bench = app.add_subcommand("bench", "throughput of the path tracer vs a bare Embree loop");
+  rf::add_bench_options(*bench, bo);
+  bench->add_option("--threads", threads, "worker threads (default: all cores)");
+
+  CLI11_PARSE(app, argc, argv);
+  std::unique_ptr<tbb::global_control> limit;
+  if (threads > 0)
+    limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                  size_t(threads));
+  spdlog::set_pattern("%^%l%$: %v");
+  try {
+    if (render->parsed()) return cmd_render(ra);
+    if (merge->parsed()) return cmd_merge(merge_inputs, merge_output, merge_exposure);
+    if (bench->parsed()) return rf::run_bench(bo);
+  } catch (const UsageError& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

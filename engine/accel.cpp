@@ -1,0 +1,151 @@
+#include "engine/accel.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace rf {
+
+namespace {
+
+void embree_error(void*, RTCError code, const char* str) {
+  spdlog::error("embree error {}: {}", int(code), str ? str : "");
+}
+
+// gamma(n) of pbrt: bound on the relative error of n floating-point operations.
+constexpr float gamma_n(int n) {
+  constexpr float eps = std::numeric_limits<float>::epsilon() * 0.5f;
+  return (n * eps) / (1 - n * eps);
+}
+
+void init_ray(RTCRay& r, Vec3 o, Vec3 d, float tmax) {
+  r.org_x = o.x, r.org_y = o.y, r.org_z = o.z;
+  r.dir_x = d.x, r.dir_y = d.y, r.dir_z = d.z;
+  r.tnear = 0.0f;
+  r.tfar = tmax;
+  r.time = 0.0f;
+  r.mask = 0xFFFFFFFFu;  // Debian builds Embree with ray masks on: all ones hits everything
+  r.id = 0;
+  r.flags = 0;
+}
+
+}  // namespace
+
+Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
+  float d = dot(abs(ng), p_error);
+  Vec3 offset = ng * d;
+  if (dot(w, ng) < 0) offset = -offset;
+  Vec3 po = p + offset;
+  for (int i = 0; i < 3; ++i) {
+    if (offset[i] > 0)
+      po[i] = std::nextafter(po[i], kInf);
+    else if (offset[i] < 0)
+      po[i] = std::nextafter(po[i], -kInf);
+  }
+  return po;
+}
+
+Accel::Accel(const Scene& scene) : scene_(scene) {
+  device_ = rtcNewDevice(nullptr);
+  if (!device_) throw std::runtime_error("embree: cannot create device");
+  rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
+  rtc_scene_ = rtcNewScene(device_);
+  rtcSetSceneBuildQuality(rtc_scene_, RTC_BUILD_QUALITY_HIGH);
+  for (size_t i = 0; i < scene.meshes.size(); ++i) {
+    const Mesh& m = scene.meshes[i];
+    RTCGeometry g = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
+    // Copied into Embree-owned buffers: Embree may read 16 bytes at the last vertex, which a
+    // tightly packed std::vector<Vec3> does not guarantee.
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, sizeof(Vec3), m.positions.size()));
+    std::memcpy(v, m.positions.data(), m.positions.size() * sizeof(Vec3));
+    auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(uint32_t), m.triangle_count()));
+    std::memcpy(idx, m.indices.data(), m.indices.size() * sizeof(uint32_t));
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(rtc_scene_, g, unsigned(i));  // geometry id == mesh index
+    rtcReleaseGeometry(g);
+  }
+  rtcCommitScene(rtc_scene_);
+}
+
+Accel::~Accel() {
+  if (rtc_scene_) rtcReleaseScene(rtc_scene_);
+  if (device_) rtcReleaseDevice(device_);
+}
+
+bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRayHit rh;
+  init_ray(rh.ray, ray.o, ray.d, ray.tmax);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(rtc_scene_, &ctx, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+
+  const Mesh& m = scene_.meshes[rh.hit.geomID];
+  uint32_t prim = rh.hit.primID;
+  uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
+  Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
+  float b1 = rh.hit.u, b2 = rh.hit.v, b0 = 1.0f - b1 - b2;
+  hit.p = b0 * p0 + b1 * p1 + b2 * p2;
+  // Error of the barycentric interpolation (pbrt-v4 Triangle::InteractionFromIntersection).
+  hit.p_error = gamma_n(7) * (abs(b0 * p0) + abs(b1 * p1) + abs(b2 * p2));
+  hit.ng = normalize(cross(p1 - p0, p2 - p0));
+  if (!m.normals.empty()) {
+    Vec3 ns = b0 * m.normals[i0] + b1 * m.normals[i1] + b2 * m.normals[i2];
+    float len = length(ns);
+    hit.ns = len > 0 ? ns / len : hit.ng;
+    if (dot(hit.ns, hit.ng) < 0) hit.ns = -hit.ns;
+  } else {
+    hit.ns = hit.ng;
+  }
+  if (!m.uvs.empty()) {
+    Vec2 a = m.uvs[i0], b = m.uvs[i1], c = m.uvs[i2];
+    hit.uv = {b0 * a.x + b1 * b.x + b2 * c.x, b0 * a.y + b1 * b.y + b2 * c.y};
+  } else {
+    hit.uv = {b1, b2};
+  }
+  hit.t = rh.ray.tfar;
+  hit.mesh = rh.hit.geomID;
+  hit.prim = prim;
+  return true;
+}
+
+bool Accel::occluded(Vec3 o, Vec3 d, float tmax) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRay r;
+  init_ray(r, o, d, tmax);
+  rtcOccluded1(rtc_scene_, &ctx, &r);
+  return r.tfar < 0;  // Embree sets tfar to -inf on a hit
+}
+
+Ray Accel::spawn(const SurfaceHit& from, Vec3 w) const {
+  return {offset_ray_origin(from.p, from.p_error, from.ng, w), w, kInf};
+}
+
+bool Accel::visible(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const {
+  Vec3 o = offset_ray_origin(from.p, from.p_error, from.ng, to - from.p);
+  Vec3 target = offset_ray_origin(to, to_error, to_ng, o - to);
+  Vec3 d = target - o;
+  // Direction unnormalised: t in (0, 1) spans the segment; stop just short of the target.
+  return !occluded(o, d, 1.0f - 1e-4f);
+}
+
+float Accel::cast(Vec3 o, Vec3 d) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRayHit rh;
+  init_ray(rh.ray, o, d, kInf);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(rtc_scene_, &ctx, &rh);
+  return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? kInf : rh.ray.tfar;
+}
+
+}  // namespace rf

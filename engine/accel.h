@@ -1,0 +1,62 @@
+// The Embree 3 scene: one triangle geometry per mesh (geometry id == mesh index), closest-hit
+// and occlusion queries, and the surface interaction rebuilt from a hit with a floating-point
+// error bound for robust ray spawning.
+#pragma once
+
+#include <embree3/rtcore.h>
+
+#include <cstdint>
+#include <string>
+
+#include "engine/scene.h"
+
+namespace rf {
+
+struct Ray {
+  Vec3 o, d;
+  float tmax = kInf;
+};
+
+struct SurfaceHit {
+  Vec3 p;       // world position, rebuilt from barycentrics
+  Vec3 p_error; // conservative absolute error bound of p per axis
+  Vec3 ng;      // unit geometric normal (right-hand winding of the triangle)
+  Vec3 ns;      // unit shading normal (interpolated vertex normals, else ng), same side as ng
+  Vec2 uv;
+  float t = 0;
+  uint32_t mesh = 0, prim = 0;
+};
+
+// Moves p off its surface along ng, towards the side w points to, by the hit's error bound
+// (pbrt-v4's OffsetRayOrigin), then one ulp further away from p per axis.
+Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w);
+
+class Accel {
+ public:
+  explicit Accel(const Scene& scene);
+  ~Accel();
+  Accel(const Accel&) = delete;
+  Accel& operator=(const Accel&) = delete;
+
+  // Closest hit along ray within (0, tmax). Returns false on a miss.
+  bool intersect(const Ray& ray, SurfaceHit& hit) const;
+  // True when anything blocks the segment o + t d, t in (0, tmax).
+  bool occluded(Vec3 o, Vec3 d, float tmax) const;
+  // Spawns a ray from a hit towards w, and a shadow ray between two hits / points.
+  Ray spawn(const SurfaceHit& from, Vec3 w) const;
+  // Shadow test between surface point `from` and point `to` (itself on a surface with normal
+  // to_ng and error to_error); true when unoccluded.
+  bool visible(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const;
+
+  // Embree's bare cast for the baseline benchmark: hit distance or infinity, no shading.
+  float cast(Vec3 o, Vec3 d) const;
+
+  const Scene& scene() const { return scene_; }
+
+ private:
+  const Scene& scene_;
+  RTCDevice device_ = nullptr;
+  RTCScene rtc_scene_ = nullptr;
+};
+
+}  // namespace rf

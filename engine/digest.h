@@ -1,0 +1,33 @@
+// SHA-256 digests (OpenSSL) for content addressing: scene bundles, buffer checksums.
+#pragma once
+
+#include <string>
+#include <string_view>
+
+namespace rf {
+
+// Lower-case hex SHA-256 of bytes.
+std::string sha256_hex(std::string_view bytes);
+
+// Incremental form, for digests over several pieces.
+class Sha256 {
+ public:
+  Sha256();
+  ~Sha256();
+  Sha256(const Sha256&) = delete;
+  Sha256& operator=(const Sha256&) = delete;
+  void update(std::string_view bytes);
+  std::string hex_digest();  // finishes; the object is then spent
+
+ private:
+  void* ctx_;
+};
+
+// Reads a whole file; throws std::runtime_error naming the path if it cannot.
+std::string read_file_bytes(const std::string& path);
+
+// Writes bytes to path atomically: temporary file in the same directory, fsync, rename, fsync of
+// the directory. Throws std::runtime_error naming the path.
+void write_file_atomic(const std::string& path, std::string_view bytes);
+
+}  // namespace rf

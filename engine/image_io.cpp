@@ -1,0 +1,181 @@
+// Image output through OpenImageIO (DESIGN.md "Sample buffers and variance", "Outputs").
+//
+// EXR: 32-bit float channels R, G, B, A (= 1), variance.R, variance.G, variance.B, where variance
+// is the batch-means variance of the mean (zero with fewer than 2 passes). A buffer whose rect is
+// a tile is written as the EXR data window (rect) inside the display window (the full frame), so
+// tiles load in place in any EXR viewer. Provenance goes in "rayfarm:*" header attributes; the
+// caller's extra attributes are written first so the built-in ones cannot be overridden.
+// EXR has only 32-bit int attributes: the seed is a decimal string, and counts (spp,
+// nonfinite_samples) are ints when they fit, else a float (spp) or a decimal string.
+//
+// PNG: 8-bit sRGB (piecewise sRGB transfer) of the rect's pixels, estimate * 2^stops clamped to
+// [0, 1]. A PNG has no data window, so a tile's PNG is just the tile.
+//
+// Both are written to a hidden temporary file beside the target, fsynced and renamed over it.
+#include "engine/image_io.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <OpenImageIO/imageio.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <limits>
+#include <vector>
+
+#include "engine/build_info.h"
+
+namespace rf {
+namespace {
+
+namespace fs = std::filesystem;
+using OIIO::ImageOutput;
+using OIIO::ImageSpec;
+using OIIO::TypeDesc;
+
+void fsync_path(const fs::path& p, int flags) {
+  int fd = ::open(p.empty() ? "." : p.c_str(), flags);
+  if (fd >= 0) {
+    ::fsync(fd);
+    ::close(fd);
+  }
+}
+
+// Writes `pixels` (spec.format, spec.nchannels interleaved) through OIIO's `format` plugin into a
+// temporary file, then fsync + rename + fsync of the directory: readers see the old file or the
+// whole new one.
+void write_image_atomic(const std::string& path, const char* format, const ImageSpec& spec,
+                        const void* pixels) {
+  static std::atomic<uint64_t> counter{0};
+  fs::path target(path);
+  fs::path tmp =
+      target.parent_path() / ("." + target.filename().string() + ".tmp-" +
+                              std::to_string(::getpid()) + "-" + std::to_string(counter++));
+  auto out = ImageOutput::create(format);
+  if (!out) {
+    throw ImageIOError(path + ": cannot create " + format + " writer: " + OIIO::geterror());
+  }
+  bool ok = out->open(tmp.string(), spec) && out->write_image(spec.format, pixels) && out->close();
+  if (!ok) {
+    std::string err = out->geterror();
+    out.reset();
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw ImageIOError(path + ": " + (err.empty() ? std::string("write failed") : err));
+  }
+  out.reset();
+  fsync_path(tmp, O_RDONLY);
+  std::error_code ec;
+  fs::rename(tmp, target, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw ImageIOError(path + ": cannot rename temporary file into place: " + ec.message());
+  }
+  fsync_path(target.parent_path(), O_RDONLY | O_DIRECTORY);
+}
+
+void check_writable(const std::string& path, const SampleBuffer& frame) {
+  if (frame.rect.area() <= 0) throw ImageIOError(path + ": nothing to write (empty rect)");
+  if (frame.count.size() != size_t(frame.rect.area())) {
+    throw ImageIOError(path + ": sample buffer planes do not match its rect");
+  }
+}
+
+// An integer attribute when the value fits EXR's 32-bit int, else a decimal string.
+void count_attribute(ImageSpec& spec, const std::string& name, uint64_t v) {
+  if (v <= uint64_t(std::numeric_limits<int>::max())) {
+    spec.attribute(name, int(v));
+  } else {
+    spec.attribute(name, std::to_string(v));
+  }
+}
+
+void double_attribute(ImageSpec& spec, const std::string& name, double v) {
+  spec.attribute(name, TypeDesc::DOUBLE, &v);
+}
+
+void provenance_attributes(ImageSpec& spec, const SampleBuffer& frame, const Attributes& extra) {
+  for (const auto& [k, v] : extra) spec.attribute("rayfarm:" + k, v);
+  const BufferHeader& h = frame.header;
+  spec.attribute("rayfarm:scene_digest", h.scene_digest);
+  spec.attribute("rayfarm:seed", std::to_string(h.seed));  // u64 does not fit an EXR int
+  count_attribute(spec, "rayfarm:frame", h.frame);
+  spec.attribute("rayfarm:integrator", h.integrator);
+  spec.attribute("rayfarm:settings", h.settings);
+  spec.attribute("rayfarm:passes", h.passes.to_string());
+  uint64_t samples = frame.total_samples(), pixels = uint64_t(frame.rect.area());
+  if (samples % pixels == 0) {
+    count_attribute(spec, "rayfarm:spp", samples / pixels);
+  } else {
+    double_attribute(spec, "rayfarm:spp", double(samples) / double(pixels));
+  }
+  spec.attribute("rayfarm:build_id", h.build_id);
+  spec.attribute("rayfarm:isa", h.isa);
+  spec.attribute("rayfarm:writer_build_id", build_id());
+  double_attribute(spec, "rayfarm:core_seconds", h.core_seconds);
+  double_attribute(spec, "rayfarm:rel_mse", frame.rel_mse());
+  uint32_t n = h.passes.count();
+  spec.attribute("rayfarm:variance_estimator",
+                 n >= 2 ? "batch means over " + std::to_string(n) + " passes"
+                        : std::string("none (fewer than 2 passes; variance channels are zero)"));
+  count_attribute(spec, "rayfarm:nonfinite_samples", frame.nonfinite_samples);
+}
+
+// The piecewise sRGB transfer (IEC 61966-2-1) of a linear value, clamped to [0, 1] (NaN -> 0).
+uint8_t srgb8(double linear) {
+  double v = linear > 0.0 ? std::min(linear, 1.0) : 0.0;
+  double s = v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055;
+  return uint8_t(std::lround(s * 255.0));
+}
+
+}  // namespace
+
+void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra) {
+  check_writable(path, frame);
+  const Rect& r = frame.rect;
+  ImageSpec spec(r.w, r.h, 7, TypeDesc::FLOAT);
+  spec.x = r.x0;
+  spec.y = r.y0;
+  spec.full_x = 0;
+  spec.full_y = 0;
+  spec.full_width = frame.header.width;
+  spec.full_height = frame.header.height;
+  spec.channelnames = {"R", "G", "B", "A", "variance.R", "variance.G", "variance.B"};
+  spec.alpha_channel = 3;
+  spec.attribute("compression", "zip");
+  spec.attribute("oiio:ColorSpace", "Linear");
+  provenance_attributes(spec, frame, extra);
+
+  std::vector<float> pixels;
+  pixels.reserve(size_t(r.area()) * 7);
+  for (int y = r.y0; y < r.y1(); ++y) {
+    for (int x = r.x0; x < r.x1(); ++x) {
+      RGB e = frame.estimate(x, y), v = frame.variance_of_mean(x, y);
+      pixels.insert(pixels.end(), {e.x, e.y, e.z, 1.0f, v.x, v.y, v.z});
+    }
+  }
+  write_image_atomic(path, "openexr", spec, pixels.data());
+}
+
+void write_png(const std::string& path, const SampleBuffer& frame, float exposure_stops) {
+  check_writable(path, frame);
+  const Rect& r = frame.rect;
+  ImageSpec spec(r.w, r.h, 3, TypeDesc::UINT8);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  spec.attribute("Software", build_id());
+  double scale = std::exp2(double(exposure_stops));
+  std::vector<uint8_t> pixels;
+  pixels.reserve(size_t(r.area()) * 3);
+  for (int y = r.y0; y < r.y1(); ++y) {
+    for (int x = r.x0; x < r.x1(); ++x) {
+      RGB e = frame.estimate(x, y);
+      for (int c = 0; c < 3; ++c) pixels.push_back(srgb8(double(e[c]) * scale));
+    }
+  }
+  write_image_atomic(path, "png", spec, pixels.data());
+}
+
+}  // namespace rf

@@ -1,0 +1,105 @@
+#include "engine/local_render.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "engine/progressive.h"
+
+namespace rf {
+
+LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOptions& opt) {
+  using clock = std::chrono::steady_clock;
+  const Scene& scene = renderer.scene();
+  uint32_t total_passes = scene.render.passes;
+  uint32_t count = opt.pass_count ? opt.pass_count : total_passes - opt.first_pass;
+  std::vector<Rect> tiles = renderer.tiles(opt.tile_size);
+  ProgressiveOptions popt{opt.first_pass, count, opt.noise_target};
+  FrameAccumulator acc(renderer.header(PassSet{}), tiles, renderer.splats(), popt);
+
+  // Passes are rendered in windows large enough to keep every thread busy; each window's tasks
+  // are merged in (pass, tile) order after it, and the stop test runs after every pass.
+  int threads = tbb::this_task_arena::max_concurrency();
+  uint32_t window =
+      uint32_t(std::max<size_t>(1, (4 * size_t(threads) + tiles.size() - 1) / tiles.size()));
+
+  auto start = clock::now();
+  std::atomic<uint64_t> tasks_done{0};
+  LocalProgress prog;
+  prog.tasks_total = uint64_t(count) * tiles.size();
+  prog.passes_total = count;
+  std::mutex mu;
+  std::condition_variable cv;
+  bool finished = false;
+  auto report = [&] {
+    LocalProgress p;
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      p = prog;
+    }
+    p.tasks_done = tasks_done.load();
+    p.seconds = std::chrono::duration<double>(clock::now() - start).count();
+    if (opt.progress) opt.progress(p);
+  };
+  std::thread monitor([&] {
+    std::unique_lock<std::mutex> lock(mu);
+    while (!finished) {
+      cv.wait_for(lock, std::chrono::milliseconds(200));
+      if (finished) break;
+      lock.unlock();
+      report();
+      lock.lock();
+    }
+  });
+
+  uint64_t rays = 0;
+  try {
+    for (uint32_t p0 = opt.first_pass; p0 < opt.first_pass + count && !acc.done(); p0 += window) {
+      uint32_t p1 = std::min(opt.first_pass + count, p0 + window);
+      size_t n = size_t(p1 - p0) * tiles.size();
+      std::vector<SampleBuffer> results(n);
+      tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        results[i] = renderer.render_task(tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size()),
+                                          /*parallel=*/false);
+        ++tasks_done;
+      });
+      for (auto& r : results) {
+        uint64_t r_rays = r.rays;
+        if (acc.add(std::move(r)) != FrameAccumulator::AddResult::Dropped) rays += r_rays;
+      }
+      std::lock_guard<std::mutex> lock(mu);
+      prog.passes_merged = acc.passes_merged();
+      prog.rel_mse = acc.rel_mse_history().empty() ? 0 : acc.rel_mse_history().back();
+    }
+  } catch (...) {
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      finished = true;
+    }
+    cv.notify_all();
+    monitor.join();
+    throw;
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    finished = true;
+  }
+  cv.notify_all();
+  monitor.join();
+  report();
+
+  LocalRenderResult res;
+  res.frame = acc.frame();
+  res.passes_merged = acc.passes_merged();
+  res.stopped_on_target = acc.stopped_on_target();
+  res.seconds = std::chrono::duration<double>(clock::now() - start).count();
+  res.rays = rays;
+  return res;
+}
+
+}  // namespace rf

@@ -1,0 +1,40 @@
+// `rayfarm render`: the local single-node run (DESIGN.md "Local single-node runs"). The same
+// splitter (tiles x passes), the same progressive merger and the same variance report as the
+// farm, with TBB threads instead of workers.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+
+#include "engine/film.h"
+#include "engine/render.h"
+
+namespace rf {
+
+struct LocalProgress {
+  uint64_t tasks_done = 0, tasks_total = 0;
+  uint32_t passes_merged = 0, passes_total = 0;
+  double rel_mse = 0;
+  double seconds = 0;
+};
+
+struct LocalRenderOptions {
+  uint32_t first_pass = 0;
+  uint32_t pass_count = 0;   // 0: all passes of the scene from first_pass on
+  double noise_target = 0;   // relMSE; 0 = none
+  int tile_size = 32;
+  // Called from a monitor thread about every 200 ms and once at the end.
+  std::function<void(const LocalProgress&)> progress;
+};
+
+struct LocalRenderResult {
+  SampleBuffer frame;        // the merged completed prefix
+  uint32_t passes_merged = 0;
+  bool stopped_on_target = false;
+  double seconds = 0;        // wall clock
+  uint64_t rays = 0;         // traced for the merged passes
+};
+
+LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOptions& options);
+
+}  // namespace rf

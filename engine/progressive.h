@@ -1,0 +1,67 @@
+// The progressive merger of one frame (DESIGN.md "Sample buffers and variance"), shared by the
+// local renderer and the coordinator. Tasks (rect, pass) arrive in any order; each pass is
+// assembled from its tiles, and complete passes are merged into the frame strictly in pass order.
+// The stop decision (noise target, pass budget) is taken on the completed prefix 0..k-1 only,
+// so the final image is exactly that prefix, whatever order workers finished in.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <vector>
+
+#include "engine/film.h"
+
+namespace rf {
+
+struct ProgressiveOptions {
+  uint32_t first_pass = 0;   // passes [first_pass, first_pass + pass_count)
+  uint32_t pass_count = 1;
+  double noise_target = 0;   // stop once relMSE <= target (0: never)
+  uint32_t min_passes = 4;   // batch-means variance from fewer passes is too noisy to stop on
+};
+
+class FrameAccumulator {
+ public:
+  // `base` is the header every task buffer carries (its passes field is ignored); `tiles` are the
+  // rects a pass is split into (they must tile the frame).
+  FrameAccumulator(const BufferHeader& base, std::vector<Rect> tiles, bool splats,
+                   const ProgressiveOptions& options);
+
+  enum class AddResult { Merged, Pending, Duplicate, Dropped };
+  // Adds a task's one-pass buffer. Duplicate: that (rect, pass) was already added. Dropped: its
+  // pass lies beyond the stop point or outside the range. Throws MergeError on a mismatch.
+  AddResult add(SampleBuffer task);
+
+  bool done() const { return done_; }
+  bool stopped_on_target() const { return stopped_on_target_; }
+  uint32_t passes_merged() const { return merged_; }   // length of the merged prefix
+  const SampleBuffer& frame() const { return frame_; }  // the merged prefix (empty header passes
+                                                        // until the first pass is merged)
+  // relMSE of the merged prefix after each pass merged, for ETA estimates.
+  const std::vector<double>& rel_mse_history() const { return rel_mse_history_; }
+  // Passes not yet merged that still need this tile (for schedulers).
+  bool task_needed(const Rect& rect, uint32_t pass) const;
+  size_t tile_index(const Rect& rect) const;  // throws MergeError if rect is not a tile
+
+ private:
+  void merge_ready_passes();
+
+  BufferHeader base_;
+  std::vector<Rect> tiles_;
+  bool splats_;
+  ProgressiveOptions options_;
+  SampleBuffer frame_;
+  struct PendingPass {
+    SampleBuffer buffer;
+    std::vector<bool> have;
+    size_t remaining;
+  };
+  std::map<uint32_t, PendingPass> pending_;
+  uint32_t merged_ = 0;
+  bool done_ = false;
+  bool stopped_on_target_ = false;
+  std::vector<double> rel_mse_history_;
+};
+
+}  // namespace rf

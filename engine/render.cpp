@@ -1,0 +1,116 @@
+#include "engine/render.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <time.h>
+
+#include <atomic>
+
+#include "engine/build_info.h"
+#include "engine/camera.h"
+#include "engine/filter.h"
+#include "engine/integrator.h"
+#include "engine/sampler.h"
+
+namespace rf {
+
+namespace {
+double thread_cpu_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+const char* filter_name(FilterType t) {
+  switch (t) {
+    case FilterType::Box:
+      return "box";
+  }
+  return "?";
+}
+}  // namespace
+
+std::string settings_text(const Scene& s) {
+  const IntegratorSettings& i = s.render.integrator;
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g",
+                i.max_depth, i.rr_min_depth, (unsigned long long)s.render.spp_per_pass(),
+                filter_name(s.film.filter.type), double(s.film.filter.radius));
+  return buf;
+}
+
+Renderer::Renderer(const Scene& scene)
+    : scene_(scene),
+      accel_(std::make_unique<Accel>(scene)),
+      lights_(std::make_unique<LightSet>(scene)) {}
+
+BufferHeader Renderer::header(const PassSet& passes) const {
+  BufferHeader h;
+  h.scene_digest = scene_.digest;
+  h.seed = scene_.render.seed;
+  h.frame = scene_.render.frame;
+  h.integrator = scene_.render.integrator.type;
+  h.settings = settings_text(scene_);
+  h.width = scene_.film.width;
+  h.height = scene_.film.height;
+  h.passes = passes;
+  h.build_id = build_id();
+  h.isa = cpu_isa();
+  return h;
+}
+
+std::vector<Rect> Renderer::tiles(int tile_size) const {
+  int w = scene_.film.width, h = scene_.film.height;
+  if (splats() || tile_size <= 0) return {Rect{0, 0, w, h}};
+  std::vector<Rect> out;
+  for (int y = 0; y < h; y += tile_size)
+    for (int x = 0; x < w; x += tile_size)
+      out.push_back({x, y, std::min(tile_size, w - x), std::min(tile_size, h - y)});
+  return out;
+}
+
+SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool parallel) const {
+  SampleBuffer buf(header(PassSet::range(pass, pass + 1)), rect, splats());
+  const RenderSettings& rs = scene_.render;
+  PinholeCamera camera(scene_.camera, scene_.film.width, scene_.film.height);
+  RenderContext ctx{scene_, *accel_, *lights_};
+  uint64_t spp = rs.spp_per_pass();
+  std::atomic<uint64_t> rays{0};
+  std::atomic<uint64_t> cpu_ns{0};
+  std::atomic<uint64_t> nonfinite{0};
+
+  auto render_rows = [&](int y_begin, int y_end) {
+    double t0 = thread_cpu_seconds();
+    TraceCounters counters;
+    uint64_t local_nonfinite = 0;
+    IndependentSampler sampler;
+    for (int y = y_begin; y < y_end; ++y)
+      for (int x = rect.x0; x < rect.x1(); ++x)
+        for (uint64_t s = 0; s < spp; ++s) {
+          sampler.start_camera_sample(rs.seed, rs.frame, pass, x, y, s);
+          FilterSample fs = sample_filter(scene_.film.filter, sampler.get_2d());
+          Ray ray =
+              camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y);
+          RGB l = path_radiance(ctx, ray, sampler, counters);
+          // Rows are disjoint: no two threads share a pixel.
+          buf.add_sample(x, y, l * fs.weight, local_nonfinite);
+        }
+    rays += counters.rays;
+    nonfinite += local_nonfinite;
+    cpu_ns += uint64_t((thread_cpu_seconds() - t0) * 1e9);
+  };
+  if (parallel) {
+    tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1(), 1), [&](const auto& r) {
+      for (int y = r.begin(); y < r.end(); ++y) render_rows(y, y + 1);
+    });
+  } else {
+    render_rows(rect.y0, rect.y1());
+  }
+  buf.rays = rays;
+  buf.nonfinite_samples = nonfinite;
+  buf.header.core_seconds = double(cpu_ns.load()) * 1e-9;
+  buf.finish_pass();
+  return buf;
+}
+
+}  // namespace rf

@@ -1,0 +1,44 @@
+// Rendering work units (DESIGN.md "Work units"): a task is (frame, rect, pass). The Renderer
+// owns what a scene needs to render (Embree BVH, lights) and renders one task into a sample
+// buffer; tasks are pure functions of (scene, settings, rect, pass), so they can run anywhere.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "engine/accel.h"
+#include "engine/film.h"
+#include "engine/lights.h"
+#include "engine/scene.h"
+
+namespace rf {
+
+class Renderer {
+ public:
+  explicit Renderer(const Scene& scene);
+
+  const Scene& scene() const { return scene_; }
+  const Accel& accel() const { return *accel_; }
+  const LightSet& lights() const { return *lights_; }
+
+  // True for integrators whose tasks cover the whole frame and splat (light tracing, BDPT).
+  bool splats() const { return false; }
+  // Header of every buffer this scene and its settings produce, for the given passes.
+  BufferHeader header(const PassSet& passes) const;
+  // The tiles of the frame (whole frame for splatting integrators), row-major.
+  std::vector<Rect> tiles(int tile_size) const;
+
+  // Renders one pass of one rect. With parallel = true the rows are spread over TBB's threads
+  // (a worker rendering one task on all cores); the pixels are the same either way.
+  SampleBuffer render_task(const Rect& rect, uint32_t pass, bool parallel) const;
+
+ private:
+  const Scene& scene_;
+  std::unique_ptr<Accel> accel_;
+  std::unique_ptr<LightSet> lights_;
+};
+
+// Canonical text of the settings that change pixels, beside the scene digest (BufferHeader).
+std::string settings_text(const Scene& scene);
+
+}  // namespace rf

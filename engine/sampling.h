@@ -1,0 +1,46 @@
+// Warping functions from the unit square, each with its pdf.
+#pragma once
+
+#include "engine/math.h"
+
+namespace rf {
+
+// Cosine-weighted direction about +z (Malley's method on a concentric disk); pdf = cos/pi.
+inline Vec3 sample_cosine_hemisphere(Vec2 u) {
+  float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
+  float r = 0, phi = 0;
+  if (ox != 0 || oy != 0) {
+    if (std::fabs(ox) > std::fabs(oy)) {
+      r = ox;
+      phi = (kPi / 4) * (oy / ox);
+    } else {
+      r = oy;
+      phi = (kPi / 2) - (kPi / 4) * (ox / oy);
+    }
+  }
+  float x = r * std::cos(phi), y = r * std::sin(phi);
+  return {x, y, safe_sqrt(1.0f - x * x - y * y)};
+}
+inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta * kInvPi; }
+
+// Uniform point on a triangle as barycentrics (b0, b1) (Heitz 2019, area-preserving).
+inline Vec2 sample_uniform_triangle(Vec2 u) {
+  float b0, b1;
+  if (u.x < u.y) {
+    b0 = u.x / 2;
+    b1 = u.y - b0;
+  } else {
+    b1 = u.y / 2;
+    b0 = u.x - b1;
+  }
+  return {b0, b1};
+}
+
+// MIS power heuristic with beta = 2 for one sample from each of two strategies.
+inline float power_heuristic(float pdf_a, float pdf_b) {
+  float a = pdf_a * pdf_a, b = pdf_b * pdf_b;
+  if (std::isinf(a)) return 1.0f;
+  return a + b > 0 ? a / (a + b) : 0.0f;
+}
+
+}  // namespace rf

@@ -1,0 +1,793 @@
+// The native scene format, version 1 (docs/scene-format.md): a JSON file plus mesh files beside
+// it. Parsing and validation live here in one place; every problem becomes a SceneError that
+// names the scene file, the JSON path (or line and column) and what was expected.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <numeric>
+#include <set>
+#include <sstream>
+#include <string_view>
+
+#include "engine/digest.h"
+#include "engine/mesh_io.h"
+#include "engine/scene.h"
+
+namespace rf {
+namespace {
+
+using json = nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr int kFormatVersion = 1;
+constexpr int kMaxResolution = 16384;
+constexpr uint32_t kDefaultPassCap = 16;  // passes default to gcd(spp, 16)
+
+const std::vector<std::string> kMaterialTypes = {"diffuse"};
+const std::vector<std::string> kFilterTypes = {"box"};
+const std::vector<std::string> kShapeTypes = {"obj", "ply", "mesh", "rectangle", "cube"};
+
+std::string join(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
+
+bool contains(const std::vector<std::string>& names, const std::string& n) {
+  return std::find(names.begin(), names.end(), n) != names.end();
+}
+
+// "a.b", "a[3]"; keys that are not plain identifiers are quoted: materials["my wall"].
+std::string child(const std::string& parent, std::string_view key) {
+  bool plain = !key.empty() && std::all_of(key.begin(), key.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+  });
+  if (!plain) return parent + "[\"" + std::string(key) + "\"]";
+  return parent.empty() ? std::string(key) : parent + "." + std::string(key);
+}
+std::string child(const std::string& parent, size_t index) {
+  return parent + "[" + std::to_string(index) + "]";
+}
+
+// Short description of a JSON value for "got ..." in messages.
+std::string describe(const json& j) {
+  if (j.is_array()) return "an array of " + std::to_string(j.size()) + " elements";
+  if (j.is_object()) return "an object";
+  std::string s = j.dump();
+  if (s.size() > 40) s = s.substr(0, 37) + "...";
+  return j.type_name() + std::string(" ") + s;
+}
+
+std::string format_number(double v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+
+// ---------------------------------------------------------------------------------------------
+// JSON text -> json, with positions for syntax errors and a check for duplicate keys (nlohmann
+// silently keeps the last one, which would hide e.g. two materials of the same name).
+
+struct JsonFrame {
+  bool is_array = false;
+  size_t count = 0;  // elements started so far (arrays)
+  std::string key;   // current key (objects)
+  std::set<std::string> keys;
+};
+
+std::string frames_path(const std::vector<JsonFrame>& frames) {
+  std::string path;
+  for (size_t i = 0; i + 1 < frames.size(); ++i)
+    path = frames[i].is_array ? child(path, frames[i].count - 1) : child(path, frames[i].key);
+  return path;
+}
+
+std::string line_column(std::string_view text, size_t byte) {
+  size_t line = 1, col = 1;
+  for (size_t i = 0; i < byte && i < text.size(); ++i) text[i] == '\n' ? (++line, col = 1) : ++col;
+  return "line " + std::to_string(line) + ", column " + std::to_string(col);
+}
+
+json parse_json_text(const std::string& text, const std::string& file) {
+  std::vector<JsonFrame> frames;
+  auto callback = [&](int, json::parse_event_t ev, json& parsed) {
+    using E = json::parse_event_t;
+    bool starts = ev == E::object_start || ev == E::array_start || ev == E::value;
+    if (starts && !frames.empty() && frames.back().is_array) ++frames.back().count;
+    if (ev == E::object_start || ev == E::array_start) {
+      frames.emplace_back();
+      frames.back().is_array = ev == E::array_start;
+    }
+    if (ev == E::object_end || ev == E::array_end) frames.pop_back();
+    if (ev == E::key) {
+      std::string k = parsed.get<std::string>();
+      if (!frames.back().keys.insert(k).second)
+        throw SceneError(file + ": " + child(frames_path(frames), k) + ": duplicate key");
+      frames.back().key = k;
+    }
+    return true;
+  };
+  try {
+    return json::parse(text, callback);
+  } catch (const json::parse_error& e) {
+    // Keep nlohmann's explanation, but put the position in our own "file: where: what" form.
+    std::string what = e.what();
+    size_t col = what.find("column ");
+    size_t colon = col == std::string::npos ? col : what.find(": ", col);
+    std::string why = colon == std::string::npos ? what : what.substr(colon + 2);
+    throw SceneError(file + ": " + line_column(text, e.byte ? e.byte - 1 : 0) + ": " + why);
+  } catch (const json::out_of_range& e) {
+    // Number overflow (e.g. 1e999) carries no position; find the literal it names.
+    std::string what = e.what();
+    size_t q1 = what.find('\''), q2 = what.rfind('\'');
+    std::string literal = q1 < q2 ? what.substr(q1 + 1, q2 - q1 - 1) : "";
+    size_t at = literal.empty() ? std::string::npos : text.find(literal);
+    std::string where = at == std::string::npos ? "(unknown position)" : line_column(text, at);
+    throw SceneError(file + ": " + where + ": number " + literal +
+                     " is out of range (JSON numbers must be finite)");
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Typed access to JSON values, each failing with the value's path.
+
+class Reader {
+ public:
+  explicit Reader(std::string file) : file_(std::move(file)) {}
+
+  [[noreturn]] void fail(const std::string& path, const std::string& what) const {
+    throw SceneError(file_ + ": " + (path.empty() ? "(top level)" : path) + ": " + what);
+  }
+
+  const std::string& file() const { return file_; }
+
+  void expect_object(const json& j, const std::string& path) const {
+    if (!j.is_object()) fail(path, "expected an object, got " + describe(j));
+  }
+
+  // j must be an object whose keys are all in `allowed`: typos are errors, not silently ignored.
+  void check_keys(const json& j, const std::string& path,
+                  const std::vector<std::string>& allowed) const {
+    expect_object(j, path);
+    for (auto it = j.begin(); it != j.end(); ++it)
+      if (!contains(allowed, it.key()))
+        fail(child(path, it.key()), "unknown key (expected one of: " + join(allowed) + ")");
+  }
+
+  const json* find(const json& j, const std::string& key) const {
+    auto it = j.find(key);
+    return it == j.end() ? nullptr : &*it;
+  }
+
+  const json& require(const json& j, const std::string& path, const std::string& key) const {
+    const json* v = find(j, key);
+    if (!v) fail(child(path, key), "required key is missing");
+    return *v;
+  }
+
+  // A number that is finite also in single precision (geometry and colours are float).
+  float number(const json& j, const std::string& path) const {
+    if (!j.is_number()) fail(path, "expected a number, got " + describe(j));
+    double v = j.get<double>();
+    if (!std::isfinite(static_cast<float>(v)))
+      fail(path, "number " + format_number(v) + " is not finite in single precision");
+    return static_cast<float>(v);
+  }
+
+  double real(const json& j, const std::string& path) const {
+    if (!j.is_number()) fail(path, "expected a number, got " + describe(j));
+    return j.get<double>();  // finite: nlohmann refuses overflowing literals
+  }
+
+  int64_t integer(const json& j, const std::string& path, int64_t lo, int64_t hi) const {
+    if (!j.is_number_integer()) fail(path, "expected an integer, got " + describe(j));
+    if (j.is_number_unsigned() && j.get<uint64_t>() > static_cast<uint64_t>(hi))
+      fail(path, "must be at most " + std::to_string(hi) + ", got " + j.dump());
+    int64_t v = j.get<int64_t>();
+    if (v < lo) fail(path, "must be at least " + std::to_string(lo) + ", got " + j.dump());
+    if (v > hi) fail(path, "must be at most " + std::to_string(hi) + ", got " + j.dump());
+    return v;
+  }
+
+  uint64_t unsigned_integer(const json& j, const std::string& path, uint64_t lo) const {
+    if (!j.is_number_unsigned()) fail(path, "expected a non-negative integer, got " + describe(j));
+    uint64_t v = j.get<uint64_t>();
+    if (v < lo) fail(path, "must be at least " + std::to_string(lo) + ", got " + j.dump());
+    return v;
+  }
+
+  bool boolean(const json& j, const std::string& path) const {
+    if (!j.is_boolean()) fail(path, "expected true or false, got " + describe(j));
+    return j.get<bool>();
+  }
+
+  std::string string(const json& j, const std::string& path) const {
+    if (!j.is_string()) fail(path, "expected a string, got " + describe(j));
+    return j.get<std::string>();
+  }
+
+  const json& array(const json& j, const std::string& path, size_t n = 0) const {
+    if (!j.is_array()) fail(path, "expected an array, got " + describe(j));
+    if (n && j.size() != n)
+      fail(path, "expected " + std::to_string(n) + " elements, got " + std::to_string(j.size()));
+    return j;
+  }
+
+  Vec3 vec3(const json& j, const std::string& path) const {
+    array(j, path, 3);
+    return {number(j[0], child(path, 0)), number(j[1], child(path, 1)),
+            number(j[2], child(path, 2))};
+  }
+
+  // A colour: [r, g, b] or one number for grey; each component in [0, max].
+  RGB rgb(const json& j, const std::string& path, float max) const {
+    if (!j.is_number() && !j.is_array())
+      fail(path, "expected [r, g, b] or a number, got " + describe(j));
+    RGB c = j.is_number() ? RGB(number(j, path)) : vec3(j, path);
+    for (int i = 0; i < 3; ++i) {
+      std::string p = j.is_number() ? path : child(path, i);
+      if (c[i] < 0) fail(p, "must be at least 0, got " + format_number(c[i]));
+      if (c[i] > max)
+        fail(p, "must be at most " + format_number(max) + ", got " + format_number(c[i]));
+    }
+    return c;
+  }
+
+  // 16 numbers, row-major, affine (last row 0 0 0 1) and invertible.
+  Mat4 matrix(const json& j, const std::string& path) const {
+    array(j, path, 16);
+    Mat4 m;
+    for (int i = 0; i < 16; ++i) m.m[i / 4][i % 4] = number(j[i], child(path, i));
+    if (m.m[3][0] != 0 || m.m[3][1] != 0 || m.m[3][2] != 0 || m.m[3][3] != 1)
+      fail(path, "last row must be [0, 0, 0, 1] (affine transforms only)");
+    check_invertible(m, path);
+    return m;
+  }
+
+  // Singular when the rows of the linear part are (nearly) dependent: |det| is small relative to
+  // the product of the row lengths (Hadamard's bound, equal to |det| for orthogonal rows).
+  void check_invertible(const Mat4& m, const std::string& path) const {
+    double bound = 1;
+    for (int r = 0; r < 3; ++r)
+      bound *= std::sqrt(double(m.m[r][0]) * m.m[r][0] + double(m.m[r][1]) * m.m[r][1] +
+                         double(m.m[r][2]) * m.m[r][2]);
+    double det = m.det3();
+    if (!m.is_finite() || !std::isfinite(det)) fail(path, "matrix is not finite");
+    if (bound == 0 || std::fabs(det) <= 1e-6 * bound)
+      fail(path, "matrix is singular (determinant " + format_number(det) + ")");
+  }
+
+ private:
+  std::string file_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Built-in shapes in object space.
+
+MeshData make_rectangle() {
+  MeshData m;
+  m.positions = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
+  m.uvs = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+  m.indices = {0, 1, 2, 0, 2, 3};  // cross(p1 - p0, p2 - p0) points along +z
+  return m;
+}
+
+// Face with outward normal n = s*e_a spans u = s*e_(a+1), v = e_(a+2), so cross(u, v) = n and
+// the corners n-u-v, n+u-v, n+u+v, n-u+v wind counter-clockwise seen from outside.
+MeshData make_cube() {
+  MeshData m;
+  for (int a = 0; a < 3; ++a)
+    for (float s : {1.0f, -1.0f}) {
+      Vec3 n(0.0f), u(0.0f), v(0.0f);
+      n[a] = s, u[(a + 1) % 3] = s, v[(a + 2) % 3] = 1;
+      auto base = static_cast<uint32_t>(m.positions.size());
+      m.positions.insert(m.positions.end(), {n - u - v, n + u - v, n + u + v, n - u + v});
+      m.uvs.insert(m.uvs.end(), {{0, 0}, {1, 0}, {1, 1}, {0, 1}});
+      m.indices.insert(m.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+    }
+  return m;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The scene file.
+
+class SceneParser {
+ public:
+  SceneParser(const std::string& path, Scene& scene)
+      : r_(path), scene_(scene), dir_(fs::path(path).parent_path()) {}
+
+  void parse(const json& root) {
+    r_.expect_object(root, "");
+    parse_version(root);
+    r_.check_keys(root, "",
+                  {"format", "version", "camera", "film", "render", "materials", "shapes"});
+    parse_camera(r_.require(root, "", "camera"));
+    parse_film(r_.require(root, "", "film"));
+    if (const json* j = r_.find(root, "render"))
+      parse_render(*j);
+    else
+      set_default_passes();
+    parse_materials(r_.require(root, "", "materials"));
+    const json& shapes = r_.array(r_.require(root, "", "shapes"), "shapes");
+    for (size_t i = 0; i < shapes.size(); ++i) parse_shape(shapes[i], child("shapes", i));
+  }
+
+  // SHA-256 over the scene bytes, then per asset (in order of first use) a NUL, its relative
+  // path, a NUL and the hex SHA-256 of its bytes. JSON text cannot contain NUL, so this is
+  // unambiguous, and a coordinator can recompute it from a bundle manifest alone.
+  std::string digest(std::string_view scene_bytes) const {
+    Sha256 h;
+    h.update(scene_bytes);
+    for (const std::string& a : scene_.assets) {
+      h.update(std::string_view("\0", 1));
+      h.update(a);
+      h.update(std::string_view("\0", 1));
+      h.update(asset_digests_.at(a));
+    }
+    return h.hex_digest();
+  }
+
+ private:
+  void parse_version(const json& root) {
+    if (const json* f = r_.find(root, "format"))
+      if (r_.string(*f, "format") != "rayfarm-scene")
+        r_.fail("format", "expected \"rayfarm-scene\", got " + describe(*f));
+    const json* v = r_.find(root, "version");
+    if (!v) r_.fail("version", "required key is missing (this build reads version 1)");
+    if (!v->is_number_integer() || v->get<int64_t>() != kFormatVersion)
+      r_.fail("version", "unsupported format version " + v->dump() + " (this build reads version " +
+                             std::to_string(kFormatVersion) + ")");
+  }
+
+  void parse_camera(const json& j) {
+    const std::string p = "camera";
+    r_.check_keys(j, p, {"type", "fov_deg", "look_at", "to_world"});
+    if (const json* t = r_.find(j, "type"))
+      if (std::string type = r_.string(*t, "camera.type"); type != "perspective")
+        r_.fail("camera.type", "unknown camera type '" + type + "' (known: perspective)");
+    float fov = r_.number(r_.require(j, p, "fov_deg"), "camera.fov_deg");
+    if (!(fov > 0 && fov < 180))
+      r_.fail("camera.fov_deg",
+              "must be between 0 and 180 degrees (exclusive), got " + format_number(fov));
+    scene_.camera.fov_deg = fov;
+    const json* look = r_.find(j, "look_at");
+    const json* to_world = r_.find(j, "to_world");
+    if (!look && !to_world) r_.fail(p, "needs either 'look_at' or 'to_world'");
+    if (look && to_world) r_.fail(p, "give either 'look_at' or 'to_world', not both");
+    scene_.camera.camera_to_world = look ? parse_look_at(*look) : parse_camera_matrix(*to_world);
+  }
+
+  Mat4 parse_look_at(const json& j) {
+    const std::string p = "camera.look_at";
+    r_.check_keys(j, p, {"eye", "target", "up"});
+    Vec3 eye = r_.vec3(r_.require(j, p, "eye"), p + ".eye");
+    Vec3 target = r_.vec3(r_.require(j, p, "target"), p + ".target");
+    Vec3 up = r_.vec3(r_.require(j, p, "up"), p + ".up");
+    if (!(length(target - eye) > 0)) r_.fail(p + ".target", "must differ from eye");
+    try {
+      return Mat4::look_at(eye, target, up);
+    } catch (const std::domain_error&) {
+      r_.fail(p + ".up", "must not be zero or parallel to the view direction");
+    }
+  }
+
+  // The camera matrix must be a rotation and a translation: a scale or shear would silently
+  // change the field of view, a mirror the handedness.
+  Mat4 parse_camera_matrix(const json& j) {
+    const std::string p = "camera.to_world";
+    Mat4 m = r_.matrix(j, p);
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) {
+        float d = m.m[0][a] * m.m[0][b] + m.m[1][a] * m.m[1][b] + m.m[2][a] * m.m[2][b];
+        if (std::fabs(d - (a == b ? 1.0f : 0.0f)) > 1e-3f)
+          r_.fail(p, "the upper 3x3 must be a rotation (orthonormal columns), no scale or shear");
+      }
+    if (m.det3() < 0) r_.fail(p, "the upper 3x3 must be a rotation, not a mirror (det < 0)");
+    return m;
+  }
+
+  void parse_film(const json& j) {
+    const std::string p = "film";
+    r_.check_keys(j, p, {"resolution", "filter"});
+    const json& res = r_.array(r_.require(j, p, "resolution"), "film.resolution", 2);
+    scene_.film.width = int(r_.integer(res[0], "film.resolution[0]", 1, kMaxResolution));
+    scene_.film.height = int(r_.integer(res[1], "film.resolution[1]", 1, kMaxResolution));
+    scene_.film.filter = {};
+    if (const json* f = r_.find(j, "filter")) {
+      r_.check_keys(*f, "film.filter", {"type", "radius"});
+      std::string type = r_.string(r_.require(*f, "film.filter", "type"), "film.filter.type");
+      if (!contains(kFilterTypes, type))
+        r_.fail("film.filter.type",
+                "unknown filter '" + type + "' (known: " + join(kFilterTypes) + ")");
+      scene_.film.filter.type = FilterType::Box;
+      if (const json* rad = r_.find(*f, "radius")) {
+        float radius = r_.number(*rad, "film.filter.radius");
+        if (!(radius > 0)) r_.fail("film.filter.radius", "must be > 0, got " + rad->dump());
+        scene_.film.filter.radius = radius;
+      }
+    }
+  }
+
+  void parse_render(const json& j) {
+    const std::string p = "render";
+    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target"});
+    RenderSettings& rs = scene_.render;
+    if (const json* i = r_.find(j, "integrator")) parse_integrator(*i);
+    if (const json* v = r_.find(j, "spp")) rs.spp = r_.unsigned_integer(*v, "render.spp", 1);
+    if (const json* v = r_.find(j, "passes")) {
+      rs.passes = uint32_t(r_.integer(*v, "render.passes", 1, UINT32_MAX));
+      if (rs.spp % rs.passes != 0)
+        r_.fail("render.spp", "must be a multiple of render.passes (" + std::to_string(rs.passes) +
+                                  "), got " + std::to_string(rs.spp));
+    } else {
+      set_default_passes();
+    }
+    if (const json* v = r_.find(j, "seed")) rs.seed = r_.unsigned_integer(*v, "render.seed", 0);
+    if (const json* v = r_.find(j, "noise_target")) {
+      rs.noise_target = r_.real(*v, "render.noise_target");
+      if (rs.noise_target < 0)
+        r_.fail("render.noise_target", "must be at least 0, got " + v->dump());
+    }
+  }
+
+  void set_default_passes() {
+    scene_.render.passes = uint32_t(std::gcd(scene_.render.spp, uint64_t(kDefaultPassCap)));
+  }
+
+  void parse_integrator(const json& j) {
+    const std::string p = "render.integrator";
+    r_.check_keys(j, p, {"type", "max_depth", "rr_min_depth"});
+    IntegratorSettings& is = scene_.render.integrator;
+    is.type = r_.string(r_.require(j, p, "type"), p + ".type");
+    if (!contains(known_integrators(), is.type))
+      r_.fail(p + ".type",
+              "unknown integrator '" + is.type + "' (known: " + join(known_integrators()) + ")");
+    if (const json* v = r_.find(j, "max_depth"))
+      is.max_depth = int(r_.integer(*v, p + ".max_depth", 0, INT32_MAX));
+    if (const json* v = r_.find(j, "rr_min_depth"))
+      is.rr_min_depth = int(r_.integer(*v, p + ".rr_min_depth", 1, INT32_MAX));
+  }
+
+  void parse_materials(const json& j) {
+    r_.expect_object(j, "materials");
+    // nlohmann's object is a std::map, so this walks names in sorted order.
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      if (it.key().empty()) r_.fail("materials", "material names must not be empty");
+      material_ids_[it.key()] = uint32_t(scene_.materials.size());
+      scene_.materials.push_back(parse_material(it.key(), it.value()));
+    }
+  }
+
+  Material parse_material(const std::string& name, const json& j) {
+    const std::string p = child("materials", name);
+    r_.expect_object(j, p);
+    std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
+    Material m;
+    m.name = name;
+    if (type == "diffuse") {
+      r_.check_keys(j, p, {"type", "reflectance"});
+      m.type = MaterialType::Diffuse;
+      if (const json* v = r_.find(j, "reflectance"))
+        m.reflectance = r_.rgb(*v, p + ".reflectance", 1);
+    } else {
+      r_.fail(p + ".type",
+              "unknown material type '" + type + "' (known: " + join(kMaterialTypes) + ")");
+    }
+    return m;
+  }
+
+  void parse_shape(const json& j, const std::string& p) {
+    r_.expect_object(j, p);
+    std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
+    std::vector<std::string> keys = {"type", "name", "material", "transform", "emission"};
+    if (type == "obj" || type == "ply")
+      keys.push_back("file");
+    else if (type == "mesh")
+      keys.insert(keys.end(), {"positions", "indices", "normals", "uvs"});
+    else if (type != "rectangle" && type != "cube")
+      r_.fail(p + ".type", "unknown shape type '" + type + "' (known: " + join(kShapeTypes) + ")");
+    r_.check_keys(j, p, keys);
+
+    Mesh mesh;
+    mesh.name = p;
+    if (const json* n = r_.find(j, "name")) mesh.name = r_.string(*n, p + ".name");
+    mesh.material = material_ref(r_.require(j, p, "material"), p + ".material");
+    if (const json* e = r_.find(j, "emission")) mesh.emission = parse_emission(*e, p + ".emission");
+    Mat4 to_world = Mat4::identity();
+    if (const json* t = r_.find(j, "transform")) to_world = parse_transform(*t, p + ".transform");
+
+    std::string where = p;  // for geometry messages: the shape, and its file if any
+    MeshData data;
+    if (type == "obj" || type == "ply") {
+      std::string file = r_.string(r_.require(j, p, "file"), p + ".file");
+      where = p + " (" + file + ")";
+      data = load_asset(file, type, p + ".file");
+    } else if (type == "mesh") {
+      data = parse_inline_mesh(j, p);
+    } else {
+      data = type == "rectangle" ? make_rectangle() : make_cube();
+    }
+    check_mesh(data, where);
+    to_world_space(data, to_world, mesh, where);
+    scene_.meshes.push_back(std::move(mesh));
+  }
+
+  uint32_t material_ref(const json& j, const std::string& p) {
+    std::string name = r_.string(j, p);
+    auto it = material_ids_.find(name);
+    if (it == material_ids_.end()) {
+      std::vector<std::string> known;
+      for (const Material& m : scene_.materials) known.push_back(m.name);
+      r_.fail(p, "unknown material '" + name +
+                     "' (known: " + (known.empty() ? std::string("none") : join(known)) + ")");
+    }
+    return it->second;
+  }
+
+  std::optional<Emission> parse_emission(const json& j, const std::string& p) {
+    r_.check_keys(j, p, {"radiance", "two_sided"});
+    Emission e;
+    e.radiance = r_.rgb(r_.require(j, p, "radiance"), p + ".radiance", kInf);
+    if (const json* t = r_.find(j, "two_sided")) e.two_sided = r_.boolean(*t, p + ".two_sided");
+    if (is_black(e.radiance)) return std::nullopt;  // black emission: not a light
+    return e;
+  }
+
+  // Ops apply in the order written: [A, B, C] maps a point p to C(B(A(p))).
+  Mat4 parse_transform(const json& j, const std::string& p) {
+    if (j.is_object()) return parse_transform_op(j, p);
+    r_.array(j, p);
+    Mat4 m = Mat4::identity();
+    for (size_t i = 0; i < j.size(); ++i) m = parse_transform_op(j[i], child(p, i)) * m;
+    r_.check_invertible(m, p);
+    return m;
+  }
+
+  Mat4 parse_transform_op(const json& j, const std::string& p) {
+    r_.expect_object(j, p);
+    if (j.size() != 1)
+      r_.fail(p, "expected exactly one of translate, scale, rotate, matrix; got " +
+                     std::to_string(j.size()) + " keys");
+    r_.check_keys(j, p, {"translate", "scale", "rotate", "matrix"});
+    const std::string& op = j.begin().key();
+    const json& v = j.begin().value();
+    const std::string vp = child(p, op);
+    if (op == "translate") return Mat4::translate(r_.vec3(v, vp));
+    if (op == "matrix") return r_.matrix(v, vp);
+    if (op == "scale") {
+      Vec3 s = v.is_number() ? Vec3(r_.number(v, vp)) : r_.vec3(v, vp);
+      if (s.x == 0 || s.y == 0 || s.z == 0) r_.fail(vp, "singular: a scale factor is 0");
+      return Mat4::scale(s);
+    }
+    r_.check_keys(v, vp, {"axis", "angle_deg"});
+    Vec3 axis = r_.vec3(r_.require(v, vp, "axis"), vp + ".axis");
+    float angle = r_.number(r_.require(v, vp, "angle_deg"), vp + ".angle_deg");
+    if (!(length(axis) > 0)) r_.fail(vp + ".axis", "must not be zero");
+    return Mat4::rotate(axis, angle);
+  }
+
+  MeshData parse_inline_mesh(const json& j, const std::string& p) {
+    MeshData m;
+    std::vector<float> pos = flat_numbers(r_.require(j, p, "positions"), p + ".positions", 3);
+    for (size_t i = 0; i < pos.size(); i += 3)
+      m.positions.emplace_back(pos[i], pos[i + 1], pos[i + 2]);
+    const json& idx = r_.array(r_.require(j, p, "indices"), p + ".indices");
+    if (idx.size() % 3 != 0)
+      r_.fail(p + ".indices", "expected 3 indices per triangle, got " + std::to_string(idx.size()));
+    for (size_t i = 0; i < idx.size(); ++i)
+      m.indices.push_back(uint32_t(r_.integer(idx[i], child(p + ".indices", i), 0, UINT32_MAX)));
+    if (const json* n = r_.find(j, "normals")) {
+      std::vector<float> v = flat_numbers(*n, p + ".normals", 3);
+      for (size_t i = 0; i < v.size(); i += 3) m.normals.emplace_back(v[i], v[i + 1], v[i + 2]);
+    }
+    if (const json* uv = r_.find(j, "uvs")) {
+      std::vector<float> v = flat_numbers(*uv, p + ".uvs", 2);
+      for (size_t i = 0; i < v.size(); i += 2) m.uvs.push_back({v[i], v[i + 1]});
+    }
+    return m;
+  }
+
+  std::vector<float> flat_numbers(const json& j, const std::string& p, size_t group) {
+    r_.array(j, p);
+    if (j.size() % group != 0 || j.empty())
+      r_.fail(p, "expected a flat array of " + std::to_string(group) + "*n numbers, got " +
+                     std::to_string(j.size()));
+    std::vector<float> out;
+    for (size_t i = 0; i < j.size(); ++i) out.push_back(r_.number(j[i], child(p, i)));
+    return out;
+  }
+
+  // Asset names are relative paths inside the scene bundle (DESIGN.md): no absolute paths, no
+  // "..", '/' as separator. Returns the normalised name ("./a//b.obj" -> "a/b.obj").
+  std::string asset_name(const std::string& file, const std::string& p) {
+    if (file.empty()) r_.fail(p, "must not be empty");
+    if (file.find('\\') != std::string::npos) r_.fail(p, "use '/' as the path separator");
+    fs::path path(file);
+    if (path.is_absolute() || file.front() == '/')
+      r_.fail(p, "absolute path '" + file + "' not allowed (asset paths are relative to the " +
+                     "scene file's directory)");
+    for (const fs::path& part : path)
+      if (part == "..")
+        r_.fail(p, "'..' not allowed in asset path '" + file + "' (assets must lie in the " +
+                       "scene file's directory or below it)");
+    return path.lexically_normal().generic_string();
+  }
+
+  MeshData load_asset(const std::string& file, const std::string& type, const std::string& p) {
+    std::string name = asset_name(file, p);
+    if (auto it = mesh_cache_.find(name); it != mesh_cache_.end()) return it->second;
+    fs::path full = dir_ / name;
+    std::error_code ec;
+    if (!fs::is_regular_file(full, ec))
+      r_.fail(p, "mesh file '" + name + "' not found (looked for " + full.string() + ")");
+    std::string bytes;
+    try {
+      bytes = read_file_bytes(full.string());
+    } catch (const std::exception& e) {
+      r_.fail(p, e.what());
+    }
+    scene_.assets.push_back(name);
+    asset_digests_[name] = sha256_hex(bytes);
+    try {
+      MeshData m = type == "obj" ? parse_obj(bytes, name) : parse_ply(bytes, name);
+      return mesh_cache_[name] = std::move(m);
+    } catch (const SceneError& e) {
+      r_.fail(p, e.what());
+    }
+  }
+
+  void check_mesh(const MeshData& m, const std::string& where) {
+    size_t n = m.positions.size();
+    if (!m.normals.empty() && m.normals.size() != n)
+      r_.fail(where, "has " + std::to_string(m.normals.size()) + " normals for " +
+                         std::to_string(n) + " vertices");
+    if (!m.uvs.empty() && m.uvs.size() != n)
+      r_.fail(where, "has " + std::to_string(m.uvs.size()) + " uvs for " + std::to_string(n) +
+                         " vertices");
+    for (size_t i = 0; i < m.indices.size(); ++i)
+      if (m.indices[i] >= n)
+        r_.fail(where, "index " + std::to_string(m.indices[i]) + " (triangle " +
+                           std::to_string(i / 3) + ") out of range (" + std::to_string(n) +
+                           " vertices)");
+  }
+
+  // Moves geometry to world space, keeps the front side under mirroring transforms, and drops
+  // zero-area triangles (they would only produce NaN normals and zero-area light samples).
+  void to_world_space(MeshData& m, const Mat4& to_world, Mesh& mesh, const std::string& where) {
+    for (Vec3& pos : m.positions) {
+      pos = to_world.point(pos);
+      if (!is_finite(pos)) r_.fail(where, "a vertex is not finite after the transform");
+    }
+    bool bad_normal = false;
+    for (Vec3& n : m.normals) {
+      n = to_world.normal(n);
+      float len = length(n);
+      bad_normal |= !(len > 0) || !std::isfinite(len);
+      n = n / len;
+    }
+    if (bad_normal) {
+      spdlog::warn("{}: {}: zero or non-finite vertex normals; using flat shading", r_.file(),
+                   where);
+      m.normals.clear();
+    }
+    bool mirror = to_world.det3() < 0;  // the winding's right-hand normal would flip
+    size_t dropped = 0;
+    for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
+      uint32_t a = m.indices[t], b = m.indices[t + 1], c = m.indices[t + 2];
+      if (mirror) std::swap(b, c);
+      Vec3 e = cross(m.positions[b] - m.positions[a], m.positions[c] - m.positions[a]);
+      if (!(length_sq(e) > 0) || !is_finite(e)) {
+        ++dropped;
+        continue;
+      }
+      mesh.indices.insert(mesh.indices.end(), {a, b, c});
+    }
+    if (dropped)
+      spdlog::warn("{}: {}: dropped {} degenerate (zero-area) triangle{}", r_.file(), where,
+                   dropped, dropped == 1 ? "" : "s");
+    if (mesh.indices.empty())
+      r_.fail(where, dropped ? "all triangles are degenerate (zero area)" : "has no triangles");
+    mesh.positions = std::move(m.positions);
+    mesh.normals = std::move(m.normals);
+    mesh.uvs = std::move(m.uvs);
+  }
+
+  Reader r_;
+  Scene& scene_;
+  fs::path dir_;
+  std::map<std::string, uint32_t> material_ids_;
+  std::map<std::string, MeshData> mesh_cache_;
+  std::map<std::string, std::string> asset_digests_;
+};
+
+// Validated override values; the message names the command-line flag.
+[[noreturn]] void flag_fail(const std::string& flag, const std::string& what) {
+  throw SceneError(flag + ": " + what);
+}
+
+// The CLI sets width and height together as --res WxH.
+void check_resolution(const std::optional<int>& v, const char* what) {
+  if (v && (*v < 1 || *v > kMaxResolution))
+    flag_fail("--res", std::string(what) + " must be between 1 and " +
+                           std::to_string(kMaxResolution) + ", got " + std::to_string(*v));
+}
+
+// spp and passes together: an explicit --passes must divide the spp; a new --spp alone keeps the
+// scene's passes if they divide it, else passes become gcd(spp, 16).
+void override_passes(RenderSettings& rs, const SceneOverrides& o) {
+  if (o.spp && *o.spp < 1) flag_fail("--spp", "must be at least 1, got 0");
+  if (o.passes && *o.passes < 1) flag_fail("--passes", "must be at least 1, got 0");
+  if (o.spp) rs.spp = *o.spp;
+  if (o.passes) {
+    rs.passes = *o.passes;
+    if (rs.spp % rs.passes == 0) return;
+    if (o.spp)
+      flag_fail("--spp", "must be a multiple of --passes (" + std::to_string(rs.passes) +
+                             "), got " + std::to_string(rs.spp));
+    flag_fail("--passes", "must divide the scene's spp (" + std::to_string(rs.spp) + "), got " +
+                              std::to_string(rs.passes));
+  }
+  if (o.spp && rs.spp % rs.passes != 0)
+    rs.passes = uint32_t(std::gcd(rs.spp, uint64_t(kDefaultPassCap)));
+}
+
+}  // namespace
+
+const std::vector<std::string>& known_integrators() {
+  // Add a name here when its integrator lands (whitted, ao, direct, light, ir, bdpt, ppm).
+  static const std::vector<std::string> kNames = {"path"};
+  return kNames;
+}
+
+void apply_overrides(Scene& scene, const SceneOverrides& o) {
+  // Work on copies so a rejected override leaves the scene untouched.
+  FilmSettings film = scene.film;
+  RenderSettings rs = scene.render;
+  if (o.integrator && !contains(known_integrators(), *o.integrator))
+    flag_fail("--integrator", "unknown integrator '" + *o.integrator +
+                                  "' (known: " + join(known_integrators()) + ")");
+  if (o.integrator) rs.integrator.type = *o.integrator;
+  if (o.max_depth && *o.max_depth < 0)
+    flag_fail("--max-depth", "must be at least 0, got " + std::to_string(*o.max_depth));
+  if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
+  check_resolution(o.width, "width");
+  check_resolution(o.height, "height");
+  if (o.width) film.width = *o.width;
+  if (o.height) film.height = *o.height;
+  if (o.filter && !contains(kFilterTypes, *o.filter))
+    flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join(kFilterTypes) + ")");
+  if (o.filter) film.filter.type = FilterType::Box;
+  if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
+    flag_fail("--noise-target",
+              "must be a finite number >= 0, got " + format_number(*o.noise_target));
+  if (o.noise_target) rs.noise_target = *o.noise_target;
+  if (o.seed) rs.seed = *o.seed;
+  if (o.frame) rs.frame = *o.frame;
+  override_passes(rs, o);
+  scene.film = film;
+  scene.render = rs;
+}
+
+Scene load_scene(const std::string& path, const SceneOverrides& overrides) {
+  std::string bytes;
+  try {
+    bytes = read_file_bytes(path);
+  } catch (const std::exception& e) {
+    throw SceneError(path + ": cannot read scene file (" + e.what() + ")");
+  }
+  Scene scene;
+  scene.path = path;
+  json root = parse_json_text(bytes, path);
+  SceneParser parser(path, scene);
+  parser.parse(root);
+  scene.digest = parser.digest(bytes);
+  apply_overrides(scene, overrides);
+  return scene;
+}
+
+}  // namespace rf

@@ -1,0 +1,94 @@
+#include "tests/support/test_support.h"
+
+#include <cmath>
+
+#include <sys/wait.h>
+
+#include <array>
+#include <atomic>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+#include <unistd.h>
+
+namespace rf::test {
+
+std::string source_dir() { return RAYFARM_SOURCE_DIR; }
+std::string shared_dir() { return std::string(RAYFARM_SOURCE_DIR) + "/../shared"; }
+std::string rayfarm_binary() { return RAYFARM_BINARY; }
+
+std::string make_temp_dir(const std::string& tag) {
+  static std::atomic<int> counter{0};
+  auto base = std::filesystem::temp_directory_path() / "rayfarm-tests";
+  auto dir = base / (tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir.string();
+}
+
+CommandResult run_command(const std::string& command_line) {
+  CommandResult r;
+  std::string cmd = command_line + " 2>&1";
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) throw std::runtime_error("popen failed: " + command_line);
+  std::array<char, 4096> buf;
+  size_t n;
+  while ((n = std::fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
+  int status = ::pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return r;
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  auto p = std::filesystem::path(path);
+  if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path());
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  if (!out) throw std::runtime_error("cannot write " + path);
+}
+
+}  // namespace rf::test
+
+namespace rf::test {
+
+Mesh make_uv_sphere(Vec3 c, float r, int n_theta, int n_phi, uint32_t material) {
+  Mesh m;
+  m.name = "sphere";
+  m.material = material;
+  // Vertex rows from the north pole (theta = 0) to the south pole.
+  for (int i = 0; i <= n_theta; ++i) {
+    float th = kPi * float(i) / float(n_theta);
+    for (int j = 0; j < n_phi; ++j) {
+      float ph = 2 * kPi * float(j) / float(n_phi);
+      m.positions.push_back(c + r * Vec3(std::sin(th) * std::cos(ph), std::cos(th),
+                                         std::sin(th) * std::sin(ph)));
+    }
+  }
+  for (int i = 0; i < n_theta; ++i)
+    for (int j = 0; j < n_phi; ++j) {
+      uint32_t a = uint32_t(i * n_phi + j), b = uint32_t(i * n_phi + (j + 1) % n_phi);
+      uint32_t c2 = a + uint32_t(n_phi), d = b + uint32_t(n_phi);
+      // Winding (a, b, c2) gives an outward normal for this parametrisation.
+      if (i != 0) m.indices.insert(m.indices.end(), {a, b, c2});
+      if (i != n_theta - 1) m.indices.insert(m.indices.end(), {b, d, c2});
+    }
+  return m;
+}
+
+Scene make_scene(std::vector<Material> materials, std::vector<Mesh> meshes, Vec3 eye, Vec3 target,
+                 int w, int h, const std::string& tag) {
+  Scene s;
+  s.path = tag;
+  s.digest = tag;
+  s.camera.camera_to_world = Mat4::look_at(eye, target, {0, 1, 0});
+  s.camera.fov_deg = 40;
+  s.film.width = w;
+  s.film.height = h;
+  s.materials = std::move(materials);
+  s.meshes = std::move(meshes);
+  return s;
+}
+
+}  // namespace rf::test

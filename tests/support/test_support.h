@@ -1,0 +1,38 @@
+// Helpers shared by tests: paths to the source tree and the CLI binary, temporary directories,
+// running the CLI and capturing its output.
+#pragma once
+
+#include <string>
+
+namespace rf::test {
+
+std::string source_dir();                  // the repository root
+std::string shared_dir();                  // ../shared beside the repository (may not exist)
+std::string rayfarm_binary();              // the built CLI
+std::string make_temp_dir(const std::string& tag);  // fresh directory under the build tree's tmp
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr together
+};
+// Runs a shell command line, capturing stdout+stderr.
+CommandResult run_command(const std::string& command_line);
+
+// Writes text to a file (creating parent directories).
+void write_text(const std::string& path, const std::string& text);
+
+}  // namespace rf::test
+
+#include "engine/scene.h"
+
+namespace rf::test {
+
+// A closed UV sphere (outward right-hand normals) of 2*n_theta*n_phi - 2*n_phi triangles.
+Mesh make_uv_sphere(Vec3 center, float radius, int n_theta, int n_phi, uint32_t material);
+
+// A minimal valid scene around the given meshes: pinhole camera at eye looking at target,
+// resolution w x h, path tracer, box filter. The digest is set from `tag`.
+Scene make_scene(std::vector<Material> materials, std::vector<Mesh> meshes, Vec3 eye,
+                 Vec3 target, int w, int h, const std::string& tag);
+
+}  // namespace rf::test
