@@ -119,6 +119,31 @@ TEST(Determinism, LocalRenderEqualsTaskMerge) {
   EXPECT_EQ(res.passes_merged, 4u);
 }
 
+TEST(Determinism, NoiseTargetStopsOnACompletedPrefix) {
+  // A target between the relMSE after 4 and after 16 passes: the render stops at some k, and
+  // its image is exactly the first k passes, whatever the tiling.
+  Scene s = cornell(32, 32, 16);
+  Renderer r(s);
+  LocalRenderOptions probe;
+  probe.pass_count = 8;
+  double target = render_local(r, probe).frame.rel_mse();
+  LocalRenderOptions opt;
+  opt.noise_target = target;
+  opt.tile_size = 8;
+  LocalRenderResult stopped = render_local(r, opt);
+  EXPECT_TRUE(stopped.stopped_on_target);
+  // The target is met after 8 passes at the latest (and not before the 4-pass minimum).
+  EXPECT_LE(stopped.passes_merged, 8u);
+  EXPECT_GE(stopped.passes_merged, 4u);
+  EXPECT_EQ(stopped.frame.header.passes, PassSet::range(0, stopped.passes_merged));
+  LocalRenderOptions prefix;
+  prefix.pass_count = stopped.passes_merged;
+  prefix.tile_size = 32;
+  LocalRenderResult again = render_local(r, prefix);
+  EXPECT_TRUE(bits_equal(again.frame.sum, stopped.frame.sum));
+  EXPECT_TRUE(bits_equal(again.frame.batch_sum_sq, stopped.frame.batch_sum_sq));
+}
+
 TEST(Determinism, SeedsAndPassesChangeTheImage) {
   Scene s1 = cornell(16, 4, 2);
   Scene s2 = s1;
