@@ -51,7 +51,7 @@ struct Bsdf {
   static Bsdf at(const Material& m, Vec3 ns, Vec3 ng, Vec3 wo_world) {
     Bsdf b;
     b.type = m.type;
-    b.diffuse.reflectance = m.reflectance;
+    b.diffuse.reflectance = m.reflectance.value;
     bool flip = dot(wo_world, ng) < 0;
     b.ng = flip ? -ng : ng;
     b.frame = Frame::from_normal(flip ? -ns : ns);

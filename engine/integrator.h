@@ -23,7 +23,7 @@ struct TraceCounters {
 };
 
 // Radiance arriving along a camera ray (integrators/path.cpp).
-RGB path_radiance(const RenderContext& ctx, Ray ray, IndependentSampler& sampler,
+RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
                   TraceCounters& counters);
 
 }  // namespace rf

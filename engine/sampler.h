@@ -62,4 +62,27 @@ class IndependentSampler {
   uint32_t dimension_ = 0;
 };
 
+// The sampler integrators draw from: a tag and a switch over the kinds (RenderSettings::sampler).
+// Only the independent kind exists so far; the same start/get interface serves every kind.
+class Sampler {
+ public:
+  enum class Kind : uint8_t { Independent };
+  explicit Sampler(Kind kind = Kind::Independent) : kind_(kind) {}
+
+  void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
+                           uint64_t sample_index) {
+    independent_.start_camera_sample(seed, frame, pass, px, py, sample_index);
+  }
+  void start_light_path(uint64_t seed, uint32_t frame, uint32_t pass, uint64_t light_path_index) {
+    independent_.start_light_path(seed, frame, pass, light_path_index);
+  }
+  float get_1d() { return independent_.get_1d(); }
+  Vec2 get_2d() { return independent_.get_2d(); }
+  Kind kind() const { return kind_; }
+
+ private:
+  Kind kind_;
+  IndependentSampler independent_;
+};
+
 }  // namespace rf

@@ -18,12 +18,52 @@ struct SceneError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-enum class MaterialType : uint8_t { Diffuse };
+// A material parameter: a constant, or (texture >= 0) a lookup in Scene::textures at the hit's uv.
+struct ColorParam {
+  RGB value{0.5f};
+  int32_t texture = -1;
+};
+struct FloatParam {
+  float value = 0;
+  int32_t texture = -1;  // the texture's luminance (or its single channel)
+};
 
+enum class TextureType : uint8_t { Constant, Checkerboard, Image };
+
+struct Texture {
+  std::string name;
+  TextureType type = TextureType::Constant;
+  RGB value{0.5f};               // constant
+  RGB color_a{0.0f}, color_b{1.0f};  // checkerboard: a where floor(u*scale)+floor(v*scale) is even
+  Vec2 uv_scale{1.0f, 1.0f};     // uv multiplied by this before lookup (all kinds)
+  Vec2 uv_offset{0.0f, 0.0f};
+  std::string file;              // image: asset path relative to the scene file
+  std::string resolved_path;     // image: path to open (scene dir + file)
+  bool is_data = false;          // image: true = linear values (roughness maps); false = colour,
+                                 // 8-bit images sRGB-decoded
+};
+
+enum class MaterialType : uint8_t {
+  Diffuse,          // Lambertian
+  Conductor,        // smooth conductor (mirror)
+  Dielectric,       // smooth dielectric (glass)
+  ThinDielectric,   // thin dielectric sheet (window pane)
+  RoughConductor,   // GGX microfacet conductor
+  RoughDielectric,  // GGX microfacet dielectric
+  Plastic,          // coated diffuse: dielectric coating (smooth or GGX) over a diffuse base
+};
+
+// Every material kind reads the fields it needs (docs/scene-format.md lists which).
 struct Material {
   std::string name;
   MaterialType type = MaterialType::Diffuse;
-  RGB reflectance{0.5f};  // diffuse albedo
+  ColorParam reflectance;           // diffuse albedo (diffuse, plastic base)
+  ColorParam specular{RGB(1.0f)};   // specular tint (conductor tint mode, dielectrics, coating)
+  FloatParam roughness{0.0f};       // GGX alpha (rough conductor/dielectric, plastic; 0 = smooth)
+  float ior = 1.5f;                 // dielectrics and plastic coating: interior / exterior IOR
+  RGB eta{0.2f, 0.92f, 1.1f};       // conductor complex IOR, real part per RGB (default: gold)
+  RGB k{3.9f, 2.45f, 2.14f};        // conductor complex IOR, imaginary part per RGB
+  bool conductor_tint = false;      // conductor: Schlick Fresnel with F0 = specular instead of eta/k
 };
 
 // Emission on a shape makes it an area light. One-sided lights emit on the side the geometric
@@ -45,20 +85,48 @@ struct Mesh {
 };
 
 struct Camera {
-  Mat4 camera_to_world;   // camera space: +x right, +y up, looking down -z
-  float fov_deg = 40.0f;  // field of view across the shorter image axis (as pbrt)
+  Mat4 camera_to_world;    // camera space: +x right, +y up, looking down -z
+  float fov_deg = 40.0f;   // field of view across the shorter image axis (as pbrt)
+  float lens_radius = 0;   // thin lens aperture radius in scene units; 0 = pinhole
+  float focus_distance = 1;  // distance along the view axis of the plane in focus
 };
 
-enum class FilterType : uint8_t { Box };
+enum class FilterType : uint8_t { Box, Triangle, Gaussian };
 
 struct FilterSettings {
   FilterType type = FilterType::Box;
   float radius = 0.5f;  // in pixels; box of radius 0.5 is exactly the pixel
+  float sigma = 0.5f;   // gaussian standard deviation in pixels (truncated at radius)
 };
 
 struct FilmSettings {
   int width = 256, height = 256;
   FilterSettings filter;
+};
+
+enum class LightType : uint8_t { Point, Spot, Directional };
+
+// Lights that are not shapes. Area lights are emissions on shapes (Mesh::emission); the
+// environment is Scene::environment.
+struct Light {
+  std::string name;
+  LightType type = LightType::Point;
+  Vec3 position{0.0f};           // point, spot
+  Vec3 direction{0, -1, 0};      // spot axis / direction light travels (directional), unit
+  RGB intensity{1.0f};           // point, spot: W/sr (radiant intensity)
+  RGB irradiance{1.0f};          // directional: W/m^2 on a surface facing it
+  float cone_angle_deg = 30;     // spot: full cutoff half-angle
+  float falloff_start_deg = 20;  // spot: smoothstep falloff from here to the cutoff
+};
+
+// Lat-long (equirectangular) environment map at infinity. For a unit direction d in map space
+// (to_world maps it to the world): u = 0.5 + atan2(d.x, -d.z) / 2pi, v = acos(d.y) / pi, so the
+// image centre looks down -z, the top row is +y, and u grows towards +x.
+struct Environment {
+  std::string file;             // asset path relative to the scene file ("" = constant)
+  std::string resolved_path;
+  RGB scale{1.0f};              // multiplies the map (or is the constant radiance)
+  Mat4 to_world;                // rotation of the map
 };
 
 struct IntegratorSettings {
@@ -74,6 +142,7 @@ struct RenderSettings {
   uint64_t seed = 0;
   uint32_t frame = 0;
   double noise_target = 0;    // relMSE to stop at; 0 = render all passes
+  std::string sampler = "independent";  // or "sobol": Owen-scrambled, scrambled per pass
   uint64_t spp_per_pass() const { return spp / passes; }
 };
 
@@ -85,7 +154,10 @@ struct Scene {
   FilmSettings film;
   RenderSettings render;
   std::vector<Material> materials;
+  std::vector<Texture> textures;
   std::vector<Mesh> meshes;
+  std::vector<Light> lights;
+  std::optional<Environment> environment;
 };
 
 // Command-line overrides of the scene's settings; each is validated like the scene's own value.
@@ -99,6 +171,7 @@ struct SceneOverrides {
   std::optional<std::string> filter;
   std::optional<double> noise_target;
   std::optional<uint32_t> frame;
+  std::optional<std::string> sampler;
 };
 
 // Reads a scene file (JSON, docs/scene-format.md) and every mesh it references, applies the

@@ -473,7 +473,7 @@ class SceneParser {
       r_.check_keys(j, p, {"type", "reflectance"});
       m.type = MaterialType::Diffuse;
       if (const json* v = r_.find(j, "reflectance"))
-        m.reflectance = r_.rgb(*v, p + ".reflectance", 1);
+        m.reflectance.value = r_.rgb(*v, p + ".reflectance", 1);
     } else {
       r_.fail(p + ".type",
               "unknown material type '" + type + "' (known: " + join(kMaterialTypes) + ")");

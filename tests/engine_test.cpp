@@ -44,7 +44,7 @@ TEST(Sampler, UniformAndUncorrelatedAcrossDimensionsAndPixels) {
 }
 
 Scene two_light_scene() {
-  Material m{"m", MaterialType::Diffuse, RGB(0.5f)};
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
   Mesh a = test::make_uv_sphere({-2, 0, 0}, 0.5f, 6, 12, 0);
   a.emission = Emission{RGB(4, 1, 1), false};
   Mesh b = test::make_uv_sphere({2, 0, 0}, 1.0f, 6, 12, 0);
@@ -87,7 +87,7 @@ TEST(Lights, SampledPdfEqualsPdfQuery) {
 TEST(Accel, SpawnedRaysDoNotHitTheirOwnSurfaceFarFromTheOrigin) {
   // A big tilted quad far from the origin: with a fixed epsilon, rounding error at |p| ~ 1e4
   // makes spawned rays re-hit the surface; the error-bound offset must not.
-  Material m{"m", MaterialType::Diffuse, RGB(0.5f)};
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
   Mesh quad;
   quad.material = 0;
   Mat4 xf = Mat4::translate({1e4f, 2e4f, -3e4f}) * Mat4::rotate({1, 1, 0}, 37) * Mat4::scale(Vec3(500));
@@ -116,7 +116,7 @@ TEST(Accel, SpawnedRaysDoNotHitTheirOwnSurfaceFarFromTheOrigin) {
 }
 
 TEST(DiffuseBsdf, SampleMatchesEvalAndPdf) {
-  Material m{"m", MaterialType::Diffuse, RGB(0.3f, 0.6f, 0.9f)};
+  Material m{"m", MaterialType::Diffuse, {RGB(0.3f, 0.6f, 0.9f)}};
   Vec3 ng = normalize(Vec3(0.2f, 1, 0.1f));
   Vec3 wo = normalize(Vec3(0.5f, 0.7f, -0.2f));
   Bsdf b = Bsdf::at(m, ng, ng, wo);

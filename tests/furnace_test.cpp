@@ -23,7 +23,7 @@ class Furnace : public ::testing::TestWithParam<FurnaceCase> {};
 TEST_P(Furnace, MatchesGeometricSeries) {
   const FurnaceCase c = GetParam();
   const float le = 0.5f;
-  Material m{"wall", MaterialType::Diffuse, RGB(c.albedo)};
+  Material m{"wall", MaterialType::Diffuse, {RGB(c.albedo)}};
   Mesh sphere = test::make_uv_sphere({0, 0, 0}, 1.0f, 24, 48, 0);
   sphere.emission = Emission{RGB(le), /*two_sided=*/true};
   Scene s = test::make_scene({m}, {sphere}, {0, 0, 0}, {0, 0, -1}, 16, 16, "furnace");

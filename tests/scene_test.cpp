@@ -97,8 +97,8 @@ TEST(CornellBox, MaterialsAreSortedByNameAndReferencedByIndex) {
   const Material& left = s.materials[mesh_named(s, "LeftWall").material];
   EXPECT_EQ(left.name, "LeftWall");
   EXPECT_EQ(left.type, MaterialType::Diffuse);
-  EXPECT_EQ(left.reflectance, RGB(0.63f, 0.065f, 0.05f));
-  EXPECT_EQ(s.materials[mesh_named(s, "Light").material].reflectance, RGB(0.0f));
+  EXPECT_EQ(left.reflectance.value, RGB(0.63f, 0.065f, 0.05f));
+  EXPECT_EQ(s.materials[mesh_named(s, "Light").material].reflectance.value, RGB(0.0f));
   EXPECT_EQ(s.materials[mesh_named(s, "TallBox").material].name, "TallBox");
 }
 

@@ -15,7 +15,7 @@
 
 namespace rf {
 
-RGB path_radiance(const RenderContext& ctx, Ray ray, IndependentSampler& sampler,
+RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
                   TraceCounters& counters) {
   const IntegratorSettings& settings = ctx.scene.render.integrator;
   RGB radiance(0.0f), beta(1.0f);
