@@ -105,7 +105,7 @@ void print_summary(const rf::SampleBuffer& frame, double seconds, uint64_t rays)
 }
 
 struct RenderArgs {
-  std::string scene, output, partial, pass_range, res, integrator, filter;
+  std::string scene, output, partial, pass_range, res, integrator, filter, sampler;
   std::optional<uint64_t> spp, seed;
   std::optional<uint32_t> passes, frame;
   std::optional<int> max_depth;
@@ -125,6 +125,7 @@ int cmd_render(const RenderArgs& a) {
   ov.noise_target = a.noise_target;
   if (!a.integrator.empty()) ov.integrator = a.integrator;
   if (!a.filter.empty()) ov.filter = a.filter;
+  if (!a.sampler.empty()) ov.sampler = a.sampler;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
   if (a.output.empty() && a.partial.empty()) throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
   if (!a.partial.empty() && a.pass_range.empty())
@@ -208,7 +209,8 @@ int main(int argc, char** argv) {
   render->add_option("--frame", ra.frame, "frame number (selects the seed stream)");
   render->add_option("--res", ra.res, "resolution WIDTHxHEIGHT");
   render->add_option("--max-depth", ra.max_depth, "max scattering events");
-  render->add_option("--filter", ra.filter, "pixel filter (box)");
+  render->add_option("--filter", ra.filter, "pixel filter (box, triangle, gaussian)");
+  render->add_option("--sampler", ra.sampler, "sampler (independent, sobol)");
   render->add_option("--threads", threads, "worker threads (default: all cores)");
   render->add_option("--noise-target", ra.noise_target, "stop when relMSE <= this");
   render->add_option("--pass-range", ra.pass_range, "render only passes FIRST-LAST (inclusive)");

@@ -61,8 +61,8 @@ struct Material {
   ColorParam specular{RGB(1.0f)};   // specular tint (conductor tint mode, dielectrics, coating)
   FloatParam roughness{0.0f};       // GGX alpha (rough conductor/dielectric, plastic; 0 = smooth)
   float ior = 1.5f;                 // dielectrics and plastic coating: interior / exterior IOR
-  RGB eta{0.2f, 0.92f, 1.1f};       // conductor complex IOR, real part per RGB (default: gold)
-  RGB k{3.9f, 2.45f, 2.14f};        // conductor complex IOR, imaginary part per RGB
+  RGB eta{0.143f, 0.374f, 1.442f};  // conductor complex IOR, real part per RGB (default: gold)
+  RGB k{3.983f, 2.385f, 1.603f};    // conductor complex IOR, imaginary part per RGB
   bool conductor_tint = false;      // conductor: Schlick Fresnel with F0 = specular instead of eta/k
 };
 

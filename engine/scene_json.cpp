@@ -28,9 +28,44 @@ constexpr int kFormatVersion = 1;
 constexpr int kMaxResolution = 16384;
 constexpr uint32_t kDefaultPassCap = 16;  // passes default to gcd(spp, 16)
 
-const std::vector<std::string> kMaterialTypes = {"diffuse"};
-const std::vector<std::string> kFilterTypes = {"box"};
-const std::vector<std::string> kShapeTypes = {"obj", "ply", "mesh", "rectangle", "cube"};
+const std::vector<std::string> kMaterialTypes = {"diffuse",         "conductor",        "rough_conductor",
+                                                 "dielectric",      "thin_dielectric",  "rough_dielectric",
+                                                 "plastic"};
+const std::vector<std::string> kFilterTypes = {"box", "triangle", "gaussian"};
+const std::vector<std::string> kShapeTypes = {"obj",  "ply",    "mesh",  "rectangle",
+                                              "cube", "sphere", "disk"};
+const std::vector<std::string> kLightTypes = {"point", "spot", "directional"};
+const std::vector<std::string> kTextureTypes = {"constant", "checkerboard", "image"};
+const std::vector<std::string> kSamplers = {"independent", "sobol"};
+
+// Conductor presets: complex IOR (eta, k) averaged over the R, G, B bands of measured spectral
+// data (approximations for an RGB renderer).
+struct ConductorPreset {
+  const char* name;
+  RGB eta, k;
+};
+const ConductorPreset kConductors[] = {
+    {"gold", {0.143f, 0.374f, 1.442f}, {3.983f, 2.385f, 1.603f}},
+    {"silver", {0.155f, 0.117f, 0.138f}, {4.828f, 3.122f, 2.147f}},
+    {"copper", {0.200f, 0.924f, 1.102f}, {3.912f, 2.452f, 2.142f}},
+    {"aluminium", {1.657f, 0.880f, 0.521f}, {9.224f, 6.270f, 4.837f}},
+};
+
+FilterType filter_type(const std::string& name) {
+  if (name == "triangle") return FilterType::Triangle;
+  if (name == "gaussian") return FilterType::Gaussian;
+  return FilterType::Box;
+}
+
+// Default radius per filter (pixels): box covers the pixel, triangle one pixel, gaussian 1.5.
+float default_filter_radius(FilterType t) {
+  switch (t) {
+    case FilterType::Box: return 0.5f;
+    case FilterType::Triangle: return 1.0f;
+    case FilterType::Gaussian: return 1.5f;
+  }
+  return 0.5f;
+}
 
 std::string join(const std::vector<std::string>& names) {
   std::string out;
@@ -293,6 +328,45 @@ MeshData make_cube() {
   return m;
 }
 
+// Unit-normal UV sphere: rows from the north pole (+y) down; uv = (phi / 2pi, 1 - theta / pi).
+MeshData make_sphere(Vec3 c, float r, int n_theta, int n_phi) {
+  MeshData m;
+  for (int i = 0; i <= n_theta; ++i) {
+    float th = kPi * float(i) / float(n_theta);
+    for (int j = 0; j <= n_phi; ++j) {  // seam column duplicated so uvs wrap cleanly
+      float ph = 2 * kPi * float(j) / float(n_phi);
+      Vec3 n(std::sin(th) * std::cos(ph), std::cos(th), -std::sin(th) * std::sin(ph));
+      m.positions.push_back(c + r * n);
+      m.normals.push_back(n);
+      m.uvs.push_back({float(j) / float(n_phi), 1.0f - float(i) / float(n_theta)});
+    }
+  }
+  uint32_t row = uint32_t(n_phi + 1);
+  for (int i = 0; i < n_theta; ++i)
+    for (int j = 0; j < n_phi; ++j) {
+      uint32_t a = uint32_t(i) * row + uint32_t(j), b = a + 1, d = a + row, e = d + 1;
+      // phi grows towards -z, so (a, d, b) winds counter-clockwise seen from outside.
+      if (i != 0) m.indices.insert(m.indices.end(), {a, d, b});
+      if (i != n_theta - 1) m.indices.insert(m.indices.end(), {b, d, e});
+    }
+  return m;
+}
+
+// Unit disk in the z = 0 plane, normal +z, as a fan; uv = polar (r, phi / 2pi).
+MeshData make_disk(int segments) {
+  MeshData m;
+  m.positions.push_back({0, 0, 0});
+  m.uvs.push_back({0, 0});
+  for (int k = 0; k < segments; ++k) {
+    float ph = 2 * kPi * float(k) / float(segments);
+    m.positions.push_back({std::cos(ph), std::sin(ph), 0});
+    m.uvs.push_back({1, float(k) / float(segments)});
+  }
+  for (int k = 0; k < segments; ++k)
+    m.indices.insert(m.indices.end(), {0u, uint32_t(1 + k), uint32_t(1 + (k + 1) % segments)});
+  return m;
+}
+
 // ---------------------------------------------------------------------------------------------
 // The scene file.
 
@@ -305,16 +379,23 @@ class SceneParser {
     r_.expect_object(root, "");
     parse_version(root);
     r_.check_keys(root, "",
-                  {"format", "version", "camera", "film", "render", "materials", "shapes"});
+                  {"format", "version", "camera", "film", "render", "textures", "materials", "shapes",
+                   "lights", "environment"});
     parse_camera(r_.require(root, "", "camera"));
     parse_film(r_.require(root, "", "film"));
     if (const json* j = r_.find(root, "render"))
       parse_render(*j);
     else
       set_default_passes();
+    if (const json* t = r_.find(root, "textures")) parse_textures(*t);
     parse_materials(r_.require(root, "", "materials"));
     const json& shapes = r_.array(r_.require(root, "", "shapes"), "shapes");
     for (size_t i = 0; i < shapes.size(); ++i) parse_shape(shapes[i], child("shapes", i));
+    if (const json* l = r_.find(root, "lights")) {
+      r_.array(*l, "lights");
+      for (size_t i = 0; i < l->size(); ++i) parse_light((*l)[i], child("lights", i));
+    }
+    if (const json* e = r_.find(root, "environment")) parse_environment(*e);
   }
 
   // SHA-256 over the scene bytes, then per asset (in order of first use) a NUL, its relative
@@ -346,7 +427,7 @@ class SceneParser {
 
   void parse_camera(const json& j) {
     const std::string p = "camera";
-    r_.check_keys(j, p, {"type", "fov_deg", "look_at", "to_world"});
+    r_.check_keys(j, p, {"type", "fov_deg", "look_at", "to_world", "aperture_radius", "focus_distance"});
     if (const json* t = r_.find(j, "type"))
       if (std::string type = r_.string(*t, "camera.type"); type != "perspective")
         r_.fail("camera.type", "unknown camera type '" + type + "' (known: perspective)");
@@ -360,6 +441,18 @@ class SceneParser {
     if (!look && !to_world) r_.fail(p, "needs either 'look_at' or 'to_world'");
     if (look && to_world) r_.fail(p, "give either 'look_at' or 'to_world', not both");
     scene_.camera.camera_to_world = look ? parse_look_at(*look) : parse_camera_matrix(*to_world);
+    if (const json* a = r_.find(j, "aperture_radius")) {
+      scene_.camera.lens_radius = r_.number(*a, "camera.aperture_radius");
+      if (scene_.camera.lens_radius < 0)
+        r_.fail("camera.aperture_radius", "must be at least 0, got " + a->dump());
+    }
+    if (const json* f = r_.find(j, "focus_distance")) {
+      scene_.camera.focus_distance = r_.number(*f, "camera.focus_distance");
+      if (!(scene_.camera.focus_distance > 0))
+        r_.fail("camera.focus_distance", "must be > 0, got " + f->dump());
+    } else if (scene_.camera.lens_radius > 0) {
+      r_.fail("camera.focus_distance", "required when aperture_radius > 0");
+    }
   }
 
   Mat4 parse_look_at(const json& j) {
@@ -399,12 +492,19 @@ class SceneParser {
     scene_.film.height = int(r_.integer(res[1], "film.resolution[1]", 1, kMaxResolution));
     scene_.film.filter = {};
     if (const json* f = r_.find(j, "filter")) {
-      r_.check_keys(*f, "film.filter", {"type", "radius"});
+      r_.check_keys(*f, "film.filter", {"type", "radius", "sigma"});
       std::string type = r_.string(r_.require(*f, "film.filter", "type"), "film.filter.type");
       if (!contains(kFilterTypes, type))
         r_.fail("film.filter.type",
                 "unknown filter '" + type + "' (known: " + join(kFilterTypes) + ")");
-      scene_.film.filter.type = FilterType::Box;
+      scene_.film.filter.type = filter_type(type);
+      scene_.film.filter.radius = default_filter_radius(scene_.film.filter.type);
+      if (const json* sg = r_.find(*f, "sigma")) {
+        if (type != "gaussian") r_.fail("film.filter.sigma", "only the gaussian filter has a sigma");
+        float sigma = r_.number(*sg, "film.filter.sigma");
+        if (!(sigma > 0)) r_.fail("film.filter.sigma", "must be > 0, got " + sg->dump());
+        scene_.film.filter.sigma = sigma;
+      }
       if (const json* rad = r_.find(*f, "radius")) {
         float radius = r_.number(*rad, "film.filter.radius");
         if (!(radius > 0)) r_.fail("film.filter.radius", "must be > 0, got " + rad->dump());
@@ -415,7 +515,7 @@ class SceneParser {
 
   void parse_render(const json& j) {
     const std::string p = "render";
-    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target"});
+    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target", "sampler"});
     RenderSettings& rs = scene_.render;
     if (const json* i = r_.find(j, "integrator")) parse_integrator(*i);
     if (const json* v = r_.find(j, "spp")) rs.spp = r_.unsigned_integer(*v, "render.spp", 1);
@@ -428,6 +528,11 @@ class SceneParser {
       set_default_passes();
     }
     if (const json* v = r_.find(j, "seed")) rs.seed = r_.unsigned_integer(*v, "render.seed", 0);
+    if (const json* v = r_.find(j, "sampler")) {
+      rs.sampler = r_.string(*v, "render.sampler");
+      if (!contains(kSamplers, rs.sampler))
+        r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join(kSamplers) + ")");
+    }
     if (const json* v = r_.find(j, "noise_target")) {
       rs.noise_target = r_.real(*v, "render.noise_target");
       if (rs.noise_target < 0)
@@ -463,22 +568,255 @@ class SceneParser {
     }
   }
 
+  // Keys each material type reads (besides "type").
+  static std::vector<std::string> material_keys(const std::string& type) {
+    if (type == "diffuse") return {"reflectance"};
+    if (type == "conductor" || type == "rough_conductor") {
+      std::vector<std::string> k = {"eta", "k", "preset", "tint"};
+      if (type == "rough_conductor") k.push_back("roughness");
+      return k;
+    }
+    if (type == "dielectric" || type == "thin_dielectric") return {"ior", "specular"};
+    if (type == "rough_dielectric") return {"ior", "specular", "roughness"};
+    return {"reflectance", "ior", "roughness"};  // plastic
+  }
+
   Material parse_material(const std::string& name, const json& j) {
     const std::string p = child("materials", name);
     r_.expect_object(j, p);
     std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
-    Material m;
-    m.name = name;
-    if (type == "diffuse") {
-      r_.check_keys(j, p, {"type", "reflectance"});
-      m.type = MaterialType::Diffuse;
-      if (const json* v = r_.find(j, "reflectance"))
-        m.reflectance.value = r_.rgb(*v, p + ".reflectance", 1);
-    } else {
+    if (!contains(kMaterialTypes, type))
       r_.fail(p + ".type",
               "unknown material type '" + type + "' (known: " + join(kMaterialTypes) + ")");
+    std::vector<std::string> keys = material_keys(type);
+    keys.push_back("type");
+    r_.check_keys(j, p, keys);
+    Material m;
+    m.name = name;
+    static const std::map<std::string, MaterialType> kTypes = {
+        {"diffuse", MaterialType::Diffuse},
+        {"conductor", MaterialType::Conductor},
+        {"rough_conductor", MaterialType::RoughConductor},
+        {"dielectric", MaterialType::Dielectric},
+        {"thin_dielectric", MaterialType::ThinDielectric},
+        {"rough_dielectric", MaterialType::RoughDielectric},
+        {"plastic", MaterialType::Plastic}};
+    m.type = kTypes.at(type);
+    if (const json* v = r_.find(j, "reflectance")) m.reflectance = color_param(*v, p + ".reflectance", 1);
+    if (const json* v = r_.find(j, "specular")) m.specular = color_param(*v, p + ".specular", 1);
+    if (const json* v = r_.find(j, "roughness")) m.roughness = float_param(*v, p + ".roughness", 0, 1);
+    if (type == "rough_conductor" || type == "rough_dielectric")
+      if (!r_.find(j, "roughness")) r_.fail(p + ".roughness", "required key is missing");
+    if (const json* v = r_.find(j, "ior")) {
+      m.ior = r_.number(*v, p + ".ior");
+      if (!(m.ior > 1.0f && m.ior < 4.0f))
+        r_.fail(p + ".ior", "must be between 1 and 4 (exclusive), got " + v->dump());
     }
+    if (type == "conductor" || type == "rough_conductor") parse_conductor(j, p, m);
     return m;
+  }
+
+  // A conductor is given by a preset name, by eta and k, or by a tint (Schlick, F0 = tint).
+  void parse_conductor(const json& j, const std::string& p, Material& m) {
+    int given = (r_.find(j, "preset") ? 1 : 0) + (r_.find(j, "tint") ? 1 : 0) +
+                (r_.find(j, "eta") || r_.find(j, "k") ? 1 : 0);
+    if (given > 1) r_.fail(p, "give one of 'preset', 'tint', or 'eta' and 'k'");
+    m.eta = kConductors[0].eta, m.k = kConductors[0].k;  // gold by default
+    if (const json* v = r_.find(j, "preset")) {
+      std::string name = r_.string(*v, p + ".preset");
+      std::vector<std::string> names;
+      for (const auto& c : kConductors) {
+        names.push_back(c.name);
+        if (name == c.name) m.eta = c.eta, m.k = c.k;
+      }
+      if (!contains(names, name))
+        r_.fail(p + ".preset", "unknown conductor '" + name + "' (known: " + join(names) + ")");
+    } else if (const json* v = r_.find(j, "tint")) {
+      m.conductor_tint = true;
+      m.specular = color_param(*v, p + ".tint", 1);
+    } else if (r_.find(j, "eta") || r_.find(j, "k")) {
+      m.eta = r_.rgb(r_.require(j, p, "eta"), p + ".eta", 100);
+      m.k = r_.rgb(r_.require(j, p, "k"), p + ".k", 100);
+    }
+  }
+
+  // A colour parameter: [r, g, b], a number, or {"texture": "name"}.
+  ColorParam color_param(const json& j, const std::string& p, float max) {
+    ColorParam c;
+    if (j.is_object()) {
+      c.texture = texture_ref(j, p);
+      return c;
+    }
+    c.value = r_.rgb(j, p, max);
+    return c;
+  }
+
+  FloatParam float_param(const json& j, const std::string& p, float lo, float hi) {
+    FloatParam f;
+    if (j.is_object()) {
+      f.texture = texture_ref(j, p);
+      return f;
+    }
+    f.value = r_.number(j, p);
+    if (f.value < lo || f.value > hi)
+      r_.fail(p, "must be between " + format_number(lo) + " and " + format_number(hi) + ", got " +
+                     j.dump());
+    return f;
+  }
+
+  int32_t texture_ref(const json& j, const std::string& p) {
+    r_.check_keys(j, p, {"texture"});
+    std::string name = r_.string(r_.require(j, p, "texture"), p + ".texture");
+    for (size_t i = 0; i < scene_.textures.size(); ++i)
+      if (scene_.textures[i].name == name) return int32_t(i);
+    std::vector<std::string> known;
+    for (const Texture& t : scene_.textures) known.push_back(t.name);
+    r_.fail(p + ".texture", "unknown texture '" + name +
+                                "' (known: " + (known.empty() ? std::string("none") : join(known)) + ")");
+  }
+
+  void parse_textures(const json& j) {
+    r_.expect_object(j, "textures");
+    for (auto it = j.begin(); it != j.end(); ++it) {
+      const std::string p = child("textures", it.key());
+      const json& t = it.value();
+      r_.expect_object(t, p);
+      std::string type = r_.string(r_.require(t, p, "type"), p + ".type");
+      Texture tex;
+      tex.name = it.key();
+      std::vector<std::string> keys = {"type", "scale", "offset"};
+      if (type == "constant") {
+        keys.push_back("value");
+        r_.check_keys(t, p, keys);
+        tex.type = TextureType::Constant;
+        tex.value = r_.rgb(r_.require(t, p, "value"), p + ".value", 1);
+      } else if (type == "checkerboard") {
+        keys.insert(keys.end(), {"color_a", "color_b"});
+        r_.check_keys(t, p, keys);
+        tex.type = TextureType::Checkerboard;
+        tex.color_a = r_.rgb(r_.require(t, p, "color_a"), p + ".color_a", 1);
+        tex.color_b = r_.rgb(r_.require(t, p, "color_b"), p + ".color_b", 1);
+      } else if (type == "image") {
+        keys.insert(keys.end(), {"file", "data"});
+        r_.check_keys(t, p, keys);
+        tex.type = TextureType::Image;
+        tex.file = register_asset(r_.string(r_.require(t, p, "file"), p + ".file"), p + ".file");
+        tex.resolved_path = (dir_ / tex.file).string();
+        if (const json* d = r_.find(t, "data")) tex.is_data = r_.boolean(*d, p + ".data");
+      } else {
+        r_.fail(p + ".type", "unknown texture type '" + type + "' (known: " + join(kTextureTypes) + ")");
+      }
+      if (const json* v = r_.find(t, "scale")) {
+        if (v->is_number()) {
+          tex.uv_scale = {r_.number(*v, p + ".scale"), r_.number(*v, p + ".scale")};
+        } else {
+          r_.array(*v, p + ".scale", 2);
+          tex.uv_scale = {r_.number((*v)[0], p + ".scale[0]"), r_.number((*v)[1], p + ".scale[1]")};
+        }
+      }
+      if (const json* v = r_.find(t, "offset")) {
+        r_.array(*v, p + ".offset", 2);
+        tex.uv_offset = {r_.number((*v)[0], p + ".offset[0]"), r_.number((*v)[1], p + ".offset[1]")};
+      }
+      scene_.textures.push_back(std::move(tex));
+    }
+  }
+
+  void parse_light(const json& j, const std::string& p) {
+    r_.expect_object(j, p);
+    std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
+    Light l;
+    l.name = p;
+    if (type == "point") {
+      r_.check_keys(j, p, {"type", "name", "position", "intensity"});
+      l.type = LightType::Point;
+    } else if (type == "spot") {
+      r_.check_keys(j, p, {"type", "name", "position", "intensity", "target", "direction",
+                           "cone_angle_deg", "falloff_start_deg"});
+      l.type = LightType::Spot;
+    } else if (type == "directional") {
+      r_.check_keys(j, p, {"type", "name", "direction", "irradiance"});
+      l.type = LightType::Directional;
+    } else {
+      r_.fail(p + ".type", "unknown light type '" + type + "' (known: " + join(kLightTypes) + ")");
+    }
+    if (const json* n = r_.find(j, "name")) l.name = r_.string(*n, p + ".name");
+    if (l.type != LightType::Directional) {
+      l.position = r_.vec3(r_.require(j, p, "position"), p + ".position");
+      l.intensity = r_.rgb(r_.require(j, p, "intensity"), p + ".intensity", kInf);
+    }
+    if (l.type == LightType::Spot) {
+      const json* target = r_.find(j, "target");
+      const json* dir = r_.find(j, "direction");
+      if (!target == !dir) r_.fail(p, "a spot light needs exactly one of 'target' or 'direction'");
+      Vec3 d = dir ? r_.vec3(*dir, p + ".direction")
+                   : r_.vec3(*target, p + ".target") - l.position;
+      if (!(length(d) > 0)) r_.fail(p + (dir ? ".direction" : ".target"), "gives a zero direction");
+      l.direction = normalize(d);
+      if (const json* v = r_.find(j, "cone_angle_deg")) l.cone_angle_deg = r_.number(*v, p + ".cone_angle_deg");
+      if (const json* v = r_.find(j, "falloff_start_deg"))
+        l.falloff_start_deg = r_.number(*v, p + ".falloff_start_deg");
+      else
+        l.falloff_start_deg = std::min(l.falloff_start_deg, l.cone_angle_deg);
+      if (!(l.cone_angle_deg > 0 && l.cone_angle_deg <= 90))
+        r_.fail(p + ".cone_angle_deg", "must be in (0, 90], got " + format_number(l.cone_angle_deg));
+      if (!(l.falloff_start_deg >= 0 && l.falloff_start_deg <= l.cone_angle_deg))
+        r_.fail(p + ".falloff_start_deg", "must be in [0, cone_angle_deg], got " +
+                                              format_number(l.falloff_start_deg));
+    }
+    if (l.type == LightType::Directional) {
+      Vec3 d = r_.vec3(r_.require(j, p, "direction"), p + ".direction");
+      if (!(length(d) > 0)) r_.fail(p + ".direction", "must not be zero");
+      l.direction = normalize(d);
+      l.irradiance = r_.rgb(r_.require(j, p, "irradiance"), p + ".irradiance", kInf);
+    }
+    scene_.lights.push_back(l);
+  }
+
+  void parse_environment(const json& j) {
+    const std::string p = "environment";
+    r_.check_keys(j, p, {"file", "radiance", "scale", "transform"});
+    Environment env;
+    const json* file = r_.find(j, "file");
+    const json* radiance = r_.find(j, "radiance");
+    if (!file == !radiance) r_.fail(p, "needs exactly one of 'file' (a lat-long map) or 'radiance'");
+    if (file) {
+      env.file = register_asset(r_.string(*file, p + ".file"), p + ".file");
+      env.resolved_path = (dir_ / env.file).string();
+      if (const json* sc = r_.find(j, "scale")) env.scale = r_.rgb(*sc, p + ".scale", kInf);
+    } else {
+      if (r_.find(j, "scale")) r_.fail(p + ".scale", "only with 'file'");
+      env.scale = r_.rgb(*radiance, p + ".radiance", kInf);
+    }
+    if (const json* t = r_.find(j, "transform")) {
+      env.to_world = parse_transform(*t, p + ".transform");
+      // Only rotations: a scale would change nothing visible but the pdf's Jacobian.
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b) {
+          const Mat4& m = env.to_world;
+          float d = m.m[0][a] * m.m[0][b] + m.m[1][a] * m.m[1][b] + m.m[2][a] * m.m[2][b];
+          if (std::fabs(d - (a == b ? 1.0f : 0.0f)) > 1e-3f || m.det3() < 0)
+            r_.fail(p + ".transform", "must be a rotation (no scale, shear or mirror)");
+        }
+    }
+    scene_.environment = env;
+  }
+
+  // Registers an asset that is not a mesh (images): checks it exists and hashes it.
+  std::string register_asset(const std::string& file, const std::string& p) {
+    std::string name = asset_name(file, p);
+    if (asset_digests_.count(name)) return name;
+    fs::path full = dir_ / name;
+    std::error_code ec;
+    if (!fs::is_regular_file(full, ec))
+      r_.fail(p, "file '" + name + "' not found (looked for " + full.string() + ")");
+    try {
+      asset_digests_[name] = sha256_hex(read_file_bytes(full.string()));
+    } catch (const std::exception& e) {
+      r_.fail(p, e.what());
+    }
+    scene_.assets.push_back(name);
+    return name;
   }
 
   void parse_shape(const json& j, const std::string& p) {
@@ -489,6 +827,10 @@ class SceneParser {
       keys.push_back("file");
     else if (type == "mesh")
       keys.insert(keys.end(), {"positions", "indices", "normals", "uvs"});
+    else if (type == "sphere")
+      keys.insert(keys.end(), {"center", "radius", "tessellation"});
+    else if (type == "disk")
+      keys.insert(keys.end(), {"segments"});
     else if (type != "rectangle" && type != "cube")
       r_.fail(p + ".type", "unknown shape type '" + type + "' (known: " + join(kShapeTypes) + ")");
     r_.check_keys(j, p, keys);
@@ -509,6 +851,12 @@ class SceneParser {
       data = load_asset(file, type, p + ".file");
     } else if (type == "mesh") {
       data = parse_inline_mesh(j, p);
+    } else if (type == "sphere") {
+      data = parse_sphere(j, p);
+    } else if (type == "disk") {
+      int segments = 128;
+      if (const json* v = r_.find(j, "segments")) segments = int(r_.integer(*v, p + ".segments", 3, 1 << 16));
+      data = make_disk(segments);
     } else {
       data = type == "rectangle" ? make_rectangle() : make_cube();
     }
@@ -569,6 +917,25 @@ class SceneParser {
     float angle = r_.number(r_.require(v, vp, "angle_deg"), vp + ".angle_deg");
     if (!(length(axis) > 0)) r_.fail(vp + ".axis", "must not be zero");
     return Mat4::rotate(axis, angle);
+  }
+
+  // Spheres are tessellated (n_theta x n_phi, default 64 x 128) with exact smooth normals; the
+  // default's worst-case distance to the true sphere is r (1 - cos(pi/128)) = 3e-4 r.
+  MeshData parse_sphere(const json& j, const std::string& p) {
+    Vec3 c(0.0f);
+    float r = 1;
+    int nt = 64, np = 128;
+    if (const json* v = r_.find(j, "center")) c = r_.vec3(*v, p + ".center");
+    if (const json* v = r_.find(j, "radius")) {
+      r = r_.number(*v, p + ".radius");
+      if (!(r > 0)) r_.fail(p + ".radius", "must be > 0, got " + v->dump());
+    }
+    if (const json* v = r_.find(j, "tessellation")) {
+      r_.array(*v, p + ".tessellation", 2);
+      nt = int(r_.integer((*v)[0], p + ".tessellation[0]", 3, 1 << 14));
+      np = int(r_.integer((*v)[1], p + ".tessellation[1]", 3, 1 << 14));
+    }
+    return make_sphere(c, r, nt, np);
   }
 
   MeshData parse_inline_mesh(const json& j, const std::string& p) {
@@ -761,7 +1128,13 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   if (o.height) film.height = *o.height;
   if (o.filter && !contains(kFilterTypes, *o.filter))
     flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join(kFilterTypes) + ")");
-  if (o.filter) film.filter.type = FilterType::Box;
+  if (o.filter && *o.filter != "" && filter_type(*o.filter) != film.filter.type) {
+    film.filter.type = filter_type(*o.filter);
+    film.filter.radius = default_filter_radius(film.filter.type);
+  }
+  if (o.sampler && !contains(kSamplers, *o.sampler))
+    flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join(kSamplers) + ")");
+  if (o.sampler) rs.sampler = *o.sampler;
   if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
     flag_fail("--noise-target",
               "must be a finite number >= 0, got " + format_number(*o.noise_target));

@@ -473,8 +473,8 @@ TEST(Overrides, ValidatedAndNamedByFlag) {
   o.max_depth = -1;
   EXPECT_EQ(override_error(s, o), "--max-depth: must be at least 0, got -1");
   o = {};
-  o.filter = "gaussian";
-  EXPECT_EQ(override_error(s, o), "--filter: unknown filter 'gaussian' (known: box)");
+  o.filter = "lanczos";
+  EXPECT_EQ(override_error(s, o), "--filter: unknown filter 'lanczos' (known: box, triangle, gaussian)");
   o = {};
   o.noise_target = -1;
   EXPECT_NE(override_error(s, o).find("--noise-target"), std::string::npos);
@@ -588,13 +588,13 @@ const std::vector<BadScene>& bad_scenes() {
       {"UnknownMaterialReference", edit([](json& j) { j["shapes"][0]["material"] = "whte"; }),
        "shapes[0].material", "unknown material 'whte' (known: white)"},
       {"UnknownMaterialType", edit([](json& j) { j["materials"]["white"]["type"] = "glass"; }),
-       "materials.white.type", "unknown material type 'glass' (known: diffuse)"},
+       "materials.white.type", "unknown material type 'glass' (known: diffuse, conductor"},
       {"ReflectanceAboveOne", edit([](json& j) {
          j["materials"]["white"]["reflectance"] = {0.5, 1.2, 0.5};
        }),
        "materials.white.reflectance[1]", "must be at most 1, got 1.2"},
       {"MaterialKeyTypo", edit([](json& j) { j["materials"]["white"]["reflectence"] = 0.5; }),
-       "materials.white.reflectence", "unknown key (expected one of: type, reflectance)"},
+       "materials.white.reflectence", "unknown key (expected one of: reflectance, type)"},
       {"MissingMeshFile",
        with_shape(R"({"type": "obj", "material": "white", "file": "meshes/nope.obj"})"),
        "shapes[0].file", "mesh file 'meshes/nope.obj' not found"},
@@ -660,15 +660,15 @@ const std::vector<BadScene>& bad_scenes() {
        }),
        "camera.to_world", "must be a rotation"},
       {"UnknownFilter", edit([](json& j) {
-         j["film"]["filter"] = {{"type", "gaussian"}};
+         j["film"]["filter"] = {{"type", "lanczos"}};
        }),
-       "film.filter.type", "unknown filter 'gaussian' (known: box)"},
+       "film.filter.type", "unknown filter 'lanczos' (known: box, triangle, gaussian)"},
       {"NegativeRadiance", edit([](json& j) {
          j["shapes"][0]["emission"] = {{"radiance", {-1, 1, 1}}};
        }),
        "shapes[0].emission.radiance[0]", "must be at least 0, got -1"},
-      {"UnknownShapeType", with_shape(R"({"type": "sphere", "material": "white"})"),
-       "shapes[0].type", "unknown shape type 'sphere'"},
+      {"UnknownShapeType", with_shape(R"({"type": "torus", "material": "white"})"),
+       "shapes[0].type", "unknown shape type 'torus'"},
       {"ShapeKeyTypo", with_shape(R"({"type": "mesh", "material": "white", "positon": [0, 0, 0],
                       "positions": [0, 0, 0, 1, 0, 0, 0, 1, 0], "indices": [0, 1, 2]})"),
        "shapes[0].positon", "unknown key"},
