@@ -53,7 +53,7 @@ Mesh make_sphere(Vec3 c, float r, int n_theta, int n_phi, uint32_t material) {
 // bounce ray from the hit point; closest-hit queries only, no shading.
 double bare_embree_rays_per_second(const Renderer& r, int spp, uint64_t& rays_out) {
   const Scene& s = r.scene();
-  PinholeCamera cam(s.camera, s.film.width, s.film.height);
+  PerspectiveCamera cam(s.camera, s.film.width, s.film.height);
   std::atomic<uint64_t> rays{0};
   auto t0 = Clock::now();
   tbb::parallel_for(tbb::blocked_range<int>(0, s.film.height), [&](const auto& range) {
@@ -64,7 +64,7 @@ double bare_embree_rays_per_second(const Renderer& r, int spp, uint64_t& rays_ou
         for (int k = 0; k < spp; ++k) {
           sampler.start_camera_sample(1, 0, 0, x, y, uint64_t(k));
           Vec2 u = sampler.get_2d();
-          Ray ray = cam.generate_ray(float(x) + u.x, float(y) + u.y);
+          Ray ray = cam.generate_ray(float(x) + u.x, float(y) + u.y, sampler.get_2d());
           SurfaceHit hit;
           ++local;
           if (!r.accel().intersect(ray, hit)) continue;

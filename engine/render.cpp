@@ -72,7 +72,7 @@ std::vector<Rect> Renderer::tiles(int tile_size) const {
 SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool parallel) const {
   SampleBuffer buf(header(PassSet::range(pass, pass + 1)), rect, splats());
   const RenderSettings& rs = scene_.render;
-  PinholeCamera camera(scene_.camera, scene_.film.width, scene_.film.height);
+  PerspectiveCamera camera(scene_.camera, scene_.film.width, scene_.film.height);
   RenderContext ctx{scene_, *accel_, *lights_};
   uint64_t spp = rs.spp_per_pass();
   std::atomic<uint64_t> rays{0};
@@ -89,8 +89,9 @@ SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool paralle
         for (uint64_t s = 0; s < spp; ++s) {
           sampler.start_camera_sample(rs.seed, rs.frame, pass, x, y, s);
           FilterSample fs = sample_filter(scene_.film.filter, sampler.get_2d());
-          Ray ray =
-              camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y);
+          Vec2 u_lens = sampler.get_2d();
+          Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x,
+                                        float(y) + 0.5f + fs.offset.y, u_lens);
           RGB l = path_radiance(ctx, ray, sampler, counters);
           // Rows are disjoint: no two threads share a pixel.
           buf.add_sample(x, y, l * fs.weight, local_nonfinite);
