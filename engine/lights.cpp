@@ -14,49 +14,119 @@ float triangle_area(const Mesh& m, uint32_t prim) {
        p2 = m.positions[m.indices[3 * prim + 2]];
   return 0.5f * length(cross(p1 - p0, p2 - p0));
 }
+
+// pbrt-v4's SmoothStep: 0 at x <= a, 1 at x >= b, 3t^2 - 2t^3 between; a step when a == b.
+float smooth_step(float x, float a, float b) {
+  if (a == b) return x < a ? 0.0f : 1.0f;
+  float t = std::clamp((x - a) / (b - a), 0.0f, 1.0f);
+  return t * t * (3.0f - 2.0f * t);
+}
+
+float cos_deg(float deg) { return std::cos(deg * kPi / 180.0f); }
 }  // namespace
 
 LightSet::LightSet(const Scene& scene) : scene_(scene) {
+  // Bounding sphere of the meshes' bounding box.
+  Vec3 lo(kInf), hi(-kInf);
+  for (const Mesh& m : scene.meshes)
+    for (Vec3 q : m.positions) lo = vmin(lo, q), hi = vmax(hi, q);
+  if (lo.x <= hi.x) {
+    center_ = 0.5f * (lo + hi);
+    radius_ = 0.5f * length(hi - lo);
+  }
+  const double r2 = double(radius_) * double(radius_);
+
   mesh_first_light_.assign(scene.meshes.size(), kNoLight);
-  std::vector<double> power;
   for (uint32_t mi = 0; mi < scene.meshes.size(); ++mi) {
     const Mesh& m = scene.meshes[mi];
     if (!m.emission || is_black(m.emission->radiance)) continue;
-    double lum = luminance(m.emission->radiance) * (m.emission->two_sided ? 2.0 : 1.0);
-    // Lights of zero luminance but non-zero colour (pure blue, say) still need a chance.
-    if (lum <= 0) lum = max_component(m.emission->radiance);
+    double w = selection_weight(m.emission->radiance) * (m.emission->two_sided ? 2.0 : 1.0);
     mesh_first_light_[mi] = uint32_t(tris_.size());
     for (uint32_t t = 0; t < m.triangle_count(); ++t) {
       float a = triangle_area(m, t);
       tris_.push_back({mi, t, a});
-      power.push_back(kPi * double(a) * lum);
+      kinds_.push_back(LightKind::Area);
+      power_.push_back(double(kPi) * double(a) * w);
     }
   }
-  double total = 0;
-  for (double p : power) total += p;
-  cdf_.assign(tris_.size() + 1, 0.0);
-  pmf_.resize(tris_.size());
-  for (size_t i = 0; i < tris_.size(); ++i) {
-    pmf_[i] = total > 0 ? float(power[i] / total) : 0.0f;
-    cdf_[i + 1] = cdf_[i] + (total > 0 ? power[i] / total : 0.0);
+  for (const Light& l : scene.lights) {
+    Punctual q{l.type, l.position, normalize(l.direction), l.intensity, 1.0f, 1.0f};
+    switch (l.type) {
+      case LightType::Point:
+        kinds_.push_back(LightKind::Point);
+        power_.push_back(4.0 * double(kPi) * selection_weight(l.intensity));
+        break;
+      case LightType::Spot:
+        q.cos_falloff_start = cos_deg(l.falloff_start_deg);
+        q.cos_falloff_end = cos_deg(l.cone_angle_deg);
+        kinds_.push_back(LightKind::Spot);
+        power_.push_back(2.0 * double(kPi) * selection_weight(l.intensity) *
+                         (1.0 - 0.5 * (double(q.cos_falloff_start) + double(q.cos_falloff_end))));
+        break;
+      case LightType::Directional:
+        q.intensity = l.irradiance;
+        kinds_.push_back(LightKind::Directional);
+        power_.push_back(double(kPi) * r2 * selection_weight(l.irradiance));
+        break;
+    }
+    punctual_.push_back(q);
   }
-  if (!tris_.empty()) cdf_.back() = 1.0;
+  if (scene.environment) {
+    env_ = std::make_unique<EnvironmentMap>(*scene.environment);
+    kinds_.push_back(LightKind::Environment);
+    power_.push_back(double(kPi) * r2 * env_->power_integral());
+  }
+
+  const size_t n = kinds_.size();
+  double total = 0;
+  for (double p : power_) total += p;
+  cdf_.assign(n + 1, 0.0);
+  pmf_.resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    double pmf = total > 0 ? power_[i] / total : 1.0 / double(n);
+    pmf_[i] = float(pmf);
+    cdf_[i + 1] = cdf_[i] + pmf;
+  }
+  if (n > 0) cdf_.back() = 1.0;
 }
 
-float LightSet::selection_pmf(size_t light) const { return pmf_[light]; }
-
 bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const {
-  if (tris_.empty()) return false;
+  const size_t n = size();
+  if (n == 0) return false;
   // First cdf entry > u: the light whose interval [cdf_i, cdf_i+1) holds u.
   size_t i =
       size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) - (cdf_.begin() + 1));
-  i = std::min(i, tris_.size() - 1);
+  i = std::min(i, n - 1);
   while (pmf_[i] == 0 && i > 0) --i;  // a zero-width interval cannot be selected
-  const Tri& tri = tris_[i];
+  if (pmf_[i] == 0) return false;
+  ls = LightSample{};
+  ls.light = uint32_t(i);
+  bool ok = false;
+  float pdf_direction = 1.0f;  // delta lights: the selection probability alone
+  if (i < tris_.size()) {
+    ok = sample_area(tris_[i], p, u_point, ls);
+    pdf_direction = ls.pdf_solid_angle;
+  } else if (i < tris_.size() + punctual_.size()) {
+    ok = sample_punctual(punctual_[i - tris_.size()], p, ls);
+  } else {
+    ok = env_->sample(u_point, ls.wi, ls.radiance, pdf_direction);
+    ls.is_infinite = true;
+    ls.distance = 2.0f * radius_;
+    ls.p = p + ls.wi * ls.distance;
+    ls.n = -ls.wi;
+  }
+  if (!ok || is_black(ls.radiance)) return false;
+  ls.pdf_solid_angle = pmf_[i] * pdf_direction;
+  return std::isfinite(ls.pdf_solid_angle) && ls.pdf_solid_angle > 0;
+}
+
+// Uniform point on the triangle; pdf_solid_angle set to the area pdf converted to solid angle
+// (without selection).
+bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const {
   const Mesh& m = scene_.meshes[tri.mesh];
   Vec3 p0 = m.positions[m.indices[3 * tri.prim]], p1 = m.positions[m.indices[3 * tri.prim + 1]],
        p2 = m.positions[m.indices[3 * tri.prim + 2]];
-  Vec2 b = sample_uniform_triangle(u_point);
+  Vec2 b = sample_uniform_triangle(u);
   float b2 = 1.0f - b.x - b.y;
   ls.p = b.x * p0 + b.y * p1 + b2 * p2;
   constexpr float g7 = 7 * std::numeric_limits<float>::epsilon() * 0.5f;
@@ -64,14 +134,39 @@ bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) con
   ls.n = normalize(cross(p1 - p0, p2 - p0));
   Vec3 d = ls.p - p;
   float dist2 = length_sq(d);
-  if (dist2 <= 0) return false;
+  if (!(dist2 > 0) || !(tri.area > 0)) return false;
   ls.distance = std::sqrt(dist2);
   ls.wi = d / ls.distance;
   float cos_light = std::fabs(dot(ls.n, ls.wi));
   ls.radiance = emitted(m, ls.n, -ls.wi);
-  if (cos_light <= 0 || is_black(ls.radiance)) return false;
-  ls.pdf_solid_angle = pmf_[i] / tri.area * dist2 / cos_light;
-  return std::isfinite(ls.pdf_solid_angle) && ls.pdf_solid_angle > 0;
+  if (!(cos_light > 0)) return false;
+  ls.pdf_solid_angle = dist2 / (tri.area * cos_light);
+  return true;
+}
+
+bool LightSet::sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const {
+  ls.is_delta = true;
+  if (l.type == LightType::Directional) {
+    ls.is_infinite = true;
+    ls.wi = -l.direction;
+    ls.distance = 2.0f * radius_;
+    ls.p = p + ls.wi * ls.distance;
+    ls.n = l.direction;
+    ls.radiance = l.intensity;
+    return true;
+  }
+  Vec3 d = l.position - p;
+  float dist2 = length_sq(d);
+  if (!(dist2 > 0)) return false;
+  ls.p = l.position;
+  ls.distance = std::sqrt(dist2);
+  ls.wi = d / ls.distance;
+  ls.n = -ls.wi;
+  float falloff = 1.0f;
+  if (l.type == LightType::Spot)  // pbrt-v4 SpotLight::I: smoothstep in cos from cone to start
+    falloff = smooth_step(dot(l.direction, -ls.wi), l.cos_falloff_end, l.cos_falloff_start);
+  ls.radiance = l.intensity * (falloff / dist2);
+  return falloff > 0;
 }
 
 float LightSet::pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light,
@@ -79,12 +174,21 @@ float LightSet::pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_li
   uint32_t first = mesh_first_light_[mesh];
   if (first == kNoLight) return 0.0f;
   const Tri& tri = tris_[first + prim];
-  if (tri.area <= 0) return 0.0f;
+  if (!(tri.area > 0)) return 0.0f;
   Vec3 d = on_light - p;
   float dist2 = length_sq(d);
   float cos_light = std::fabs(dot(n_light, d)) / std::sqrt(dist2);
-  if (cos_light <= 0) return 0.0f;
+  if (!(cos_light > 0)) return 0.0f;
   return pmf_[first + prim] / tri.area * dist2 / cos_light;
+}
+
+RGB LightSet::environment_radiance(Vec3 dir_world) const {
+  return env_ ? env_->radiance(dir_world) : RGB(0.0f);
+}
+
+float LightSet::pdf_environment(Vec3 dir_world) const {
+  if (!env_) return 0.0f;
+  return pmf_[environment_index()] * env_->pdf(dir_world);
 }
 
 }  // namespace rf

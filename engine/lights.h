@@ -1,39 +1,89 @@
-// Lights and light selection. Area lights: every triangle of a mesh with an emission is one
-// light primitive, sampled uniformly by area. Next-event estimation picks a light primitive with
-// probability proportional to its power, Phi = pi * A * luminance(Le) * (2 if two-sided), so the
-// many small triangles of a big emitter are picked as often as their share of the light.
+// Lights and light selection for next-event estimation.
+//
+// Kinds: area lights (every triangle of a mesh with an emission is one light, its point sampled
+// uniformly by area), point, spot and directional lights (Scene::lights; delta distributions),
+// and the environment (Scene::environment, see envmap.h).
+//
+// Numbering (selection_pmf, LightSample::light): area triangles first, mesh by mesh, then
+// Scene::lights in order, then the environment last.
+//
+// Selection: one light is picked with probability proportional to its power, measured by the
+// selection weight w(c) = luminance(c) (the largest component when that is 0 but c is not black,
+// so every light that emits can be chosen). R is the radius of the bounding sphere of the scene's
+// meshes (1 if there are none):
+//   area triangle  Phi = pi * A * w(Le) * (2 if two-sided)      (Lambertian emitter)
+//   point          Phi = 4 pi * w(I)
+//   spot           Phi = 2 pi * w(I) * (1 - (cos_start + cos_end) / 2)   (pbrt-v4 SpotLight::Phi;
+//                  exact, since the smoothstep falloff integrates to half its width in cos)
+//   directional    Phi = pi R^2 * w(E)          (the flux through the scene's bounding disk)
+//   environment    Phi = pi R^2 * integral over the sphere of w(L(w)) dw
+//                      = 4 pi^2 R^2 * (sphere average of w(L))   (pbrt-v4 ImageInfiniteLight::Phi)
+// If every power is 0 (say, only zero-area triangles), lights are picked uniformly.
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "engine/accel.h"
+#include "engine/envmap.h"
 #include "engine/scene.h"
 
 namespace rf {
 
+// One light sample as seen from a shading point. For every kind the estimator of the light's
+// contribution is f * radiance * |cos| / pdf_solid_angle (times visibility).
 struct LightSample {
-  Vec3 p, p_error, n;   // point on the light, its error bound and unit geometric normal
-  RGB radiance;         // emitted towards the shading point
-  Vec3 wi;              // unit direction from the shading point to the light point
-  float distance = 0;
-  float pdf_solid_angle = 0;  // including the selection probability
+  Vec3 p, p_error, n;         // point on the light, its error bound and unit normal (-wi if none)
+  RGB radiance;               // area/environment: emitted radiance; point/spot: I / r^2;
+                              // directional: irradiance E (all towards the shading point)
+  Vec3 wi;                    // unit direction from the shading point to the light
+  float distance = 0;         // |p - shading point| (2R for infinite lights)
+  float pdf_solid_angle = 0;  // including the selection probability; for a delta light this is
+                              // a probability mass (the selection probability)
+  bool is_delta = false;      // point, spot, directional: MIS must not weight against BSDFs
+  bool is_infinite = false;   // directional, environment: visibility is a ray to infinity along
+                              // wi; p is the shading point + wi * 2R, beyond every mesh when
+                              // the shading point is inside the scene's bounding sphere
+  uint32_t light = 0;         // which light (the numbering above)
 };
+
+enum class LightKind : uint8_t { Area, Point, Spot, Directional, Environment };
 
 class LightSet {
  public:
+  // Throws std::runtime_error when the environment map cannot be read.
   explicit LightSet(const Scene& scene);
 
-  bool empty() const { return tris_.empty(); }
-  size_t size() const { return tris_.size(); }
+  bool empty() const { return size() == 0; }
+  size_t size() const { return kinds_.size(); }
+  size_t area_light_count() const { return tris_.size(); }
+  LightKind kind(size_t light) const { return kinds_[light]; }
+  // Light index of Scene::lights[k], and of the environment (only when has_environment()).
+  size_t scene_light_index(size_t k) const { return tris_.size() + k; }
+  size_t environment_index() const { return tris_.size() + punctual_.size(); }
 
-  // Samples a light point as seen from p; false when nothing can be sampled (pdf 0).
+  // Samples a light point as seen from p; false when nothing can be sampled (pdf 0, outside a
+  // spot's cone, a one-sided emitter seen from behind).
   bool sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const;
   // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from p, as
   // sample() would, including selection; 0 when that triangle is not a light.
   float pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light, Vec3 n_light) const;
-  // Probability of selecting each light (sums to 1).
-  float selection_pmf(size_t light) const;
+  // Probability of selecting each light (sums to 1 over size() lights).
+  float selection_pmf(size_t light) const { return pmf_[light]; }
+  // The power (Phi above) the selection is proportional to.
+  double selection_power(size_t light) const { return power_[light]; }
+
+  bool has_environment() const { return env_ != nullptr; }
+  // Radiance arriving from world direction dir (unit) at infinity; black without environment.
+  RGB environment_radiance(Vec3 dir_world) const;
+  // Solid-angle pdf of sample() choosing the environment and producing dir_world, including the
+  // selection probability (for MIS when a BSDF ray escapes); 0 without environment.
+  float pdf_environment(Vec3 dir_world) const;
+
+  // Bounding sphere of the meshes (centre 0, radius 1 when there are none).
+  Vec3 scene_center() const { return center_; }
+  float scene_radius() const { return radius_; }
 
   // Radiance a surface point of `mesh` emits in direction w (world), given its geometric normal.
   static RGB emitted(const Mesh& mesh, Vec3 ng, Vec3 w) {
@@ -47,11 +97,26 @@ class LightSet {
     uint32_t mesh, prim;
     float area;
   };
+  struct Punctual {  // point, spot, directional
+    LightType type;
+    Vec3 position, direction;  // direction: spot axis / direction the light travels
+    RGB intensity;             // I (point, spot) or E (directional)
+    float cos_falloff_start, cos_falloff_end;
+  };
+  bool sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const;
+  bool sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const;
+
   const Scene& scene_;
+  Vec3 center_{0.0f};
+  float radius_ = 1;
   std::vector<Tri> tris_;
-  std::vector<double> cdf_;                  // size tris_+1, cdf_[0] = 0, cdf_.back() = 1
+  std::vector<Punctual> punctual_;
+  std::unique_ptr<EnvironmentMap> env_;
+  std::vector<LightKind> kinds_;
+  std::vector<double> power_;
+  std::vector<double> cdf_;  // size()+1, cdf_[0] = 0, cdf_.back() = 1
   std::vector<float> pmf_;
-  std::vector<uint32_t> mesh_first_light_;   // per mesh: index of its first light triangle or ~0
+  std::vector<uint32_t> mesh_first_light_;  // per mesh: index of its first light triangle or ~0
 };
 
 }  // namespace rf

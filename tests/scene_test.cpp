@@ -527,6 +527,82 @@ TEST(Integrators, KnownNames) {
 }
 
 // ---------------------------------------------------------------------------------------------
+TEST(Format, MaterialsTexturesLightsEnvironmentCameraSampler) {
+  json j = minimal_scene();
+  j["textures"] = {{"checks", {{"type", "checkerboard"}, {"color_a", 0.1}, {"color_b", {0.9, 0.8, 0.7}}, {"scale", 8}}},
+                   {"grey", {{"type", "constant"}, {"value", 0.25}}}};
+  j["materials"] = {
+      {"white", {{"type", "diffuse"}, {"reflectance", {{"texture", "checks"}}}}},
+      {"gold", {{"type", "rough_conductor"}, {"preset", "gold"}, {"roughness", {{"texture", "grey"}}}}},
+      {"tinted", {{"type", "conductor"}, {"tint", {0.9, 0.5, 0.2}}}},
+      {"glass", {{"type", "dielectric"}, {"ior", 1.5}}},
+      {"frosted", {{"type", "rough_dielectric"}, {"ior", 1.33}, {"roughness", 0.2}}},
+      {"pane", {{"type", "thin_dielectric"}}},
+      {"plastic", {{"type", "plastic"}, {"reflectance", {0.2, 0.3, 0.8}}, {"roughness", 0.1}}}};
+  j["shapes"].push_back({{"type", "sphere"}, {"material", "glass"}, {"center", {0, 1, 0}}, {"radius", 0.5}, {"tessellation", {8, 16}}});
+  j["shapes"].push_back({{"type", "disk"}, {"material", "gold"}, {"segments", 12}});
+  j["lights"] = {{{"type", "point"}, {"position", {0, 2, 0}}, {"intensity", {1, 2, 3}}},
+                 {{"type", "spot"}, {"position", {0, 2, 0}}, {"target", {0, 0, 0}}, {"intensity", 5}, {"cone_angle_deg", 25}},
+                 {{"type", "directional"}, {"direction", {0, -2, 0}}, {"irradiance", 3}}};
+  j["environment"] = {{"radiance", {0.1, 0.2, 0.3}}, {"transform", {{"rotate", {{"axis", {0, 1, 0}}, {"angle_deg", 90}}}}}};
+  j["camera"]["aperture_radius"] = 0.05;
+  j["camera"]["focus_distance"] = 5;
+  j["film"]["filter"] = {{"type", "gaussian"}, {"sigma", 0.4}};
+  j["render"]["sampler"] = "sobol";
+  Scene s = load_json(j, "format");
+  ASSERT_EQ(s.materials.size(), 7u);
+  auto mat = [&](const std::string& n) -> const Material& {
+    for (const Material& m : s.materials)
+      if (m.name == n) return m;
+    throw std::runtime_error(n);
+  };
+  EXPECT_EQ(mat("white").reflectance.texture, 0);  // textures in sorted name order: checks, grey
+  EXPECT_EQ(mat("gold").type, MaterialType::RoughConductor);
+  EXPECT_EQ(mat("gold").roughness.texture, 1);
+  EXPECT_TRUE(mat("tinted").conductor_tint);
+  EXPECT_EQ(mat("tinted").specular.value, RGB(0.9f, 0.5f, 0.2f));
+  EXPECT_EQ(mat("frosted").type, MaterialType::RoughDielectric);
+  EXPECT_FLOAT_EQ(mat("frosted").ior, 1.33f);
+  EXPECT_EQ(mat("pane").type, MaterialType::ThinDielectric);
+  EXPECT_EQ(mat("plastic").type, MaterialType::Plastic);
+  EXPECT_EQ(s.textures[0].type, TextureType::Checkerboard);
+  EXPECT_FLOAT_EQ(s.textures[0].uv_scale.x, 8);
+  // Sphere: 2*8*16 - 2*16 triangles, unit normals pointing away from the centre.
+  const Mesh& sphere = s.meshes[1];
+  EXPECT_EQ(sphere.triangle_count(), 2u * 8 * 16 - 2 * 16);
+  for (size_t i = 0; i < sphere.positions.size(); ++i) {
+    EXPECT_NEAR(length(sphere.positions[i] - Vec3(0, 1, 0)), 0.5f, 1e-5f);
+    EXPECT_GT(dot(sphere.normals[i], sphere.positions[i] - Vec3(0, 1, 0)), 0.49f);
+  }
+  for (size_t t = 0; t < sphere.triangle_count(); ++t)
+    EXPECT_GT(dot(face_normal(sphere, t), face_centroid(sphere, t) - Vec3(0, 1, 0)), 0) << t;
+  EXPECT_EQ(s.meshes[2].triangle_count(), 12u);
+  ASSERT_EQ(s.lights.size(), 3u);
+  EXPECT_EQ(s.lights[1].type, LightType::Spot);
+  EXPECT_NEAR(s.lights[1].direction.y, -1.0f, 1e-6f);
+  EXPECT_FLOAT_EQ(s.lights[1].falloff_start_deg, 20.0f);  // default, below the cone
+  EXPECT_NEAR(s.lights[2].direction.y, -1.0f, 1e-6f);     // normalised
+  ASSERT_TRUE(s.environment.has_value());
+  EXPECT_TRUE(s.environment->file.empty());
+  EXPECT_FLOAT_EQ(s.camera.lens_radius, 0.05f);
+  EXPECT_EQ(s.film.filter.type, FilterType::Gaussian);
+  EXPECT_FLOAT_EQ(s.film.filter.radius, 1.5f);
+  EXPECT_EQ(s.render.sampler, "sobol");
+}
+
+TEST(Format, ImageAssetsAreInTheDigest) {
+  json j = minimal_scene();
+  j["textures"] = {{"img", {{"type", "image"}, {"file", "tex/a.png"}, {"data", true}}}};
+  std::string dir = test::make_temp_dir("asset");
+  test::write_text(dir + "/tex/a.png", "not really a png, only hashed here");
+  test::write_text(dir + "/scene.json", j.dump());
+  Scene a = load_scene(dir + "/scene.json");
+  EXPECT_EQ(a.assets, std::vector<std::string>{"tex/a.png"});
+  EXPECT_TRUE(a.textures[0].is_data);
+  test::write_text(dir + "/tex/a.png", "changed");
+  EXPECT_NE(load_scene(dir + "/scene.json").digest, a.digest);
+}
+
 // Bad scenes: each message names the file, the JSON path (or line) and the problem.
 
 struct BadScene {
@@ -696,6 +772,53 @@ const std::vector<BadScene>& bad_scenes() {
          return with_shape(R"({"type": "ply", "material": "white", "file": "./t.ply"})")(dir);
        },
        "shapes[0].file", "t.ply: element 'face' row 0 of 1: unexpected end of data"},
+      {"UnknownTextureReference", edit([](json& j) {
+         j["materials"]["white"]["reflectance"] = {{"texture", "wood"}};
+       }),
+       "materials.white.reflectance.texture", "unknown texture 'wood' (known: none)"},
+      {"MissingTextureFile", edit([](json& j) {
+         j["textures"] = {{"wood", {{"type", "image"}, {"file", "wood.png"}}}};
+       }),
+       "textures.wood.file", "file 'wood.png' not found"},
+      {"RoughConductorWithoutRoughness", edit([](json& j) {
+         j["materials"]["white"] = {{"type", "rough_conductor"}, {"preset", "gold"}};
+       }),
+       "materials.white.roughness", "required key is missing"},
+      {"UnknownConductorPreset", edit([](json& j) {
+         j["materials"]["white"] = {{"type", "conductor"}, {"preset", "unobtainium"}};
+       }),
+       "materials.white.preset", "unknown conductor 'unobtainium' (known: gold, silver"},
+      {"DielectricIorBelowOne", edit([](json& j) {
+         j["materials"]["white"] = {{"type", "dielectric"}, {"ior", 0.9}};
+       }),
+       "materials.white.ior", "must be between 1 and 4"},
+      {"SpotWithoutDirection", edit([](json& j) {
+         j["lights"] = {{{"type", "spot"}, {"position", {0, 1, 0}}, {"intensity", 1}}};
+       }),
+       "lights[0]", "exactly one of 'target' or 'direction'"},
+      {"SpotFalloffBeyondCone", edit([](json& j) {
+         j["lights"] = {{{"type", "spot"}, {"position", {0, 1, 0}}, {"intensity", 1},
+                         {"direction", {0, -1, 0}}, {"cone_angle_deg", 20}, {"falloff_start_deg", 30}}};
+       }),
+       "lights[0].falloff_start_deg", "must be in [0, cone_angle_deg]"},
+      {"EnvironmentBothFileAndRadiance", edit([](json& j) {
+         j["environment"] = {{"radiance", 1}, {"file", "sky.exr"}};
+       }),
+       "environment", "exactly one of 'file'"},
+      {"EnvironmentScaledTransform", edit([](json& j) {
+         j["environment"] = {{"radiance", 1}, {"transform", {{{"scale", 2}}}}};
+       }),
+       "environment.transform", "must be a rotation"},
+      {"ThinLensWithoutFocus", edit([](json& j) { j["camera"]["aperture_radius"] = 0.1; }),
+       "camera.focus_distance", "required when aperture_radius > 0"},
+      {"SigmaOnBoxFilter", edit([](json& j) {
+         j["film"]["filter"] = {{"type", "box"}, {"sigma", 0.5}};
+       }),
+       "film.filter.sigma", "only the gaussian filter has a sigma"},
+      {"UnknownSampler", edit([](json& j) { j["render"]["sampler"] = "halton"; }),
+       "render.sampler", "unknown sampler 'halton' (known: independent, sobol)"},
+      {"SphereNegativeRadius", with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"),
+       "shapes[0].radius", "must be > 0"},
   };
   return cases;
 }
