@@ -103,6 +103,35 @@ void bench_scene(const std::string& label, const Scene& scene, int spp) {
       path_rays / bare);
 }
 
+// The Cornell box plus about `triangles` triangles of rippled spheres: one diffuse sphere, or four
+// of diffuse, rough plastic, rough gold and glass (the materials issue's benchmark).
+Scene with_generated_spheres(Scene s, int triangles, bool materials) {
+  int count = materials ? 4 : 1;
+  // Each sphere has n_theta * n_phi * 2 - 2 * n_phi triangles with n_phi = 2 n_theta.
+  int n_theta = std::max(4, int(std::sqrt(double(triangles) / count / 4.0)));
+  std::vector<uint32_t> mats(4, s.meshes[0].material);
+  if (materials) {
+    auto add = [&](Material m) {
+      s.materials.push_back(m);
+      return uint32_t(s.materials.size() - 1);
+    };
+    Material plastic{"bench-plastic", MaterialType::Plastic, {RGB(0.2f, 0.3f, 0.8f)}};
+    plastic.roughness.value = 0.2f;
+    Material gold{"bench-gold", MaterialType::RoughConductor};
+    gold.roughness.value = 0.15f;
+    Material glass{"bench-glass", MaterialType::Dielectric};
+    mats = {s.meshes[0].material, add(plastic), add(gold), add(glass)};
+  }
+  for (int i = 0; i < count; ++i) {
+    float r = materials ? 0.22f : 0.45f;
+    Vec3 c = materials ? Vec3(-0.55f + 0.37f * float(i), 1.45f - 0.12f * float(i % 2), 0.45f)
+                       : Vec3(0.0f, 0.8f, 0.3f);
+    s.meshes.push_back(make_sphere(c, r, n_theta, 2 * n_theta, mats[size_t(i)]));
+  }
+  s.digest = "generated";
+  return s;
+}
+
 }  // namespace
 
 void add_bench_options(CLI::App& app, BenchOptions& o) {
@@ -134,11 +163,8 @@ int run_bench(const BenchOptions& in) {
   }
   if (o.generated) {
     Scene s = load_scene(cornell, ov);
-    // n_theta * n_phi * 2 - 2 * n_phi triangles, n_phi = 2 n_theta.
-    int n_theta = std::max(4, int(std::sqrt(double(o.triangles) / 4.0)));
-    s.meshes.push_back(make_sphere({0.0f, 0.8f, 0.3f}, 0.45f, n_theta, 2 * n_theta, s.meshes[0].material));
-    s.digest = "generated";
-    bench_scene("generated (cornell+sphere)", s, o.spp);
+    bench_scene("generated (cornell+sphere)", with_generated_spheres(s, o.triangles, false), o.spp);
+    bench_scene("generated, 4 materials", with_generated_spheres(s, o.triangles, true), o.spp);
   }
   return 0;
 }

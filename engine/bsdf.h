@@ -1,80 +1,166 @@
-// BSDF dispatch over a closed set of kinds (a tag and a switch; CONVENTIONS.md). Directions are
-// in the local shading frame, z = shading normal, oriented to the side of wo.
+// BSDF dispatch over the closed set of material kinds (a tag and a switch, CONVENTIONS.md): a
+// std::variant of plain lobe structs, one file each in engine/bsdfs/, no virtual calls and no
+// heap. Bsdf takes and returns world-space directions, both pointing away from the surface; the
+// lobes work in the local shading frame.
 //
-// Two-sided rule: every BSDF here is two-sided. The shading frame is flipped to the side wo
-// arrives from, and a reflection is only valid when wi and wo lie on the same side of the
-// *geometric* normal too, so shading normals cannot leak light through a surface.
+// Two-sided rule.
+// - Diffuse, conductors (smooth and rough), plastic and the thin dielectric are two-sided: they
+//   are evaluated with both directions mirrored to wo's side of the shading normal, so a surface
+//   looks the same from either side whatever its winding.
+// - Dielectrics (smooth and rough) are oriented: the geometric normal ng's side is the outside
+//   (IOR 1), the other side the inside (IOR = ior). The shading normal is first turned to ng's
+//   side, so vertex normals that disagree with the winding cannot swap inside and outside.
+// Geometric consistency (against light leaks through shading normals): a reflection is valid
+// only when wo and wi lie on the same side of ng, a transmission only when they lie on opposite
+// sides, where "reflection" and "transmission" are decided by the shading normal. Otherwise
+// eval() and pdf() return 0 and sample() fails.
+//
+// Roughness alpha below kSmoothAlpha (1e-3) turns rough conductors and dielectrics into their
+// smooth (delta) counterparts and a plastic's coat into a smooth one.
+// Non-symmetric BSDFs: only refraction depends on TransportMode (engine/bsdfs/common.h). The
+// adjoint correction for shading normals (Veach 1997, section 5.3) is the integrator's business.
 #pragma once
 
+#include <variant>
+
+#include "engine/bsdfs/common.h"
+#include "engine/bsdfs/conductor.h"
+#include "engine/bsdfs/dielectric.h"
+#include "engine/bsdfs/diffuse.h"
+#include "engine/bsdfs/plastic.h"
+#include "engine/bsdfs/rough_conductor.h"
+#include "engine/bsdfs/rough_dielectric.h"
+#include "engine/bsdfs/thin_dielectric.h"
 #include "engine/math.h"
-#include "engine/sampling.h"
+#include "engine/microfacet.h"
 #include "engine/scene.h"
 
 namespace rf {
 
-struct BsdfSample {
-  Vec3 wi;            // local
-  RGB f;              // BSDF value
-  float pdf_solid_angle = 0;
-  bool is_delta = false;
-};
-
-// The diffuse (Lambertian) BSDF: f = R / pi, sampled cosine-weighted.
-struct DiffuseBsdf {
-  RGB reflectance;
-  RGB eval(Vec3 wo, Vec3 wi) const {
-    if (wo.z <= 0 || wi.z <= 0) return RGB(0.0f);
-    return reflectance * kInvPi;
-  }
-  float pdf(Vec3 wo, Vec3 wi) const {
-    if (wo.z <= 0 || wi.z <= 0) return 0.0f;
-    return cosine_hemisphere_pdf(wi.z);
-  }
-  bool sample(Vec3 wo, Vec2 u, BsdfSample& s) const {
-    if (wo.z <= 0) return false;
-    s.wi = sample_cosine_hemisphere(u);
-    s.pdf_solid_angle = cosine_hemisphere_pdf(s.wi.z);
-    if (s.pdf_solid_angle <= 0) return false;
-    s.f = reflectance * kInvPi;
-    s.is_delta = false;
-    return true;
-  }
-};
-
-// A BSDF at a surface point: the material's lobe plus the shading frame.
-struct Bsdf {
+// A material's parameters at one surface point, textures already resolved.
+struct BsdfParams {
   MaterialType type = MaterialType::Diffuse;
-  DiffuseBsdf diffuse;
-  Frame frame;  // shading frame, n on the side of wo
-  Vec3 ng;      // geometric normal, flipped to the side of wo
+  RGB reflectance{0.5f};  // diffuse albedo (diffuse, plastic base)
+  RGB specular{1.0f};     // conductor F0 in tint mode; dielectric and coat tint
+  float alpha = 0;        // GGX roughness (rough conductor / dielectric, plastic coat)
+  float ior = 1.5f;       // dielectrics and plastic coat: IOR inside / IOR outside
+  RGB eta{1.0f};          // conductor complex IOR, real part
+  RGB k{0.0f};            // conductor complex IOR, imaginary part
+  bool conductor_tint = false;
+};
 
-  static Bsdf at(const Material& m, Vec3 ns, Vec3 ng, Vec3 wo_world) {
+// The material's constant values (ignores its textures).
+inline BsdfParams constant_params(const Material& m) {
+  return {m.type, m.reflectance.value, m.specular.value, m.roughness.value, m.ior, m.eta,
+          m.k,    m.conductor_tint};
+}
+
+class Bsdf {
+ public:
+  // ns and ng are unit world normals; ng's side is the outside for dielectrics.
+  static Bsdf make(const BsdfParams& p, Vec3 ns, Vec3 ng) {
     Bsdf b;
-    b.type = m.type;
-    b.diffuse.reflectance = m.reflectance.value;
-    bool flip = dot(wo_world, ng) < 0;
-    b.ng = flip ? -ng : ng;
-    b.frame = Frame::from_normal(flip ? -ns : ns);
+    b.ng_ = ng;
+    b.frame_ = Frame::from_normal(dot(ns, ng) < 0 ? -ns : ns);
+    ConductorFresnel fr{p.eta, p.k, p.specular, p.conductor_tint};
+    TrowbridgeReitz tr{p.alpha, p.alpha};
+    bool smooth = TrowbridgeReitz::effectively_smooth(p.alpha);
+    switch (p.type) {
+      case MaterialType::Diffuse:
+        b.lobe_ = DiffuseBxdf{p.reflectance};
+        break;
+      case MaterialType::Conductor:
+        b.lobe_ = ConductorBxdf{fr};
+        break;
+      case MaterialType::Dielectric:
+        b.lobe_ = DielectricBxdf{p.ior, p.specular};
+        break;
+      case MaterialType::ThinDielectric:
+        b.lobe_ = ThinDielectricBxdf{p.ior, p.specular};
+        break;
+      case MaterialType::RoughConductor:
+        if (smooth)
+          b.lobe_ = ConductorBxdf{fr};
+        else
+          b.lobe_ = RoughConductorBxdf{tr, fr};
+        break;
+      case MaterialType::RoughDielectric:
+        if (smooth)
+          b.lobe_ = DielectricBxdf{p.ior, p.specular};
+        else
+          b.lobe_ = RoughDielectricBxdf{tr, p.ior, p.specular};
+        break;
+      case MaterialType::Plastic:
+        b.lobe_ = PlasticBxdf::make(p.reflectance, p.specular, p.ior, p.alpha);
+        break;
+    }
     return b;
   }
-  // Same side of the geometric surface (reflection only, for now).
-  bool geometric_reflection(Vec3 wo_world, Vec3 wi_world) const {
-    return dot(wo_world, ng) > 0 && dot(wi_world, ng) > 0;
+  // Temporary, until engine/integrators/path.cpp resolves textures: the material's constants.
+  static Bsdf at(const Material& m, Vec3 ns, Vec3 ng, Vec3 /*wo*/) {
+    return make(constant_params(m), ns, ng);
   }
-  RGB eval(Vec3 wo_world, Vec3 wi_world) const {
-    if (!geometric_reflection(wo_world, wi_world)) return RGB(0.0f);
-    return diffuse.eval(frame.to_local(wo_world), frame.to_local(wi_world));
+
+  RGB eval(Vec3 wo, Vec3 wi, TransportMode mode = TransportMode::Radiance) const {
+    Vec3 lo, li;
+    if (!to_lobe(wo, wi, lo, li)) return RGB(0.0f);
+    return std::visit([&](const auto& l) { return l.eval(lo, li, mode); }, lobe_);
   }
-  float pdf(Vec3 wo_world, Vec3 wi_world) const {
-    if (!geometric_reflection(wo_world, wi_world)) return 0.0f;
-    return diffuse.pdf(frame.to_local(wo_world), frame.to_local(wi_world));
+  float pdf(Vec3 wo, Vec3 wi, TransportMode mode = TransportMode::Radiance) const {
+    Vec3 lo, li;
+    if (!to_lobe(wo, wi, lo, li)) return 0.0f;
+    return std::visit([&](const auto& l) { return l.pdf(lo, li, mode); }, lobe_);
   }
-  // Samples wi (returned in world space in s.wi).
-  bool sample(Vec3 wo_world, Vec2 u, BsdfSample& s) const {
-    if (!diffuse.sample(frame.to_local(wo_world), u, s)) return false;
-    s.wi = frame.to_world(s.wi);
-    return geometric_reflection(wo_world, s.wi);
+  // Samples wi given wo; on success s holds wi (world), f, pdf and the lobe's kind.
+  bool sample(Vec3 wo, float uc, Vec2 u, TransportMode mode, BsdfSample& s) const {
+    Vec3 lo = frame_.to_local(wo);
+    if (lo.z == 0) return false;
+    bool mirror = two_sided() && lo.z < 0;
+    if (mirror) lo.z = -lo.z;
+    bool ok = std::visit([&](const auto& l) { return l.sample(lo, uc, u, mode, s); }, lobe_);
+    if (!ok) return false;
+    if (mirror) s.wi.z = -s.wi.z;
+    s.wi = frame_.to_world(s.wi);
+    float go = dot(wo, ng_), gi = dot(s.wi, ng_);
+    return s.is_transmission ? go * gi < 0 : go * gi > 0;
   }
+  // Temporary overload for callers written before TransportMode (tests/engine_test.cpp).
+  bool sample(Vec3 wo, Vec2 u, BsdfSample& s) const {
+    return sample(wo, 0.5f, u, TransportMode::Radiance, s);
+  }
+
+  // Only delta lobes (smooth conductor, dielectric, thin dielectric): light sampling is useless.
+  bool is_delta() const {
+    return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kDelta; }, lobe_);
+  }
+  // The shading normal, turned to ng's side (for the cosine |dot(wi, ns)|).
+  Vec3 shading_normal() const { return frame_.n; }
+
+ private:
+  using Lobe = std::variant<DiffuseBxdf, ConductorBxdf, DielectricBxdf, ThinDielectricBxdf,
+                            RoughConductorBxdf, RoughDielectricBxdf, PlasticBxdf>;
+
+  bool two_sided() const {
+    return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kTwoSided; }, lobe_);
+  }
+  // World pair to the lobe's local pair (mirrored for two-sided lobes); false when the pair
+  // fails the geometric consistency rule.
+  bool to_lobe(Vec3 wo, Vec3 wi, Vec3& lo, Vec3& li) const {
+    float go = dot(wo, ng_), gi = dot(wi, ng_);
+    lo = frame_.to_local(wo);
+    li = frame_.to_local(wi);
+    if (go * gi == 0 || lo.z * li.z == 0) return false;
+    if ((go * gi > 0) != (lo.z * li.z > 0)) return false;
+    if (two_sided() && lo.z < 0) {
+      lo.z = -lo.z;
+      li.z = -li.z;
+    }
+    return true;
+  }
+
+  Frame frame_;
+  Vec3 ng_;
+  Lobe lobe_;
 };
 
 }  // namespace rf

@@ -8,6 +8,7 @@
 #include "engine/lights.h"
 #include "engine/sampler.h"
 #include "engine/scene.h"
+#include "engine/texture.h"
 
 namespace rf {
 
@@ -15,6 +16,8 @@ struct RenderContext {
   const Scene& scene;
   const Accel& accel;
   const LightSet& lights;
+  const TextureEvaluator& textures;
+  float pixel_spread = 0;  // angle one pixel subtends at the camera (for texture footprints)
 };
 
 // Per-thread counters an integrator updates; summed into the task's buffer.

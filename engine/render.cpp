@@ -25,6 +25,10 @@ const char* filter_name(FilterType t) {
   switch (t) {
     case FilterType::Box:
       return "box";
+    case FilterType::Triangle:
+      return "triangle";
+    case FilterType::Gaussian:
+      return "gaussian";
   }
   return "?";
 }
@@ -33,16 +37,19 @@ const char* filter_name(FilterType t) {
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
   char buf[256];
-  std::snprintf(buf, sizeof buf, "max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g",
+  std::snprintf(buf, sizeof buf,
+                "max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g:%g;sampler=%s",
                 i.max_depth, i.rr_min_depth, (unsigned long long)s.render.spp_per_pass(),
-                filter_name(s.film.filter.type), double(s.film.filter.radius));
+                filter_name(s.film.filter.type), double(s.film.filter.radius),
+                double(s.film.filter.sigma), s.render.sampler.c_str());
   return buf;
 }
 
 Renderer::Renderer(const Scene& scene)
     : scene_(scene),
       accel_(std::make_unique<Accel>(scene)),
-      lights_(std::make_unique<LightSet>(scene)) {}
+      lights_(std::make_unique<LightSet>(scene)),
+      textures_(std::make_unique<TextureEvaluator>(scene)) {}
 
 BufferHeader Renderer::header(const PassSet& passes) const {
   BufferHeader h;
@@ -73,7 +80,11 @@ SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool paralle
   SampleBuffer buf(header(PassSet::range(pass, pass + 1)), rect, splats());
   const RenderSettings& rs = scene_.render;
   PerspectiveCamera camera(scene_.camera, scene_.film.width, scene_.film.height);
-  RenderContext ctx{scene_, *accel_, *lights_};
+  RenderContext ctx{scene_, *accel_, *lights_, *textures_};
+  {
+    float t = std::tan(0.5f * scene_.camera.fov_deg * kPi / 180.0f);
+    ctx.pixel_spread = 2 * t / float(std::min(scene_.film.width, scene_.film.height));
+  }
   uint64_t spp = rs.spp_per_pass();
   std::atomic<uint64_t> rays{0};
   std::atomic<uint64_t> cpu_ns{0};

@@ -10,6 +10,7 @@
 #include "engine/film.h"
 #include "engine/lights.h"
 #include "engine/scene.h"
+#include "engine/texture.h"
 
 namespace rf {
 
@@ -20,6 +21,7 @@ class Renderer {
   const Scene& scene() const { return scene_; }
   const Accel& accel() const { return *accel_; }
   const LightSet& lights() const { return *lights_; }
+  const TextureEvaluator& textures() const { return *textures_; }
 
   // True for integrators whose tasks cover the whole frame and splat (light tracing, BDPT).
   bool splats() const { return false; }
@@ -36,6 +38,7 @@ class Renderer {
   const Scene& scene_;
   std::unique_ptr<Accel> accel_;
   std::unique_ptr<LightSet> lights_;
+  std::unique_ptr<TextureEvaluator> textures_;
 };
 
 // Canonical text of the settings that change pixels, beside the scene digest (BufferHeader).

@@ -1,10 +1,18 @@
-// The independent sampler under the determinism contract (DESIGN.md): every number it returns is
-// a pure function of (seed, frame, pass, pixel x, pixel y, sample index, dimension) for camera
-// paths, and of (seed, frame, pass, light-path index, dimension) for light paths. No state is
-// shared between samples, threads or tasks, so any tile or pass renders the same anywhere.
+// Samplers under the determinism contract (DESIGN.md): every number they return is a pure
+// function of (seed, frame, pass, pixel x, pixel y, sample index, dimension) for camera paths, and
+// of (seed, frame, pass, light-path index, dimension) for light paths. No state is shared between
+// samples, threads or tasks, so any tile or pass renders the same anywhere.
+//
+// - IndependentSampler: hashed uniform numbers.
+// - SobolSampler: padded, shuffled, Owen-scrambled 2D Sobol (pbrt-v4's PaddedSobolSampler with
+//   Burley 2020, "Practical Hash-based Owen Scrambling"). See the class.
+// - Sampler: the tag-and-switch front the integrators use (RenderSettings::sampler).
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <stdexcept>
+#include <string>
 
 #include "engine/math.h"
 
@@ -62,27 +70,142 @@ class IndependentSampler {
   uint32_t dimension_ = 0;
 };
 
+// Reverses the 32 bits of v (bit 0 <-> bit 31).
+inline uint32_t reverse_bits32(uint32_t v) {
+  v = ((v >> 1) & 0x55555555u) | ((v & 0x55555555u) << 1);
+  v = ((v >> 2) & 0x33333333u) | ((v & 0x33333333u) << 2);
+  v = ((v >> 4) & 0x0f0f0f0fu) | ((v & 0x0f0f0f0fu) << 4);
+  v = ((v >> 8) & 0x00ff00ffu) | ((v & 0x00ff00ffu) << 8);
+  return (v >> 16) | (v << 16);
+}
+
+// Generator matrix columns of Sobol's second dimension (primitive polynomial x + 1, m_1 = 1):
+// column 0 is the top bit and column j = column j-1 ^ (column j-1 >> 1), i.e. Pascal's triangle
+// mod 2. The first dimension's matrix is the identity reversed (van der Corput).
+inline constexpr std::array<uint32_t, 32> kSobolDimension1 = [] {
+  std::array<uint32_t, 32> c{};
+  c[0] = 1u << 31;
+  for (int j = 1; j < 32; ++j) c[j] = c[j - 1] ^ (c[j - 1] >> 1);
+  return c;
+}();
+
+// Sample `index` of Sobol dimension 0 or 1, as a 32-bit fixed-point fraction.
+inline uint32_t sobol_sample(uint32_t index, int dimension) {
+  if (dimension == 0) return reverse_bits32(index);
+  uint32_t x = 0;
+  for (int b = 0; index != 0; ++b, index >>= 1)
+    if (index & 1u) x ^= kSobolDimension1[b];
+  return x;
+}
+
+// A hash in which each output bit depends only on the input bits below it (xor with an even
+// multiple, add, multiply by an odd number), so it is a bijection that, applied to bit-reversed
+// values, is a nested uniform (Owen) scramble. Laine-Karras 2011 as improved by Vegdahl 2021
+// ("Building a Better LK Hash"); seed should be well mixed.
+inline uint32_t lk_hash(uint32_t x, uint32_t seed) {
+  x ^= x * 0x3d20adeau;
+  x += seed;
+  x *= (seed >> 16) | 1u;
+  x ^= x * 0x05526c56u;
+  x ^= x * 0x53a22864u;
+  return x;
+}
+
+// Owen scramble of a 32-bit fraction: bit k (from the top) is flipped by a hash of the bits above
+// it. Applied to an integer index it flips bit k by a hash of the bits above k, so it maps each
+// aligned block [m 2^j, (m+1) 2^j) onto another aligned block of the same size.
+inline uint32_t owen_scramble(uint32_t x, uint32_t seed) {
+  return reverse_bits32(lk_hash(reverse_bits32(x), seed));
+}
+
+// 32-bit fixed-point fraction to a float in [0, 1): the top 24 bits, exactly representable.
+inline float fraction_to_float(uint32_t x) { return float(x >> 8) * 0x1p-24f; }
+
+// Padded, shuffled, Owen-scrambled 2D Sobol. Every get_1d/get_2d call is one dimension slot d,
+// and draws from Sobol dimensions 0 (and 1), the (0,2)-sequence, independently of other slots:
+// - the sample index is Owen-scrambled as an integer with a seed hashed from (seed, frame, pass,
+//   pixel, d), which sends the pixel's first 2^k samples of a pass onto an aligned block of 2^k
+//   Sobol indices: a (0,k,2)-net. Different slots get different index orders, so slots are
+//   decorrelated (this is the "padding" by shuffling);
+// - each coordinate is then Owen-scrambled with its own hashed seed, which keeps the net
+//   property and makes each point uniformly distributed, so every pass is an unbiased,
+//   independently scrambled estimate.
+// So, for N = 2^k samples of a pixel in a pass, every 2D slot has exactly one point in each
+// elementary interval of area 1/N, and every 1D slot one point in each [i/N, (i+1)/N). Sample
+// indices beyond 2^32 fold their high bits into the key. Light paths use IndependentSampler.
+class SobolSampler {
+ public:
+  static constexpr uint64_t kDomain = 0x736f626f6cULL;  // "sobol"
+
+  void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
+                           uint64_t sample_index) {
+    uint64_t h = hash_combine(mix64(seed), kDomain);
+    h = hash_combine(h, (uint64_t(frame) << 32) | pass);
+    h = hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
+    key_ = hash_combine(h, sample_index >> 32);
+    index_ = uint32_t(sample_index);
+    dimension_ = 0;
+  }
+  float get_1d() {
+    uint64_t h = hash_combine(key_, dimension_++);
+    uint32_t index = owen_scramble(index_, uint32_t(h));
+    return fraction_to_float(owen_scramble(sobol_sample(index, 0), uint32_t(h >> 32)));
+  }
+  Vec2 get_2d() {
+    uint64_t h = hash_combine(key_, dimension_++);
+    uint32_t index = owen_scramble(index_, uint32_t(h));
+    uint32_t seed_y = uint32_t(mix64(h));
+    return {fraction_to_float(owen_scramble(sobol_sample(index, 0), uint32_t(h >> 32))),
+            fraction_to_float(owen_scramble(sobol_sample(index, 1), seed_y))};
+  }
+  uint32_t dimension() const { return dimension_; }
+
+ private:
+  uint64_t key_ = 0;
+  uint32_t index_ = 0;
+  uint32_t dimension_ = 0;
+};
+
 // The sampler integrators draw from: a tag and a switch over the kinds (RenderSettings::sampler).
-// Only the independent kind exists so far; the same start/get interface serves every kind.
+// The Sobol kind draws light paths (start_light_path) from the independent sampler: a light path
+// has no pixel to stratify over, and its index already spreads it over the pass.
 class Sampler {
  public:
-  enum class Kind : uint8_t { Independent };
+  enum class Kind : uint8_t { Independent, Sobol };
   explicit Sampler(Kind kind = Kind::Independent) : kind_(kind) {}
 
   void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
-    independent_.start_camera_sample(seed, frame, pass, px, py, sample_index);
+    sobol_active_ = kind_ == Kind::Sobol;
+    if (sobol_active_)
+      sobol_.start_camera_sample(seed, frame, pass, px, py, sample_index);
+    else
+      independent_.start_camera_sample(seed, frame, pass, px, py, sample_index);
   }
   void start_light_path(uint64_t seed, uint32_t frame, uint32_t pass, uint64_t light_path_index) {
+    sobol_active_ = false;
     independent_.start_light_path(seed, frame, pass, light_path_index);
   }
-  float get_1d() { return independent_.get_1d(); }
-  Vec2 get_2d() { return independent_.get_2d(); }
+  float get_1d() { return sobol_active_ ? sobol_.get_1d() : independent_.get_1d(); }
+  Vec2 get_2d() { return sobol_active_ ? sobol_.get_2d() : independent_.get_2d(); }
   Kind kind() const { return kind_; }
 
  private:
   Kind kind_;
+  bool sobol_active_ = false;
   IndependentSampler independent_;
+  SobolSampler sobol_;
 };
+
+// "independent" or "sobol" (RenderSettings::sampler); throws std::invalid_argument otherwise.
+inline Sampler::Kind kind_from_name(const std::string& name) {
+  if (name == "independent") return Sampler::Kind::Independent;
+  if (name == "sobol") return Sampler::Kind::Sobol;
+  throw std::invalid_argument("unknown sampler '" + name + "' (expected independent or sobol)");
+}
+
+inline const char* kind_name(Sampler::Kind kind) {
+  return kind == Sampler::Kind::Sobol ? "sobol" : "independent";
+}
 
 }  // namespace rf

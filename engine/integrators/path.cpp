@@ -1,33 +1,78 @@
 // Path tracing with next-event estimation (`path`).
 //
-// Estimator: unidirectional paths from the camera. At every non-delta vertex one light sample
-// (light chosen by power, point uniform by area) and one BSDF sample, combined by multiple
-// importance sampling with the power heuristic (Veach 1997, ch. 9); emission found by the BSDF
-// sample is weighted against the light-sampling pdf of the same point.
+// Estimator: unidirectional paths from the camera. At every vertex with a non-delta BSDF, one
+// light sample (light chosen by power) and one BSDF sample, combined by multiple importance
+// sampling with the power heuristic (Veach 1997, ch. 9); emission found by the BSDF sample (area
+// lights, the environment) is weighted against the light-sampling pdf of the same point. Delta
+// lights (point, spot, directional) are reached by light sampling only, delta BSDFs (mirror,
+// glass) by BSDF sampling only, each with weight 1.
 // Parameters: max_depth D (scattering events, pbrt-v4's meaning: D = 0 sees emitters only, D = 1
-// is direct lighting), rr_min_depth (Russian roulette after that many bounces, with survival
-// probability min(1, max component of the throughput)).
+// is direct lighting), rr_min_depth (Russian roulette after that many bounces, survival
+// probability min(1, max component of throughput x eta scale), pbrt-v4's rule).
 // Strengths: unbiased, simple, robust for diffuse and glossy scenes with visible light sources.
 // Cannot do well: caustics from small lights seen through specular surfaces (found only by
-// chance), light arriving through narrow openings; see bdpt and ppm for those.
+// chance; from point lights never), light arriving through narrow openings; see bdpt and ppm.
 #include "engine/bsdf.h"
 #include "engine/integrator.h"
 
 namespace rf {
 
-RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
-                  TraceCounters& counters) {
+namespace {
+
+// Material parameters at a hit, textures resolved. The footprint is a ray-cone estimate: the
+// cone's width at the hit, converted to uv units by the triangle's uv-to-world area ratio.
+BsdfParams resolve(const RenderContext& ctx, const Material& m, const SurfaceHit& hit,
+                   float cone_width) {
+  BsdfParams p = constant_params(m);
+  if (m.reflectance.texture < 0 && m.specular.texture < 0 && m.roughness.texture < 0) return p;
+  const Mesh& mesh = ctx.scene.meshes[hit.mesh];
+  float footprint = 0;
+  if (!mesh.uvs.empty()) {
+    const uint32_t* t = &mesh.indices[3 * hit.prim];
+    Vec3 p0 = mesh.positions[t[0]], p1 = mesh.positions[t[1]], p2 = mesh.positions[t[2]];
+    Vec2 a = mesh.uvs[t[0]], b = mesh.uvs[t[1]], c = mesh.uvs[t[2]];
+    float world_area = length(cross(p1 - p0, p2 - p0));
+    float uv_area = std::fabs((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y));
+    if (world_area > 0) footprint = cone_width * std::sqrt(uv_area / world_area);
+  }
+  p.reflectance = ctx.textures.eval(m.reflectance, hit.uv, footprint);
+  p.specular = ctx.textures.eval(m.specular, hit.uv, footprint);
+  p.alpha = ctx.textures.eval(m.roughness, hit.uv, footprint);
+  return p;
+}
+
+bool unoccluded(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
+  if (ls.is_infinite) {
+    Ray r = ctx.accel.spawn(hit, ls.wi);
+    return !ctx.accel.occluded(r.o, r.d, kInf);
+  }
+  return ctx.accel.visible(hit, ls.p, ls.p_error, ls.n);
+}
+
+}  // namespace
+
+RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters) {
   const IntegratorSettings& settings = ctx.scene.render.integrator;
   RGB radiance(0.0f), beta(1.0f);
+  float eta_scale = 1;
   float prev_bsdf_pdf = 0;
   bool prev_delta = true;  // the camera ray counts as "specular": emission is taken unweighted
   Vec3 prev_p = ray.o;
+  float cone_width = 0;  // ray-cone width at the current hit, for texture filtering
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
-    if (!ctx.accel.intersect(ray, hit)) break;
+    if (!ctx.accel.intersect(ray, hit)) {
+      if (ctx.lights.has_environment()) {
+        RGB le = ctx.lights.environment_radiance(ray.d);
+        float w = prev_delta ? 1.0f : power_heuristic(prev_bsdf_pdf, ctx.lights.pdf_environment(ray.d));
+        radiance += beta * le * w;
+      }
+      break;
+    }
     const Mesh& mesh = ctx.scene.meshes[hit.mesh];
     Vec3 wo = -ray.d;
+    cone_width += ctx.pixel_spread * hit.t;
 
     RGB le = LightSet::emitted(mesh, hit.ng, wo);
     if (!is_black(le)) {
@@ -40,20 +85,21 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
     }
     if (depth == settings.max_depth) break;
 
-    Bsdf bsdf = Bsdf::at(ctx.scene.materials[mesh.material], hit.ns, hit.ng, wo);
+    const Material& material = ctx.scene.materials[mesh.material];
+    Bsdf bsdf = Bsdf::make(resolve(ctx, material, hit, cone_width), hit.ns, hit.ng);
 
-    // Next-event estimation.
+    // Next-event estimation (the dimensions are drawn either way, so a material change does
+    // not reshuffle the random numbers of later bounces).
     float u_light = sampler.get_1d();
     Vec2 u_point = sampler.get_2d();
     LightSample ls;
-    if (ctx.lights.sample(hit.p, u_light, u_point, ls)) {
+    if (!bsdf.is_delta() && ctx.lights.sample(hit.p, u_light, u_point, ls)) {
       RGB f = bsdf.eval(wo, ls.wi);
       if (!is_black(f)) {
         ++counters.rays;
-        if (ctx.accel.visible(hit, ls.p, ls.p_error, ls.n)) {
-          float bsdf_pdf = bsdf.pdf(wo, ls.wi);
-          float w = power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
-          float cos_i = std::fabs(dot(ls.wi, bsdf.frame.n));
+        if (unoccluded(ctx, hit, ls)) {
+          float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
+          float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
           radiance += beta * f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
         }
       }
@@ -61,9 +107,12 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
 
     // BSDF sampling for the next vertex.
     BsdfSample bs;
-    if (!bsdf.sample(wo, sampler.get_2d(), bs)) break;
-    float cos_i = std::fabs(dot(bs.wi, bsdf.frame.n));
+    float uc = sampler.get_1d();
+    Vec2 u = sampler.get_2d();
+    if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) break;
+    float cos_i = std::fabs(dot(bs.wi, bsdf.shading_normal()));
     beta *= bs.f * (cos_i / bs.pdf_solid_angle);
+    if (bs.is_transmission) eta_scale *= sqr(bs.eta);
     prev_bsdf_pdf = bs.pdf_solid_angle;
     prev_delta = bs.is_delta;
     prev_p = hit.p;
@@ -71,7 +120,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
 
     float u_rr = sampler.get_1d();
     if (depth + 1 >= settings.rr_min_depth) {
-      float survive = std::min(1.0f, max_component(beta));
+      float survive = std::min(1.0f, max_component(beta * eta_scale));
       if (u_rr >= survive) break;
       beta = beta / survive;
     }
