@@ -96,11 +96,6 @@ class Bsdf {
     }
     return b;
   }
-  // Temporary, until engine/integrators/path.cpp resolves textures: the material's constants.
-  static Bsdf at(const Material& m, Vec3 ns, Vec3 ng, Vec3 /*wo*/) {
-    return make(constant_params(m), ns, ng);
-  }
-
   RGB eval(Vec3 wo, Vec3 wi, TransportMode mode = TransportMode::Radiance) const {
     Vec3 lo, li;
     if (!to_lobe(wo, wi, lo, li)) return RGB(0.0f);
@@ -124,11 +119,6 @@ class Bsdf {
     float go = dot(wo, ng_), gi = dot(s.wi, ng_);
     return s.is_transmission ? go * gi < 0 : go * gi > 0;
   }
-  // Temporary overload for callers written before TransportMode (tests/engine_test.cpp).
-  bool sample(Vec3 wo, Vec2 u, BsdfSample& s) const {
-    return sample(wo, 0.5f, u, TransportMode::Radiance, s);
-  }
-
   // Only delta lobes (smooth conductor, dielectric, thin dielectric): light sampling is useless.
   bool is_delta() const {
     return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kDelta; }, lobe_);

@@ -802,11 +802,11 @@ TEST(BsdfSides, GeometricNormalBlocksLeaks) {
 }
 
 // The temporary adapter for callers that still pass a Material.
-TEST(Bsdf, AtUsesMaterialConstants) {
+TEST(Bsdf, ConstantParamsUseMaterialConstants) {
   Material m;
   m.type = MaterialType::Diffuse;
   m.reflectance.value = RGB(0.25f, 0.5f, 0.75f);
-  Bsdf b = Bsdf::at(m, kZ, kZ, kZ);
+  Bsdf b = Bsdf::make(constant_params(m), kZ, kZ);
   RGB f = b.eval(direction(0.5f), direction(0.7f, 2.0f));
   EXPECT_NEAR(f.y, 0.5f * kInvPi, 1e-7f);
   BsdfParams p = constant_params(m);

@@ -4,7 +4,6 @@
 #include <cmath>
 
 #include "engine/accel.h"
-#include "engine/bsdf.h"
 #include "engine/lights.h"
 #include "engine/sampler.h"
 #include "tests/support/test_support.h"
@@ -113,22 +112,6 @@ TEST(Accel, SpawnedRaysDoNotHitTheirOwnSurfaceFarFromTheOrigin) {
   }
   EXPECT_GT(hits, 19000);
   EXPECT_EQ(self_hits, 0);
-}
-
-TEST(DiffuseBsdf, SampleMatchesEvalAndPdf) {
-  Material m{"m", MaterialType::Diffuse, {RGB(0.3f, 0.6f, 0.9f)}};
-  Vec3 ng = normalize(Vec3(0.2f, 1, 0.1f));
-  Vec3 wo = normalize(Vec3(0.5f, 0.7f, -0.2f));
-  Bsdf b = Bsdf::at(m, ng, ng, wo);
-  IndependentSampler smp;
-  for (int i = 0; i < 1000; ++i) {
-    smp.start_light_path(5, 0, 0, uint64_t(i));
-    BsdfSample s;
-    if (!b.sample(wo, smp.get_2d(), s)) continue;
-    RGB f = b.eval(wo, s.wi);
-    EXPECT_NEAR(f.y, s.f.y, 1e-6f);
-    EXPECT_NEAR(b.pdf(wo, s.wi), s.pdf_solid_angle, 1e-4f * s.pdf_solid_angle);
-  }
 }
 
 }  // namespace
