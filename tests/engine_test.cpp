@@ -6,6 +6,7 @@
 #include "engine/accel.h"
 #include "engine/lights.h"
 #include "engine/sampler.h"
+#include "engine/sampling.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
