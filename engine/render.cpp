@@ -94,7 +94,7 @@ SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool paralle
     double t0 = thread_cpu_seconds();
     TraceCounters counters;
     uint64_t local_nonfinite = 0;
-    Sampler sampler;
+    Sampler sampler(kind_from_name(scene_.render.sampler));
     for (int y = y_begin; y < y_end; ++y)
       for (int x = rect.x0; x < rect.x1(); ++x)
         for (uint64_t s = 0; s < spp; ++s) {

@@ -6,8 +6,8 @@
 
 #include <cassert>
 #include <cmath>
-#include <cstdlib>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <functional>
 #include <system_error>
@@ -54,7 +54,8 @@ class BoxDownsampler {
   void add_row(const float* row) {
     std::fill(hrow_.begin(), hrow_.end(), 0.0f);
     for (const Tap& t : taps_)
-      for (int c = 0; c < nch_; ++c) hrow_[size_t(t.out) * nch_ + c] += t.weight * row[size_t(t.in) * nch_ + c];
+      for (int c = 0; c < nch_; ++c)
+        hrow_[size_t(t.out) * nch_ + c] += t.weight * row[size_t(t.in) * nch_ + c];
     // Input row y covers [y*nh, (y+1)*nh), output row j covers [j*h, (j+1)*h).
     long lo = long(y_) * nh_, hi = long(y_ + 1) * nh_;
     for (int k = 0; k < 2 && j_ + k < nh_; ++k) {
@@ -102,12 +103,14 @@ struct RowFile {
 class RowReader {
  public:
   RowReader(const Texture& t, OIIO::ImageInput& in) : t_(t), in_(in), spec_(in.spec()) {
-    if (spec_.tile_width > 0) tiles_.resize(size_t(spec_.width) * spec_.tile_height * spec_.nchannels);
+    if (spec_.tile_width > 0)
+      tiles_.resize(size_t(spec_.width) * spec_.tile_height * spec_.nchannels);
   }
   void read(int y0, int y1, float* dst) {
     const int nch = spec_.nchannels;
     if (spec_.tile_width <= 0) {
-      if (!in_.read_scanlines(0, 0, spec_.y + y0, spec_.y + y1, 0, 0, nch, OIIO::TypeDesc::FLOAT, dst))
+      if (!in_.read_scanlines(0, 0, spec_.y + y0, spec_.y + y1, 0, 0, nch, OIIO::TypeDesc::FLOAT,
+                              dst))
         throw error();
       return;
     }
@@ -290,8 +293,8 @@ void TextureEvaluator::open_image(int index) {
       if (!::mkdtemp(tmpl.data())) throw texture_error(t, "cannot create a temporary directory");
       temp_dir_ = tmpl;
     }
-    // Half keeps 8-bit sources (and half ones) to 1/8 of a code step; deeper ones stay float.
-    bool half = spec.format.size() <= 2;
+    // Half keeps 8-bit sources to 1/8 of a code step (and half ones exact); deeper ones get float.
+    bool half = spec.format.size() == 1 || spec.format == OIIO::TypeDesc::HALF;
     std::string converted = temp_dir_ + "/" + std::to_string(index) + ".exr";
     write_mipmapped(t, *in, decode, half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT, converted);
     path = converted;

@@ -46,8 +46,8 @@ TEST(SamplerTest, KindFromName) {
 TEST(SamplerTest, SobolSecondDimensionMatrix) {
   // The first direction numbers of Sobol's second dimension (Joe & Kuo): 1, 3, 5, 15, 17, ...
   // as left-aligned fractions.
-  const uint32_t expect[] = {0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u, 0x88000000u,
-                             0xcc000000u, 0xaa000000u, 0xff000000u};
+  const uint32_t expect[] = {0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u,
+                             0x88000000u, 0xcc000000u, 0xaa000000u, 0xff000000u};
   for (int j = 0; j < 8; ++j) EXPECT_EQ(kSobolDimension1[j], expect[j]) << j;
   // Unscrambled, the first 4 points are (0,0), (1/2,1/2), (1/4,3/4), (3/4,1/4).
   EXPECT_EQ(sobol_sample(2, 0), 0x40000000u);
@@ -55,6 +55,20 @@ TEST(SamplerTest, SobolSecondDimensionMatrix) {
   EXPECT_EQ(sobol_sample(3, 1), 0x40000000u);
   EXPECT_EQ(reverse_bits32(0x00000001u), 0x80000000u);
   EXPECT_EQ(reverse_bits32(0x12345678u), 0x1e6a2c48u);
+  // The byte tables agree with the matrix applied bit by bit, and the fused scramble with its
+  // definition.
+  IndependentSampler r;
+  for (uint64_t i = 0; i < 1000; ++i) {
+    r.start_light_path(0, 0, 0, i);
+    uint32_t index = uint32_t(r.get_1d() * 0x1p24f) * 256u + uint32_t(i & 255);
+    uint32_t seed = uint32_t(r.get_1d() * 0x1p24f) << 8;
+    uint32_t x = 0;
+    for (int b = 0; b < 32; ++b)
+      if (index >> b & 1u) x ^= kSobolDimension1[b];
+    ASSERT_EQ(sobol_sample(index, 1), x);
+    for (int d = 0; d < 2; ++d)
+      ASSERT_EQ(scrambled_sobol(index, d, seed), owen_scramble(sobol_sample(index, d), seed));
+  }
 }
 
 // Owen scrambling as a map of integers: bijective, and it maps every aligned block of 2^j onto
@@ -202,7 +216,8 @@ TEST(SamplerTest, SobolSlotsAreUncorrelated) {
       s.start_camera_sample(1, 0, 0, p, 0, uint64_t(i));
       Vec2 a = s.get_2d(), b = s.get_2d();
       double x = a.x - 0.5, y = b.x - 0.5, z = b.y - 0.5;
-      sx += x, sy += y, sz += z, sxx += x * x, syy += y * y, szz += z * z, sxy += x * y, sxz += x * z;
+      sx += x, sy += y, sz += z, sxx += x * x, syy += y * y, szz += z * z, sxy += x * y,
+          sxz += x * z;
     }
   auto corr = [n](double sa, double sb, double saa, double sbb, double sab) {
     double cov = sab / n - sa / n * sb / n;
@@ -215,7 +230,8 @@ TEST(SamplerTest, SobolSlotsAreUncorrelated) {
 
 // An anisotropic Gaussian bump on the unit square and its exact integral.
 double bump(double x, double y) {
-  return std::exp(-(x - 0.4) * (x - 0.4) / (2 * 0.15 * 0.15) - (y - 0.6) * (y - 0.6) / (2 * 0.2 * 0.2));
+  return std::exp(-(x - 0.4) * (x - 0.4) / (2 * 0.15 * 0.15) -
+                  (y - 0.6) * (y - 0.6) / (2 * 0.2 * 0.2));
 }
 double bump_integral() {
   auto axis = [](double mu, double sigma) {
@@ -244,15 +260,17 @@ double rms_error(Sampler::Kind kind, int spp, int pixels, uint32_t pass) {
   return std::sqrt(sq / pixels);
 }
 
-// For a smooth integrand, Owen-scrambled nets converge as N^-1.5 against Monte Carlo's N^-0.5:
-// at 64 spp the RMS error ratio is about 50 (measured 4096 pixels). Asserted > 10, far from both.
+// For a smooth integrand, Owen-scrambled nets converge as N^-1.5 (asymptotically) against Monte
+// Carlo's N^-0.5. Measured over 4096 pixels: RMS error ratio 8.3 at 64 spp and 27 at 256 spp
+// (a full per-bit Owen scramble measures the same). The RMS over 4096 pixels is known to ~2%,
+// so asserting ratios > 5 and > 15 fails only if the scrambled net loses its convergence rate.
 TEST(SamplerTest, SobolIntegratesASmoothBumpFarBetterThanIndependent) {
-  for (int spp : {16, 64}) {
+  for (int spp : {64, 256}) {
     double independent = rms_error(Sampler::Kind::Independent, spp, 4096, 0);
     double sobol = rms_error(Sampler::Kind::Sobol, spp, 4096, 0);
     std::printf("spp %d: RMS error independent %.3g, sobol %.3g, ratio %.1f\n", spp, independent,
                 sobol, independent / sobol);
-    EXPECT_GT(independent / sobol, spp == 16 ? 5.0 : 10.0);
+    EXPECT_GT(independent / sobol, spp == 64 ? 5.0 : 15.0);
   }
 }
 

@@ -24,6 +24,15 @@
 #include "engine/sampler.h"
 #include "tests/support/test_support.h"
 
+#if defined(__SANITIZE_ADDRESS__)
+// OpenImageIO 2.4's TextureSystem::destroy deletes its object through a mismatched type, which
+// AddressSanitizer reports in the library; the rest stays checked.
+extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
 namespace rf {
 namespace {
 
@@ -109,8 +118,8 @@ TEST(TextureTest, CheckerboardPointValues) {
     bool a;
   };
   for (Case c : {Case{{0.0f, 0.1f}, true}, Case{{0.2f, 0.1f}, false}, Case{{0.2f, 0.6f}, true},
-                 Case{{0.0f, 0.6f}, false}, Case{{-0.2f, 0.1f}, false},
-                 Case{{-0.2f, -0.1f}, true}, Case{{0.99f, 0.99f}, false}}) {
+                 Case{{0.0f, 0.6f}, false}, Case{{-0.2f, 0.1f}, false}, Case{{-0.2f, -0.1f}, true},
+                 Case{{0.99f, 0.99f}, false}}) {
     RGB expect = c.a ? t.color_a : t.color_b;
     EXPECT_EQ(ev.eval(tex(0), c.uv, 0.0f), expect) << c.uv.x << "," << c.uv.y;
   }
@@ -137,8 +146,8 @@ TEST(TextureTest, CheckerboardFootprintIsBoxFiltered) {
   const int n = 400;
   for (int i = 0; i < n; ++i)
     for (int j = 0; j < n; ++j)
-      sum += ev.eval(tex(0), {uv.x + w * ((i + 0.5f) / n - 0.5f), uv.y + w * ((j + 0.5f) / n - 0.5f)},
-                     0.0f)
+      sum += ev.eval(tex(0),
+                     {uv.x + w * ((i + 0.5f) / n - 0.5f), uv.y + w * ((j + 0.5f) / n - 0.5f)}, 0.0f)
                  .x;
   EXPECT_NEAR(ev.eval(tex(0), uv, w).x, sum / (n * n), 3e-3);  // midpoint rule: O(1/n) at edges
 }
@@ -206,9 +215,9 @@ TEST(TextureTest, DataImagesAreNotDecoded) {
   write_png8(dir + "/rough.png", 2, 2, 1, px);
   std::vector<uint8_t> rgb = {10, 100, 200, 50, 150, 250, 0, 0, 0, 255, 255, 255};
   write_png8(dir + "/rgb.png", 2, 2, 3, rgb);
-  TextureEvaluator ev(scene_with({image_texture(dir + "/rough.png", true),
-                                  image_texture(dir + "/rgb.png", true),
-                                  image_texture(dir + "/rgb.png", false)}));
+  TextureEvaluator ev(
+      scene_with({image_texture(dir + "/rough.png", true), image_texture(dir + "/rgb.png", true),
+                  image_texture(dir + "/rgb.png", false)}));
   for (int j = 0; j < 2; ++j)
     for (int i = 0; i < 2; ++i) {
       Vec2 uv = texel_centre(i, j, 2, 2);
@@ -231,7 +240,9 @@ TEST(TextureTest, DataImagesAreNotDecoded) {
 TEST(TextureTest, FloatExrTexelCentresAreExact) {
   std::string dir = test::make_temp_dir("texture");
   const int w = 5, h = 3;
-  auto value = [](int x, int y, int c) { return 0.37f * float(x) - 1.1f * float(y) + 3.0f * c + 0.01f; };
+  auto value = [](int x, int y, int c) {
+    return 0.37f * float(x) - 1.1f * float(y) + 3.0f * c + 0.01f;
+  };
   write_exr(dir + "/f.exr", w, h, 3, value);
   TextureEvaluator ev(scene_with({image_texture(dir + "/f.exr")}));
   for (int j = 0; j < h; ++j)
@@ -318,7 +329,8 @@ TEST(TextureTest, OddSizedImageKeepsItsMeanAtEveryLevel) {
     const int n = 16;
     double s = 0;
     for (int j = 0; j < h * n; ++j)
-      for (int i = 0; i < w * n; ++i) s += ev.eval(ftex(0), {(i + 0.5f) / (w * n), (j + 0.5f) / (h * n)}, fp);
+      for (int i = 0; i < w * n; ++i)
+        s += ev.eval(ftex(0), {(i + 0.5f) / (w * n), (j + 0.5f) / (h * n)}, fp);
     EXPECT_NEAR(s / (double(w) * h * n * n), mean, 0.01 * mean) << "fp " << fp;
   }
 }
@@ -337,13 +349,15 @@ TEST(TextureTest, TiledInputs) {
   config.attribute("maketx:nomipmap", 1);
   ASSERT_TRUE(OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture,
                                                dir + "/plain.exr", dir + "/tiled.exr", config));
-  TextureEvaluator ev(scene_with({image_texture(dir + "/mip.tx"), image_texture(dir + "/tiled.exr")}));
+  TextureEvaluator ev(
+      scene_with({image_texture(dir + "/mip.tx"), image_texture(dir + "/tiled.exr")}));
   for (int t = 0; t < 2; ++t)
     for (int j = 0; j < h; j += 7)
       for (int i = 0; i < w; i += 5) {
         RGB got = ev.eval(tex(t), texel_centre(i, j, w, h), 0);
         for (int c = 0; c < 3; ++c)
-          ASSERT_NEAR(got[c], value(i, j, c), 1e-6f * value(i, j, c) + 1e-4f) << t << " " << i << "," << j;
+          ASSERT_NEAR(got[c], value(i, j, c), 1e-6f * value(i, j, c) + 1e-4f)
+              << t << " " << i << "," << j;
       }
 }
 
@@ -363,7 +377,8 @@ TEST(TextureTest, MissingImageIsASceneErrorNamingIt) {
 TEST(TextureTest, ConcurrentLookupsMatchSerialOnes) {
   std::string dir = test::make_temp_dir("texture");
   write_noise_png(dir + "/a.png", 256, 128, 1);
-  write_exr(dir + "/b.exr", 300, 200, 3, [](int x, int y, int c) { return float((x * 7 + y * 13 + c) % 17); });
+  write_exr(dir + "/b.exr", 300, 200, 3,
+            [](int x, int y, int c) { return float((x * 7 + y * 13 + c) % 17); });
   TextureEvaluator ev(scene_with({image_texture(dir + "/a.png"), image_texture(dir + "/b.exr")}));
   const int n = 20000;
   auto lookup = [&](int k) {
@@ -406,12 +421,14 @@ bool reset_peak_rss() {
 // MB (construction included). Lookups sweep a grid of 1/4 the resolution in scanline order, as
 // coherent rays would, half at the finest level and half a few levels up.
 double peak_rss_growth_mb(int count, int size, size_t cache_mb) {
+  if (kAddressSanitizer) return -1;  // its quarantine keeps freed memory resident
   std::string dir = test::make_temp_dir("texture-memory");
   std::vector<Texture> textures;
   for (int i = 0; i < count; ++i) {
     std::string path = dir + "/big" + std::to_string(i) + ".exr";
-    write_exr(path, size, size, 3,
-              [i](int x, int y, int c) { return float((x ^ (y * 3)) + c + i) * 1e-3f; }, "none");
+    write_exr(
+        path, size, size, 3,
+        [i](int x, int y, int c) { return float((x ^ (y * 3)) + c + i) * 1e-3f; }, "none");
     textures.push_back(image_texture(path));
   }
   ::malloc_trim(0);  // return freed heap to the system, so the reset peak is what is live now
@@ -445,6 +462,7 @@ double peak_rss_growth_mb(int count, int size, size_t cache_mb) {
 // the peak RSS grows by at most the cache plus 16 MB (OIIO per-thread state, file buffers, the
 // rewriting's strips), well below the data's size. Measured: 9.5 MB; 50 MB with a 1 GB cache.
 TEST(TextureTest, CacheBoundsMemorySmall) {
+  if (kAddressSanitizer) GTEST_SKIP() << "RSS is meaningless under AddressSanitizer";
   double growth = peak_rss_growth_mb(4, 1024, 8);
   std::printf("peak RSS growth: %.1f MB (data 48 MB, cache 8 MB)\n", growth);
   EXPECT_LT(growth, 8 + 16);
@@ -458,6 +476,7 @@ TEST(TextureTest, CacheBoundsMemorySmall) {
 // 8 x 2048^2 RGB float (384 MB, 512 MB with mip levels) through a 32 MB cache: the peak RSS grows
 // by at most the cache plus 32 MB. Measured: 34 MB. About 12 s, and 900 MB written to $TMPDIR.
 TEST(LongTextureTest, CacheBoundsMemoryLarge) {
+  if (kAddressSanitizer) GTEST_SKIP() << "RSS is meaningless under AddressSanitizer";
   double growth = peak_rss_growth_mb(8, 2048, 32);
   std::printf("peak RSS growth: %.1f MB (data 384 MB, cache 32 MB)\n", growth);
   EXPECT_LT(growth, 32 + 32);
