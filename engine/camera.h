@@ -20,21 +20,6 @@
 
 namespace rf {
 
-// Uniform point on the unit disk (Shirley-Chiu concentric mapping).
-inline Vec2 sample_concentric_disk(Vec2 u) {
-  float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
-  if (ox == 0 && oy == 0) return {0, 0};
-  float r, theta;
-  if (std::fabs(ox) > std::fabs(oy)) {
-    r = ox;
-    theta = (kPi / 4) * (oy / ox);
-  } else {
-    r = oy;
-    theta = (kPi / 2) - (kPi / 4) * (ox / oy);
-  }
-  return {r * std::cos(theta), r * std::sin(theta)};
-}
-
 // A point on the lens seen from a scene point, for connecting a light vertex to the camera.
 struct CameraConnection {
   Vec3 p_lens;             // world

@@ -5,21 +5,26 @@
 
 namespace rf {
 
-// Cosine-weighted direction about +z (Malley's method on a concentric disk); pdf = cos/pi.
-inline Vec3 sample_cosine_hemisphere(Vec2 u) {
+// Uniform point on the unit disk (Shirley-Chiu concentric mapping: low distortion, so
+// stratification of u survives).
+inline Vec2 sample_concentric_disk(Vec2 u) {
   float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
-  float r = 0, phi = 0;
-  if (ox != 0 || oy != 0) {
-    if (std::fabs(ox) > std::fabs(oy)) {
-      r = ox;
-      phi = (kPi / 4) * (oy / ox);
-    } else {
-      r = oy;
-      phi = (kPi / 2) - (kPi / 4) * (ox / oy);
-    }
+  if (ox == 0 && oy == 0) return {0, 0};
+  float r, theta;
+  if (std::fabs(ox) > std::fabs(oy)) {
+    r = ox;
+    theta = (kPi / 4) * (oy / ox);
+  } else {
+    r = oy;
+    theta = (kPi / 2) - (kPi / 4) * (ox / oy);
   }
-  float x = r * std::cos(phi), y = r * std::sin(phi);
-  return {x, y, safe_sqrt(1.0f - x * x - y * y)};
+  return {r * std::cos(theta), r * std::sin(theta)};
+}
+
+// Cosine-weighted direction about +z (Malley's method on the concentric disk); pdf = cos/pi.
+inline Vec3 sample_cosine_hemisphere(Vec2 u) {
+  Vec2 d = sample_concentric_disk(u);
+  return {d.x, d.y, safe_sqrt(1.0f - d.x * d.x - d.y * d.y)};
 }
 inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta * kInvPi; }
 

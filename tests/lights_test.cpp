@@ -18,14 +18,14 @@
 #include "engine/envmap.h"
 #include "engine/lights.h"
 #include "engine/sampler.h"
-#include "tests/support/lights_chisq.h"
+#include "tests/support/chisq.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
 namespace {
 
 constexpr int kChiSquareTests = 4;  // area, environment, rotated environment, constant
-const double kAlpha = test::lights::sidak_alpha(1e-3, kChiSquareTests);
+const double kAlpha = test::sidak_alpha(1e-3, kChiSquareTests);
 
 Material diffuse() { return Material{"m", MaterialType::Diffuse, {RGB(0.5f)}}; }
 
@@ -150,8 +150,8 @@ void chi_square_directions(const LightSet& lights, Vec3 p, const SphereGrid& gri
     total += cell_prob[k];
   }
   expected.back() = std::max(0.0, n * (1.0 - total));
-  test::lights::ChiSquareResult r = test::lights::chi_square_test(observed, expected);
-  EXPECT_GT(r.p_value, kAlpha) << r.message;
+  test::ChiSquareResult r = test::chi_square_test(observed, expected, kAlpha);
+  EXPECT_TRUE(r.passed) << r.message;
   std::printf("  %s (alpha %.2e)\n", r.message.c_str(), kAlpha);
 }
 
