@@ -98,7 +98,8 @@ void warn_nonfinite(const rf::SampleBuffer& b) {
 
 void print_summary(const rf::SampleBuffer& frame, double seconds, uint64_t rays) {
   double pixels = double(frame.rect.area());
-  double samples = double(frame.total_samples());
+  // Splatting integrators count light paths (one per pixel sample's worth of work).
+  double samples = double(frame.total_samples() ? frame.total_samples() : frame.light_paths);
   std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n",
               pixels > 0 ? samples / pixels : 0.0, seconds, human(samples / seconds).c_str(),
               human(double(rays) / seconds).c_str(), frame.rel_mse(), frame.header.passes.count());

@@ -106,7 +106,9 @@ void provenance_attributes(ImageSpec& spec, const SampleBuffer& frame, const Att
   spec.attribute("rayfarm:integrator", h.integrator);
   spec.attribute("rayfarm:settings", h.settings);
   spec.attribute("rayfarm:passes", h.passes.to_string());
-  uint64_t samples = frame.total_samples(), pixels = uint64_t(frame.rect.area());
+  // Splatting integrators take no camera samples: their "spp" is light paths per pixel.
+  uint64_t pixels = uint64_t(frame.rect.area());
+  uint64_t samples = frame.total_samples() ? frame.total_samples() : frame.light_paths;
   if (samples % pixels == 0) {
     count_attribute(spec, "rayfarm:spp", samples / pixels);
   } else {

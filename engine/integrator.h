@@ -1,16 +1,28 @@
-// What every integrator sees: the scene, its acceleration structure and its lights, read-only
-// and shared by all threads. Integrators are free functions dispatched on the settings' type.
+// What every integrator sees: the scene, its acceleration structure, lights and textures,
+// read-only and shared by all threads. Integrators are free functions, one file each under
+// engine/integrators/, dispatched on IntegratorKind (a closed set: a switch, no virtual calls).
 #pragma once
 
 #include <cstdint>
+#include <string>
+#include <vector>
 
 #include "engine/accel.h"
+#include "engine/bsdf.h"
+#include "engine/camera.h"
 #include "engine/lights.h"
 #include "engine/sampler.h"
 #include "engine/scene.h"
 #include "engine/texture.h"
 
 namespace rf {
+
+enum class IntegratorKind : uint8_t { Whitted, AmbientOcclusion, Direct, Path, LightTracing };
+
+// Throws std::invalid_argument for a name known_integrators() does not list.
+IntegratorKind integrator_kind(const std::string& name);
+// Splatting integrators render whole-frame tasks and fill the splat plane (DESIGN.md).
+inline bool integrator_splats(IntegratorKind k) { return k == IntegratorKind::LightTracing; }
 
 struct RenderContext {
   const Scene& scene;
@@ -25,8 +37,32 @@ struct TraceCounters {
   uint64_t rays = 0;
 };
 
-// Radiance arriving along a camera ray (integrators/path.cpp).
-RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
-                  TraceCounters& counters);
+// The BSDF at a hit, its textures resolved with a ray-cone footprint of the given width.
+Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
+// Whether a light sample is visible from a hit (a ray to infinity for infinite lights).
+bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);
+
+// Radiance arriving along a camera ray, one function per camera-path integrator.
+RGB whitted_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters);
+RGB ao_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters);
+RGB direct_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters);
+RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters);
+
+// Light tracing: where a light path's camera connections land. Splats are recorded per chunk
+// of light paths and added to the task's splat plane in chunk order, so the sum, and the image,
+// does not depend on which thread traced which chunk.
+struct Splat {
+  uint32_t pixel;  // y * width + x
+  RGB value;       // already weighted by the filter and the pixel count
+};
+struct SplatTarget {
+  std::vector<Splat>* out;
+  int width, height;
+  const FilterSettings* filter;
+};
+// Traces one light path (its random numbers from `sampler`, already started for this path) and
+// splats every vertex's connection to the camera.
+void trace_light_path(const RenderContext& ctx, const PerspectiveCamera& camera, Sampler& sampler,
+                      SplatTarget& target, TraceCounters& counters);
 
 }  // namespace rf

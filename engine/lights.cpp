@@ -191,4 +191,95 @@ float LightSet::pdf_environment(Vec3 dir_world) const {
   return pmf_[environment_index()] * env_->pdf(dir_world);
 }
 
+bool LightSet::sample_delta_light(size_t k, Vec3 p, LightSample& ls) const {
+  if (k >= punctual_.size()) return false;
+  ls = LightSample{};
+  ls.light = uint32_t(tris_.size() + k);
+  if (!sample_punctual(punctual_[k], p, ls) || is_black(ls.radiance)) return false;
+  ls.pdf_solid_angle = 1.0f;
+  return true;
+}
+
+namespace {
+// Uniform direction in the cone of half-angle acos(cos_max) about +z; pdf 1 / (2 pi (1 - cos_max)).
+Vec3 sample_uniform_cone(Vec2 u, float cos_max) {
+  float cos_t = 1.0f - u.x * (1.0f - cos_max);
+  float sin_t = safe_sqrt(1.0f - cos_t * cos_t);
+  float phi = 2 * kPi * u.y;
+  return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
+}
+}  // namespace
+
+bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es) const {
+  const size_t n = size();
+  if (n == 0) return false;
+  size_t i =
+      size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) - (cdf_.begin() + 1));
+  i = std::min(i, n - 1);
+  while (pmf_[i] == 0 && i > 0) --i;
+  if (pmf_[i] == 0) return false;
+  es = EmissionSample{};
+  float pmf = pmf_[i];
+  if (i < tris_.size()) {
+    const Tri& tri = tris_[i];
+    const Mesh& m = scene_.meshes[tri.mesh];
+    if (!(tri.area > 0)) return false;
+    Vec3 p0 = m.positions[m.indices[3 * tri.prim]], p1 = m.positions[m.indices[3 * tri.prim + 1]],
+         p2 = m.positions[m.indices[3 * tri.prim + 2]];
+    Vec2 b = sample_uniform_triangle(u_pos);
+    float b2 = 1.0f - b.x - b.y;
+    es.p = b.x * p0 + b.y * p1 + b2 * p2;
+    constexpr float g7 = 7 * std::numeric_limits<float>::epsilon() * 0.5f;
+    es.p_error = g7 * (abs(b.x * p0) + abs(b.y * p1) + abs(b2 * p2));
+    es.n = normalize(cross(p1 - p0, p2 - p0));
+    // Two-sided emitters pick a side with probability 1/2 (the first half of u_dir.x).
+    Vec2 u = u_dir;
+    float side_pdf = 1.0f;
+    Vec3 side_n = es.n;
+    if (m.emission->two_sided) {
+      side_pdf = 0.5f;
+      if (u.x < 0.5f) {
+        u.x *= 2.0f;
+      } else {
+        u.x = 2.0f * u.x - 1.0f;
+        side_n = -es.n;
+      }
+      u.x = std::min(u.x, 0x1.fffffep-1f);
+    }
+    Vec3 local = sample_cosine_hemisphere(u);
+    if (!(local.z > 0)) return false;
+    es.dir = Frame::from_normal(side_n).to_world(local);
+    es.radiance = emitted(m, es.n, es.dir);
+    es.pdf_pos = pmf / tri.area;
+    float pdf_dir = side_pdf * local.z * kInvPi;
+    es.beta = es.radiance * (local.z / (es.pdf_pos * pdf_dir));
+    es.is_area = true;
+    es.mesh = tri.mesh;
+    es.prim = tri.prim;
+  } else if (i < tris_.size() + punctual_.size()) {
+    const Punctual& l = punctual_[i - tris_.size()];
+    if (l.type == LightType::Directional) return false;
+    es.p = l.position;
+    es.n = l.direction;
+    float pdf_dir;
+    if (l.type == LightType::Point) {
+      float z = 1.0f - 2.0f * u_dir.x, r = safe_sqrt(1.0f - z * z), phi = 2 * kPi * u_dir.y;
+      es.dir = {r * std::cos(phi), r * std::sin(phi), z};
+      pdf_dir = 1.0f / (4 * kPi);
+    } else {
+      es.dir = Frame::from_normal(l.direction)
+                   .to_world(sample_uniform_cone(u_dir, l.cos_falloff_end));
+      pdf_dir = 1.0f / (2 * kPi * (1.0f - l.cos_falloff_end));
+    }
+    float falloff = l.type == LightType::Spot
+                        ? smooth_step(dot(l.direction, es.dir), l.cos_falloff_end, l.cos_falloff_start)
+                        : 1.0f;
+    es.pdf_pos = pmf;  // a probability mass: the point is fixed
+    es.beta = l.intensity * (falloff / (pmf * pdf_dir));
+  } else {
+    return false;  // the environment: no finite emission position
+  }
+  return !is_black(es.beta) && is_finite(es.beta);
+}
+
 }  // namespace rf

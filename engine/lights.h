@@ -50,6 +50,17 @@ struct LightSample {
 
 enum class LightKind : uint8_t { Area, Point, Spot, Directional, Environment };
 
+// A light path's first vertex (light tracing): a point on a light and a direction leaving it.
+struct EmissionSample {
+  Vec3 p, p_error, n;     // point, its error bound, unit normal (area lights; the axis otherwise)
+  Vec3 dir;               // unit direction the light travels
+  RGB beta;               // Le cos / (pdf_select pdf_pos pdf_dir): the path's initial throughput
+  RGB radiance;           // Le(p, dir) for area lights (the vertex's own emission towards dir)
+  float pdf_pos = 0;      // area density of p, including the selection probability
+  bool is_area = false;   // p lies on a surface (can be seen by the camera)
+  uint32_t mesh = 0, prim = 0;
+};
+
 class LightSet {
  public:
   // Throws std::runtime_error when the environment map cannot be read.
@@ -66,6 +77,16 @@ class LightSet {
   // Samples a light point as seen from p; false when nothing can be sampled (pdf 0, outside a
   // spot's cone, a one-sided emitter seen from behind).
   bool sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const;
+  // Samples Scene::lights[k] (point, spot, directional) as seen from p, without selection: the
+  // estimator f * radiance * |cos| is then exact for that light (Whitted's "delta lights exactly").
+  bool sample_delta_light(size_t k, Vec3 p, LightSample& ls) const;
+  size_t delta_light_count() const { return punctual_.size(); }
+  // Samples the start of a light path: a light by power, a point on it, a direction (area:
+  // cosine-weighted about the emitting side, both sides for two-sided; point: uniform sphere;
+  // spot: uniform in its cone). Directional and environment lights have no finite emission
+  // position and are not sampled (light tracing refuses such scenes). False when the picked light
+  // cannot emit.
+  bool sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es) const;
   // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from p, as
   // sample() would, including selection; 0 when that triangle is not a light.
   float pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light, Vec3 n_light) const;

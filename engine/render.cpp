@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 #include <time.h>
 
 #include <atomic>
@@ -36,20 +37,36 @@ const char* filter_name(FilterType t) {
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
-  char buf[256];
-  std::snprintf(buf, sizeof buf,
-                "max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g:%g;sampler=%s",
-                i.max_depth, i.rr_min_depth, (unsigned long long)s.render.spp_per_pass(),
-                filter_name(s.film.filter.type), double(s.film.filter.radius),
-                double(s.film.filter.sigma), s.render.sampler.c_str());
+  char buf[512];
+  int n = std::snprintf(buf, sizeof buf,
+                        "max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g:%g;sampler=%s",
+                        i.max_depth, i.rr_min_depth, (unsigned long long)s.render.spp_per_pass(),
+                        filter_name(s.film.filter.type), double(s.film.filter.radius),
+                        double(s.film.filter.sigma), s.render.sampler.c_str());
+  if (i.type == "ao")
+    std::snprintf(buf + n, sizeof buf - size_t(n), ";ao=%g:%s:%d", double(i.ao_max_distance),
+                  i.ao_cosine ? "cosine" : "uniform", i.ao_samples);
+  if (i.type == "direct")
+    std::snprintf(buf + n, sizeof buf - size_t(n), ";direct=%d:%s:%d:%d", int(i.direct_strategy),
+                  i.power_heuristic ? "power" : "balance", i.light_samples, i.bsdf_samples);
   return buf;
 }
 
 Renderer::Renderer(const Scene& scene)
     : scene_(scene),
+      kind_(integrator_kind(scene.render.integrator.type)),
       accel_(std::make_unique<Accel>(scene)),
       lights_(std::make_unique<LightSet>(scene)),
-      textures_(std::make_unique<TextureEvaluator>(scene)) {}
+      textures_(std::make_unique<TextureEvaluator>(scene)) {
+  if (kind_ == IntegratorKind::LightTracing) {
+    bool directional = false;
+    for (const Light& l : scene.lights) directional |= l.type == LightType::Directional;
+    if (scene.environment || directional)
+      throw SceneError(scene.path + ": the light tracer cannot start paths on " +
+                       std::string(scene.environment ? "an environment" : "a directional light") +
+                       " (no finite emission position); use the path tracer for this scene");
+  }
+}
 
 BufferHeader Renderer::header(const PassSet& passes) const {
   BufferHeader h;
@@ -76,15 +93,27 @@ std::vector<Rect> Renderer::tiles(int tile_size) const {
   return out;
 }
 
+RenderContext Renderer::context() const {
+  RenderContext ctx{scene_, *accel_, *lights_, *textures_};
+  float t = std::tan(0.5f * scene_.camera.fov_deg * kPi / 180.0f);
+  ctx.pixel_spread = 2 * t / float(std::min(scene_.film.width, scene_.film.height));
+  return ctx;
+}
+
 SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool parallel) const {
-  SampleBuffer buf(header(PassSet::range(pass, pass + 1)), rect, splats());
+  return splats() ? render_light_paths(pass, parallel)
+                  : render_camera_paths(rect, pass, parallel);
+}
+
+SampleBuffer Renderer::render_camera_paths(const Rect& rect, uint32_t pass, bool parallel) const {
+  SampleBuffer buf(header(PassSet::range(pass, pass + 1)), rect, false);
   const RenderSettings& rs = scene_.render;
   PerspectiveCamera camera(scene_.camera, scene_.film.width, scene_.film.height);
-  RenderContext ctx{scene_, *accel_, *lights_, *textures_};
-  {
-    float t = std::tan(0.5f * scene_.camera.fov_deg * kPi / 180.0f);
-    ctx.pixel_spread = 2 * t / float(std::min(scene_.film.width, scene_.film.height));
-  }
+  RenderContext ctx = context();
+  auto radiance = kind_ == IntegratorKind::Whitted            ? whitted_radiance
+                  : kind_ == IntegratorKind::AmbientOcclusion ? ao_radiance
+                  : kind_ == IntegratorKind::Direct           ? direct_radiance
+                                                              : path_radiance;
   uint64_t spp = rs.spp_per_pass();
   std::atomic<uint64_t> rays{0};
   std::atomic<uint64_t> cpu_ns{0};
@@ -103,7 +132,7 @@ SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool paralle
           Vec2 u_lens = sampler.get_2d();
           Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x,
                                         float(y) + 0.5f + fs.offset.y, u_lens);
-          RGB l = path_radiance(ctx, ray, sampler, counters);
+          RGB l = radiance(ctx, ray, sampler, counters);
           // Rows are disjoint: no two threads share a pixel.
           buf.add_sample(x, y, l * fs.weight, local_nonfinite);
         }
@@ -120,6 +149,52 @@ SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool paralle
   }
   buf.rays = rays;
   buf.nonfinite_samples = nonfinite;
+  buf.header.core_seconds = double(cpu_ns.load()) * 1e-9;
+  buf.finish_pass();
+  return buf;
+}
+
+// One pass of light tracing: spp_per_pass light paths per pixel of the frame, so a pass costs
+// about what a camera-path pass costs. Light path i of pass p is keyed by (seed, frame, p, i).
+// Paths are traced in fixed chunks; each chunk records its splats, and the chunks' splats are
+// added in chunk order: bit-identical whatever the thread count (atomics would not be).
+SampleBuffer Renderer::render_light_paths(uint32_t pass, bool parallel) const {
+  const int w = scene_.film.width, h = scene_.film.height;
+  SampleBuffer buf(header(PassSet::range(pass, pass + 1)), Rect{0, 0, w, h}, true);
+  const RenderSettings& rs = scene_.render;
+  PerspectiveCamera camera(scene_.camera, w, h);
+  RenderContext ctx = context();
+  const uint64_t paths = rs.spp_per_pass() * uint64_t(w) * uint64_t(h);
+  constexpr uint64_t kChunk = 4096;
+  const uint64_t chunks = (paths + kChunk - 1) / kChunk;
+  const size_t wave = parallel ? size_t(8 * tbb::this_task_arena::max_concurrency()) : 1;
+  std::vector<std::vector<Splat>> lists(std::min<uint64_t>(wave, chunks));
+  std::atomic<uint64_t> rays{0}, cpu_ns{0};
+
+  auto trace_chunk = [&](uint64_t chunk, std::vector<Splat>& out) {
+    double t0 = thread_cpu_seconds();
+    out.clear();
+    TraceCounters counters;
+    Sampler sampler(Sampler::Kind::Independent);  // light paths: independent (sampler.h)
+    SplatTarget target{&out, w, h, &scene_.film.filter};
+    for (uint64_t i = chunk * kChunk; i < std::min(paths, (chunk + 1) * kChunk); ++i) {
+      sampler.start_light_path(rs.seed, rs.frame, pass, i);
+      trace_light_path(ctx, camera, sampler, target, counters);
+    }
+    rays += counters.rays;
+    cpu_ns += uint64_t((thread_cpu_seconds() - t0) * 1e9);
+  };
+  for (uint64_t first = 0; first < chunks; first += lists.size()) {
+    size_t n = size_t(std::min<uint64_t>(lists.size(), chunks - first));
+    if (parallel)
+      tbb::parallel_for(size_t(0), n, [&](size_t k) { trace_chunk(first + k, lists[k]); });
+    else
+      for (size_t k = 0; k < n; ++k) trace_chunk(first + k, lists[k]);
+    for (size_t k = 0; k < n; ++k)
+      for (const Splat& sp : lists[k]) buf.add_splat(int(sp.pixel % uint32_t(w)), int(sp.pixel / uint32_t(w)), sp.value);
+  }
+  buf.light_paths = paths;
+  buf.rays = rays;
   buf.header.core_seconds = double(cpu_ns.load()) * 1e-9;
   buf.finish_pass();
   return buf;

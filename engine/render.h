@@ -8,6 +8,7 @@
 
 #include "engine/accel.h"
 #include "engine/film.h"
+#include "engine/integrator.h"
 #include "engine/lights.h"
 #include "engine/scene.h"
 #include "engine/texture.h"
@@ -24,7 +25,7 @@ class Renderer {
   const TextureEvaluator& textures() const { return *textures_; }
 
   // True for integrators whose tasks cover the whole frame and splat (light tracing, BDPT).
-  bool splats() const { return false; }
+  bool splats() const { return integrator_splats(kind_); }
   // Header of every buffer this scene and its settings produce, for the given passes.
   BufferHeader header(const PassSet& passes) const;
   // The tiles of the frame (whole frame for splatting integrators), row-major.
@@ -35,7 +36,12 @@ class Renderer {
   SampleBuffer render_task(const Rect& rect, uint32_t pass, bool parallel) const;
 
  private:
+  SampleBuffer render_camera_paths(const Rect& rect, uint32_t pass, bool parallel) const;
+  SampleBuffer render_light_paths(uint32_t pass, bool parallel) const;
+  RenderContext context() const;
+
   const Scene& scene_;
+  IntegratorKind kind_;
   std::unique_ptr<Accel> accel_;
   std::unique_ptr<LightSet> lights_;
   std::unique_ptr<TextureEvaluator> textures_;

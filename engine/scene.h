@@ -129,10 +129,22 @@ struct Environment {
   Mat4 to_world;                // rotation of the map
 };
 
+// Integrator parameters; each integrator reads those its doc block names
+// (engine/integrators/*.cpp), the parser accepts only those for the chosen type.
 struct IntegratorSettings {
   std::string type = "path";
   int max_depth = 5;      // scattering events (DESIGN.md "Max depth", pbrt-v4's meaning)
   int rr_min_depth = 3;   // Russian roulette starts after this many bounces
+  // ao
+  float ao_max_distance = kInf;  // occluders farther than this do not count
+  bool ao_cosine = true;         // cosine-weighted (true) or uniform hemisphere sampling
+  int ao_samples = 1;            // occlusion rays per camera sample
+  // direct
+  enum class Strategy : uint8_t { Light, Bsdf, Mis };
+  Strategy direct_strategy = Strategy::Mis;
+  bool power_heuristic = true;   // MIS: power (true) or balance heuristic
+  int light_samples = 1;         // N light samples per hit
+  int bsdf_samples = 1;          // M BSDF samples per hit
 };
 
 struct RenderSettings {

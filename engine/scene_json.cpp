@@ -546,16 +546,53 @@ class SceneParser {
 
   void parse_integrator(const json& j) {
     const std::string p = "render.integrator";
-    r_.check_keys(j, p, {"type", "max_depth", "rr_min_depth"});
+    r_.expect_object(j, p);
     IntegratorSettings& is = scene_.render.integrator;
     is.type = r_.string(r_.require(j, p, "type"), p + ".type");
     if (!contains(known_integrators(), is.type))
       r_.fail(p + ".type",
               "unknown integrator '" + is.type + "' (known: " + join(known_integrators()) + ")");
+    std::vector<std::string> keys = {"type", "max_depth", "rr_min_depth"};
+    if (is.type == "ao") keys = {"type", "max_distance", "sampling", "samples"};
+    if (is.type == "direct") keys = {"type", "strategy", "heuristic", "light_samples", "bsdf_samples"};
+    if (is.type == "whitted") keys = {"type", "max_depth"};
+    r_.check_keys(j, p, keys);
     if (const json* v = r_.find(j, "max_depth"))
       is.max_depth = int(r_.integer(*v, p + ".max_depth", 0, INT32_MAX));
     if (const json* v = r_.find(j, "rr_min_depth"))
       is.rr_min_depth = int(r_.integer(*v, p + ".rr_min_depth", 1, INT32_MAX));
+    if (const json* v = r_.find(j, "max_distance")) {
+      is.ao_max_distance = r_.number(*v, p + ".max_distance");
+      if (!(is.ao_max_distance > 0)) r_.fail(p + ".max_distance", "must be > 0, got " + v->dump());
+    }
+    if (const json* v = r_.find(j, "sampling")) {
+      std::string s = r_.string(*v, p + ".sampling");
+      if (s != "cosine" && s != "uniform")
+        r_.fail(p + ".sampling", "expected \"cosine\" or \"uniform\", got '" + s + "'");
+      is.ao_cosine = s == "cosine";
+    }
+    if (const json* v = r_.find(j, "samples")) is.ao_samples = int(r_.integer(*v, p + ".samples", 1, 1 << 16));
+    if (const json* v = r_.find(j, "strategy")) {
+      std::string s = r_.string(*v, p + ".strategy");
+      using S = IntegratorSettings::Strategy;
+      if (s == "light") is.direct_strategy = S::Light;
+      else if (s == "bsdf") is.direct_strategy = S::Bsdf;
+      else if (s == "mis") is.direct_strategy = S::Mis;
+      else r_.fail(p + ".strategy", "expected \"light\", \"bsdf\" or \"mis\", got '" + s + "'");
+    }
+    if (const json* v = r_.find(j, "heuristic")) {
+      std::string s = r_.string(*v, p + ".heuristic");
+      if (s != "power" && s != "balance")
+        r_.fail(p + ".heuristic", "expected \"power\" or \"balance\", got '" + s + "'");
+      is.power_heuristic = s == "power";
+    }
+    if (const json* v = r_.find(j, "light_samples"))
+      is.light_samples = int(r_.integer(*v, p + ".light_samples", 0, 1 << 16));
+    if (const json* v = r_.find(j, "bsdf_samples"))
+      is.bsdf_samples = int(r_.integer(*v, p + ".bsdf_samples", 0, 1 << 16));
+    if (is.type == "direct" && is.light_samples + is.bsdf_samples == 0)
+      r_.fail(p, "light_samples and bsdf_samples cannot both be 0");
+    if (is.type == "direct") is.max_depth = 1;  // direct lighting is exactly one bounce
   }
 
   void parse_materials(const json& j) {
@@ -1106,8 +1143,8 @@ void override_passes(RenderSettings& rs, const SceneOverrides& o) {
 }  // namespace
 
 const std::vector<std::string>& known_integrators() {
-  // Add a name here when its integrator lands (whitted, ao, direct, light, ir, bdpt, ppm).
-  static const std::vector<std::string> kNames = {"path"};
+  // Add a name here when its integrator lands (ir, bdpt, ppm come next).
+  static const std::vector<std::string> kNames = {"whitted", "ao", "direct", "path", "light"};
   return kNames;
 }
 
@@ -1122,6 +1159,7 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   if (o.max_depth && *o.max_depth < 0)
     flag_fail("--max-depth", "must be at least 0, got " + std::to_string(*o.max_depth));
   if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
+  if (rs.integrator.type == "direct") rs.integrator.max_depth = 1;  // one bounce by definition
   check_resolution(o.width, "width");
   check_resolution(o.height, "height");
   if (o.width) film.width = *o.width;

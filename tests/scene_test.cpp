@@ -465,7 +465,7 @@ TEST(Overrides, ValidatedAndNamedByFlag) {
   EXPECT_EQ(override_error(s, o), "--passes: must divide the scene's spp (256), got 3");
   o = {};
   o.integrator = "pathh";
-  EXPECT_EQ(override_error(s, o), "--integrator: unknown integrator 'pathh' (known: path)");
+  EXPECT_EQ(override_error(s, o), "--integrator: unknown integrator 'pathh' (known: whitted, ao, direct, path, light)");
   o = {};
   o.width = 0;
   EXPECT_EQ(override_error(s, o), "--res: width must be between 1 and 16384, got 0");
@@ -523,7 +523,7 @@ TEST(Overrides, Applied) {
 }
 
 TEST(Integrators, KnownNames) {
-  EXPECT_EQ(known_integrators(), (std::vector<std::string>{"path"}));
+  EXPECT_EQ(known_integrators(), (std::vector<std::string>{"whitted", "ao", "direct", "path", "light"}));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -715,7 +715,7 @@ const std::vector<BadScene>& bad_scenes() {
       {"NegativeMaxDepth", edit([](json& j) { j["render"]["integrator"]["max_depth"] = -1; }),
        "render.integrator.max_depth", "must be at least 0, got -1"},
       {"UnknownIntegrator", edit([](json& j) { j["render"]["integrator"]["type"] = "pathh"; }),
-       "render.integrator.type", "unknown integrator 'pathh' (known: path)"},
+       "render.integrator.type", "unknown integrator 'pathh' (known: whitted, ao, direct, path, light)"},
       {"NegativeSeed", edit([](json& j) { j["render"]["seed"] = -1; }), "render.seed",
        "expected a non-negative integer, got number -1"},
       {"FovOutOfRange", edit([](json& j) { j["camera"]["fov_deg"] = 180; }), "camera.fov_deg",
@@ -815,6 +815,16 @@ const std::vector<BadScene>& bad_scenes() {
          j["film"]["filter"] = {{"type", "box"}, {"sigma", 0.5}};
        }),
        "film.filter.sigma", "only the gaussian filter has a sigma"},
+      {"AoKeyOnPathIntegrator", edit([](json& j) { j["render"]["integrator"]["max_distance"] = 1; }),
+       "render.integrator.max_distance", "unknown key (expected one of: type, max_depth, rr_min_depth)"},
+      {"UnknownDirectStrategy", edit([](json& j) {
+         j["render"]["integrator"] = {{"type", "direct"}, {"strategy", "both"}};
+       }),
+       "render.integrator.strategy", "expected \"light\", \"bsdf\" or \"mis\", got 'both'"},
+      {"DirectWithoutSamples", edit([](json& j) {
+         j["render"]["integrator"] = {{"type", "direct"}, {"light_samples", 0}, {"bsdf_samples", 0}};
+       }),
+       "render.integrator", "light_samples and bsdf_samples cannot both be 0"},
       {"UnknownSampler", edit([](json& j) { j["render"]["sampler"] = "halton"; }),
        "render.sampler", "unknown sampler 'halton' (known: independent, sobol)"},
       {"SphereNegativeRadius", with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"),

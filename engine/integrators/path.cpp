@@ -12,44 +12,9 @@
 // Strengths: unbiased, simple, robust for diffuse and glossy scenes with visible light sources.
 // Cannot do well: caustics from small lights seen through specular surfaces (found only by
 // chance; from point lights never), light arriving through narrow openings; see bdpt and ppm.
-#include "engine/bsdf.h"
 #include "engine/integrator.h"
 
 namespace rf {
-
-namespace {
-
-// Material parameters at a hit, textures resolved. The footprint is a ray-cone estimate: the
-// cone's width at the hit, converted to uv units by the triangle's uv-to-world area ratio.
-BsdfParams resolve(const RenderContext& ctx, const Material& m, const SurfaceHit& hit,
-                   float cone_width) {
-  BsdfParams p = constant_params(m);
-  if (m.reflectance.texture < 0 && m.specular.texture < 0 && m.roughness.texture < 0) return p;
-  const Mesh& mesh = ctx.scene.meshes[hit.mesh];
-  float footprint = 0;
-  if (!mesh.uvs.empty()) {
-    const uint32_t* t = &mesh.indices[3 * hit.prim];
-    Vec3 p0 = mesh.positions[t[0]], p1 = mesh.positions[t[1]], p2 = mesh.positions[t[2]];
-    Vec2 a = mesh.uvs[t[0]], b = mesh.uvs[t[1]], c = mesh.uvs[t[2]];
-    float world_area = length(cross(p1 - p0, p2 - p0));
-    float uv_area = std::fabs((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y));
-    if (world_area > 0) footprint = cone_width * std::sqrt(uv_area / world_area);
-  }
-  p.reflectance = ctx.textures.eval(m.reflectance, hit.uv, footprint);
-  p.specular = ctx.textures.eval(m.specular, hit.uv, footprint);
-  p.alpha = ctx.textures.eval(m.roughness, hit.uv, footprint);
-  return p;
-}
-
-bool unoccluded(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
-  if (ls.is_infinite) {
-    Ray r = ctx.accel.spawn(hit, ls.wi);
-    return !ctx.accel.occluded(r.o, r.d, kInf);
-  }
-  return ctx.accel.visible(hit, ls.p, ls.p_error, ls.n);
-}
-
-}  // namespace
 
 RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters) {
   const IntegratorSettings& settings = ctx.scene.render.integrator;
@@ -85,8 +50,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
     }
     if (depth == settings.max_depth) break;
 
-    const Material& material = ctx.scene.materials[mesh.material];
-    Bsdf bsdf = Bsdf::make(resolve(ctx, material, hit, cone_width), hit.ns, hit.ng);
+    Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
 
     // Next-event estimation (the dimensions are drawn either way, so a material change does
     // not reshuffle the random numbers of later bounces).
@@ -97,7 +61,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
       RGB f = bsdf.eval(wo, ls.wi);
       if (!is_black(f)) {
         ++counters.rays;
-        if (unoccluded(ctx, hit, ls)) {
+        if (light_visible(ctx, hit, ls)) {
           float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
           float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
           radiance += beta * f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);

@@ -1,0 +1,56 @@
+// Pieces every integrator shares: dispatch names, material resolution at a hit, shadow tests.
+#include <stdexcept>
+
+#include "engine/integrator.h"
+
+namespace rf {
+
+IntegratorKind integrator_kind(const std::string& name) {
+  if (name == "whitted") return IntegratorKind::Whitted;
+  if (name == "ao") return IntegratorKind::AmbientOcclusion;
+  if (name == "direct") return IntegratorKind::Direct;
+  if (name == "path") return IntegratorKind::Path;
+  if (name == "light") return IntegratorKind::LightTracing;
+  throw std::invalid_argument("unknown integrator '" + name + "'");
+}
+
+namespace {
+
+// Material parameters at a hit, textures resolved. The footprint is a ray-cone estimate: the
+// cone's width at the hit, converted to uv units by the triangle's uv-to-world area ratio.
+BsdfParams resolve(const RenderContext& ctx, const Material& m, const SurfaceHit& hit,
+                   float cone_width) {
+  BsdfParams p = constant_params(m);
+  if (m.reflectance.texture < 0 && m.specular.texture < 0 && m.roughness.texture < 0) return p;
+  const Mesh& mesh = ctx.scene.meshes[hit.mesh];
+  float footprint = 0;
+  if (!mesh.uvs.empty()) {
+    const uint32_t* t = &mesh.indices[3 * hit.prim];
+    Vec3 p0 = mesh.positions[t[0]], p1 = mesh.positions[t[1]], p2 = mesh.positions[t[2]];
+    Vec2 a = mesh.uvs[t[0]], b = mesh.uvs[t[1]], c = mesh.uvs[t[2]];
+    float world_area = length(cross(p1 - p0, p2 - p0));
+    float uv_area = std::fabs((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y));
+    if (world_area > 0) footprint = cone_width * std::sqrt(uv_area / world_area);
+  }
+  p.reflectance = ctx.textures.eval(m.reflectance, hit.uv, footprint);
+  p.specular = ctx.textures.eval(m.specular, hit.uv, footprint);
+  p.alpha = ctx.textures.eval(m.roughness, hit.uv, footprint);
+  return p;
+}
+
+}  // namespace
+
+Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width) {
+  const Material& m = ctx.scene.materials[ctx.scene.meshes[hit.mesh].material];
+  return Bsdf::make(resolve(ctx, m, hit, cone_width), hit.ns, hit.ng);
+}
+
+bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
+  if (ls.is_infinite) {
+    Ray r = ctx.accel.spawn(hit, ls.wi);
+    return !ctx.accel.occluded(r.o, r.d, kInf);
+  }
+  return ctx.accel.visible(hit, ls.p, ls.p_error, ls.n);
+}
+
+}  // namespace rf

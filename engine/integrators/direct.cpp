@@ -1,0 +1,97 @@
+// Direct illumination (`direct`).
+//
+// Estimator: emitted radiance seen by the camera plus light that reaches the first surface
+// straight from an emitter (exactly one scattering event, so it equals `path` with max depth 1).
+// Strategy "light": N light samples (light chosen by power); "bsdf": M BSDF samples, emitters and
+// the environment found along them; "mis": both, combined by the multi-sample MIS heuristic
+// w_l = (N p_l)^b / ((N p_l)^b + (M p_f)^b), b = 2 (power) or 1 (balance) (Veach 1997, 9.2).
+// Delta lights are reached by light sampling only and delta BSDFs by BSDF sampling only, both
+// with weight 1, whatever the strategy, so the three strategies estimate the same image.
+// Parameters: strategy, heuristic, light_samples N, bsdf_samples M.
+// Strengths: the textbook test bed for importance sampling: light sampling wins for small lights
+// on rough surfaces, BSDF sampling for big lights on glossy surfaces, MIS is never much worse than
+// the better one.
+// Cannot do: any indirect light.
+#include "engine/integrator.h"
+
+namespace rf {
+
+namespace {
+float mis_weight(float n_a, float pdf_a, float n_b, float pdf_b, bool power) {
+  float a = n_a * pdf_a, b = n_b * pdf_b;
+  if (power) a *= a, b *= b;
+  if (std::isinf(a)) return 1.0f;
+  return a + b > 0 ? a / (a + b) : 0.0f;
+}
+}  // namespace
+
+RGB direct_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters) {
+  const IntegratorSettings& s = ctx.scene.render.integrator;
+  using Strategy = IntegratorSettings::Strategy;
+  // Sample counts of each strategy (0 when unused), as the MIS weights need them.
+  float n_light = s.direct_strategy == Strategy::Bsdf ? 0.0f : float(s.light_samples);
+  float n_bsdf = s.direct_strategy == Strategy::Light ? 0.0f : float(s.bsdf_samples);
+  SurfaceHit hit;
+  ++counters.rays;
+  if (!ctx.accel.intersect(ray, hit)) return ctx.lights.environment_radiance(ray.d);
+  Vec3 wo = -ray.d;
+  RGB radiance = LightSet::emitted(ctx.scene.meshes[hit.mesh], hit.ng, wo);
+  Bsdf bsdf = bsdf_at(ctx, hit, ctx.pixel_spread * hit.t);
+  Vec3 ns = bsdf.shading_normal();
+
+  // Light sampling: area lights and the environment MIS-weighted, delta lights always.
+  // With the "bsdf" strategy one light sample still serves the delta lights, if any.
+  int light_rounds = bsdf.is_delta()  ? 0
+                     : n_light > 0    ? s.light_samples
+                     : ctx.lights.delta_light_count() > 0 ? 1
+                                                          : 0;
+  for (int k = 0; k < light_rounds; ++k) {
+    float u = sampler.get_1d();
+    Vec2 up = sampler.get_2d();
+    LightSample ls;
+    if (!ctx.lights.sample(hit.p, u, up, ls)) continue;
+    if (n_light == 0 && !ls.is_delta) continue;  // "bsdf" strategy: only delta lights here
+    RGB f = bsdf.eval(wo, ls.wi);
+    if (is_black(f)) continue;
+    ++counters.rays;
+    if (!light_visible(ctx, hit, ls)) continue;
+    float w = ls.is_delta ? 1.0f
+                          : mis_weight(n_light, ls.pdf_solid_angle, n_bsdf, bsdf.pdf(wo, ls.wi),
+                                       s.power_heuristic);
+    // Delta lights are sampled in every round but estimated by the light strategy alone.
+    float count = ls.is_delta ? float(light_rounds) : n_light;
+    radiance += f * ls.radiance * (std::fabs(dot(ls.wi, ns)) * w / (ls.pdf_solid_angle * count));
+  }
+
+  // BSDF sampling: emitters and the environment along sampled directions.
+  int bsdf_rounds = bsdf.is_delta() ? std::max(1, s.bsdf_samples) : int(n_bsdf);
+  for (int k = 0; k < bsdf_rounds; ++k) {
+    float uc = sampler.get_1d();
+    Vec2 u = sampler.get_2d();
+    BsdfSample bs;
+    if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) continue;
+    RGB weight = bs.f * (std::fabs(dot(bs.wi, ns)) / (bs.pdf_solid_angle * float(bsdf_rounds)));
+    Ray r = ctx.accel.spawn(hit, bs.wi);
+    SurfaceHit light_hit;
+    ++counters.rays;
+    RGB le;
+    float light_pdf;
+    if (ctx.accel.intersect(r, light_hit)) {
+      le = LightSet::emitted(ctx.scene.meshes[light_hit.mesh], light_hit.ng, -bs.wi);
+      if (is_black(le)) continue;
+      light_pdf = ctx.lights.pdf_solid_angle(hit.p, light_hit.mesh, light_hit.prim, light_hit.p,
+                                             light_hit.ng);
+    } else {
+      le = ctx.lights.environment_radiance(bs.wi);
+      if (is_black(le)) continue;
+      light_pdf = ctx.lights.pdf_environment(bs.wi);
+    }
+    float w = bs.is_delta ? 1.0f
+                          : mis_weight(n_bsdf, bs.pdf_solid_angle, n_light, light_pdf,
+                                       s.power_heuristic);
+    radiance += weight * le * w;
+  }
+  return radiance;
+}
+
+}  // namespace rf
