@@ -23,6 +23,8 @@ class Renderer {
   const Accel& accel() const { return *accel_; }
   const LightSet& lights() const { return *lights_; }
   const TextureEvaluator& textures() const { return *textures_; }
+  // What integrators see (for tests and tools that call an integrator directly).
+  RenderContext context() const;
 
   // True for integrators whose tasks cover the whole frame and splat (light tracing, BDPT).
   bool splats() const { return integrator_splats(kind_); }
@@ -38,7 +40,6 @@ class Renderer {
  private:
   SampleBuffer render_camera_paths(const Rect& rect, uint32_t pass, bool parallel) const;
   SampleBuffer render_light_paths(uint32_t pass, bool parallel) const;
-  RenderContext context() const;
 
   const Scene& scene_;
   IntegratorKind kind_;
