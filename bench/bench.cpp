@@ -5,6 +5,7 @@
 #include <tbb/task_arena.h>
 
 #include <atomic>
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -132,6 +133,64 @@ Scene with_generated_spheres(Scene s, int triangles, bool materials) {
   return s;
 }
 
+// Every integrator on the Cornell box: one pass of the whole frame on all cores. Light tracing
+// counts light paths (as many per pass as camera samples: spp per pixel).
+void bench_integrators(const std::string& cornell, SceneOverrides ov) {
+  std::printf("\nintegrators on cornell-box (one pass, all cores):\n");
+  for (const std::string& name : known_integrators()) {
+    ov.integrator = name;
+    Scene s = load_scene(cornell, ov);
+    Renderer r(s);
+    auto t0 = Clock::now();
+    SampleBuffer b = r.render_task(Rect{0, 0, s.film.width, s.film.height}, 0, true);
+    double secs = seconds_since(t0);
+    double work = double(b.total_samples() ? b.total_samples() : b.light_paths);
+    std::printf("  %-8s %8.3f M%s/s %8.2f Mrays/s\n", name.c_str(), work / secs / 1e6,
+                b.light_paths ? "light paths" : "samples", double(b.rays) / secs / 1e6);
+  }
+}
+
+// Splat accumulation, the light tracer's choice: each chunk of paths records its splats in a list
+// and the lists are added in chunk order (deterministic), against every thread adding into one
+// shared plane with atomic fetch_add on doubles (non-deterministic: float addition order varies).
+void bench_splat_accumulation(bool quick) {
+  const int w = 256, h = 256;
+  const uint64_t splats = quick ? (1u << 18) : (1u << 24), chunk = 4096 * 5;
+  std::vector<double> plane(size_t(w) * h * 3, 0.0);
+  auto key = [](uint64_t i) { return mix64(i * 0x9e3779b97f4a7c15ULL); };
+  auto t0 = Clock::now();
+  tbb::parallel_for(uint64_t(0), splats, [&](uint64_t i) {
+    uint64_t k = key(i);
+    size_t px = size_t(k % uint64_t(w * h));
+    for (int c = 0; c < 3; ++c)
+      std::atomic_ref<double>(plane[3 * px + size_t(c)]).fetch_add(double(k >> 40) * 0x1p-24);
+  });
+  double atomic_s = seconds_since(t0);
+  std::fill(plane.begin(), plane.end(), 0.0);
+  uint64_t chunks = (splats + chunk - 1) / chunk;
+  size_t wave = size_t(8 * tbb::this_task_arena::max_concurrency());
+  std::vector<std::vector<std::pair<uint32_t, float>>> lists(wave);
+  t0 = Clock::now();
+  for (uint64_t first = 0; first < chunks; first += wave) {
+    size_t n = size_t(std::min<uint64_t>(wave, chunks - first));
+    tbb::parallel_for(size_t(0), n, [&](size_t j) {
+      lists[j].clear();
+      for (uint64_t i = (first + j) * chunk; i < std::min(splats, (first + j + 1) * chunk); ++i) {
+        uint64_t k = key(i);
+        lists[j].push_back({uint32_t(k % uint64_t(w * h)), float(k >> 40) * 0x1p-24f});
+      }
+    });
+    for (size_t j = 0; j < n; ++j)
+      for (auto [px, v] : lists[j])
+        for (int c = 0; c < 3; ++c) plane[3 * size_t(px) + size_t(c)] += double(v);
+  }
+  double list_s = seconds_since(t0);
+  std::printf("\nsplat accumulation, %llu splats into %dx%d: atomic fetch_add %.1f Msplats/s, "
+              "chunk lists merged in order %.1f Msplats/s\n",
+              (unsigned long long)splats, w, h, double(splats) / atomic_s / 1e6,
+              double(splats) / list_s / 1e6);
+}
+
 }  // namespace
 
 void add_bench_options(CLI::App& app, BenchOptions& o) {
@@ -161,6 +220,8 @@ int run_bench(const BenchOptions& in) {
     Scene s = load_scene(path, ov);
     bench_scene(std::filesystem::path(path).parent_path().filename().string(), s, o.spp);
   }
+  bench_integrators(cornell, ov);
+  bench_splat_accumulation(o.quick);
   if (o.generated) {
     Scene s = load_scene(cornell, ov);
     bench_scene("generated (cornell+sphere)", with_generated_spheres(s, o.triangles, false), o.spp);

@@ -65,7 +65,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
       std::vector<SampleBuffer> results(n);
       tbb::parallel_for(size_t(0), n, [&](size_t i) {
         results[i] = renderer.render_task(tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size()),
-                                          /*parallel=*/false);
+                                          /*parallel=*/true);  // nested: TBB balances
         ++tasks_done;
       });
       for (auto& r : results) {
