@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -17,12 +18,23 @@
 
 namespace rf {
 
-enum class IntegratorKind : uint8_t { Whitted, AmbientOcclusion, Direct, Path, LightTracing };
+enum class IntegratorKind : uint8_t {
+  Whitted,
+  AmbientOcclusion,
+  Direct,
+  Path,
+  LightTracing,
+  Bdpt,
+  InstantRadiosity,
+  PhotonMapping
+};
 
 // Throws std::invalid_argument for a name known_integrators() does not list.
 IntegratorKind integrator_kind(const std::string& name);
 // Splatting integrators render whole-frame tasks and fill the splat plane (DESIGN.md).
-inline bool integrator_splats(IntegratorKind k) { return k == IntegratorKind::LightTracing; }
+inline bool integrator_splats(IntegratorKind k) {
+  return k == IntegratorKind::LightTracing || k == IntegratorKind::Bdpt;
+}
 
 struct RenderContext {
   const Scene& scene;
@@ -64,5 +76,25 @@ struct SplatTarget {
 // splats every vertex's connection to the camera.
 void trace_light_path(const RenderContext& ctx, const PerspectiveCamera& camera, Sampler& sampler,
                       SplatTarget& target, TraceCounters& counters);
+
+// Bidirectional path tracing (integrators/bdpt.cpp): one camera sample through `ray` (its
+// subpath and a light subpath keyed by the same sample); returns what lands in the sample's own
+// pixel (strategies t >= 2) and records t = 1 strategies as splats.
+RGB bdpt_sample(const RenderContext& ctx, const PerspectiveCamera& camera, Ray ray,
+                Sampler& sampler, SplatTarget& splats, TraceCounters& counters);
+
+// Per-pass state of integrators that precompute something for a whole pass, built once per pass
+// by the Renderer (a pure function of the scene, settings and pass) and shared read-only by the
+// pass's tiles: instant radiosity's virtual point lights, photon mapping's photons.
+struct VplSet;
+struct PhotonMap;
+std::shared_ptr<const VplSet> build_vpls(const RenderContext& ctx, uint32_t pass,
+                                         TraceCounters& counters);
+RGB ir_radiance(const RenderContext& ctx, const VplSet& vpls, Ray ray, Sampler& sampler,
+                TraceCounters& counters);
+std::shared_ptr<const PhotonMap> build_photon_map(const RenderContext& ctx, uint32_t pass,
+                                                  TraceCounters& counters);
+RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& photons, Ray ray, Sampler& sampler,
+                 TraceCounters& counters);
 
 }  // namespace rf

@@ -6,6 +6,8 @@
 #include <time.h>
 
 #include <atomic>
+#include <map>
+#include <mutex>
 
 #include "engine/build_info.h"
 #include "engine/camera.h"
@@ -101,8 +103,9 @@ RenderContext Renderer::context() const {
 }
 
 SampleBuffer Renderer::render_task(const Rect& rect, uint32_t pass, bool parallel) const {
-  return splats() ? render_light_paths(pass, parallel)
-                  : render_camera_paths(rect, pass, parallel);
+  if (kind_ == IntegratorKind::LightTracing) return render_light_paths(pass, parallel);
+  if (kind_ == IntegratorKind::Bdpt) return render_bdpt(pass, parallel);
+  return render_camera_paths(rect, pass, parallel);
 }
 
 SampleBuffer Renderer::render_camera_paths(const Rect& rect, uint32_t pass, bool parallel) const {
@@ -110,12 +113,23 @@ SampleBuffer Renderer::render_camera_paths(const Rect& rect, uint32_t pass, bool
   const RenderSettings& rs = scene_.render;
   PerspectiveCamera camera(scene_.camera, scene_.film.width, scene_.film.height);
   RenderContext ctx = context();
-  auto radiance = kind_ == IntegratorKind::Whitted            ? whitted_radiance
-                  : kind_ == IntegratorKind::AmbientOcclusion ? ao_radiance
-                  : kind_ == IntegratorKind::Direct           ? direct_radiance
-                                                              : path_radiance;
-  uint64_t spp = rs.spp_per_pass();
   std::atomic<uint64_t> rays{0};
+  // IR and PPM precompute per pass (virtual point lights, photons); the rest need nothing.
+  std::shared_ptr<const VplSet> vpls;
+  std::shared_ptr<const PhotonMap> photons;
+  if (kind_ == IntegratorKind::InstantRadiosity) vpls = pass_vpls(pass, rays);
+  if (kind_ == IntegratorKind::PhotonMapping) photons = pass_photons(pass, rays);
+  auto radiance = [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
+    switch (kind_) {
+      case IntegratorKind::Whitted: return whitted_radiance(ctx, ray, sampler, counters);
+      case IntegratorKind::AmbientOcclusion: return ao_radiance(ctx, ray, sampler, counters);
+      case IntegratorKind::Direct: return direct_radiance(ctx, ray, sampler, counters);
+      case IntegratorKind::InstantRadiosity: return ir_radiance(ctx, *vpls, ray, sampler, counters);
+      case IntegratorKind::PhotonMapping: return ppm_radiance(ctx, *photons, ray, sampler, counters);
+      default: return path_radiance(ctx, ray, sampler, counters);
+    }
+  };
+  uint64_t spp = rs.spp_per_pass();
   std::atomic<uint64_t> cpu_ns{0};
   std::atomic<uint64_t> nonfinite{0};
 
@@ -132,7 +146,7 @@ SampleBuffer Renderer::render_camera_paths(const Rect& rect, uint32_t pass, bool
           Vec2 u_lens = sampler.get_2d();
           Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x,
                                         float(y) + 0.5f + fs.offset.y, u_lens);
-          RGB l = radiance(ctx, ray, sampler, counters);
+          RGB l = radiance(ray, sampler, counters);
           // Rows are disjoint: no two threads share a pixel.
           buf.add_sample(x, y, l * fs.weight, local_nonfinite);
         }
@@ -198,6 +212,101 @@ SampleBuffer Renderer::render_light_paths(uint32_t pass, bool parallel) const {
   buf.header.core_seconds = double(cpu_ns.load()) * 1e-9;
   buf.finish_pass();
   return buf;
+}
+
+// One pass of BDPT: camera samples as for the path tracer, each with its own light subpath, so
+// the splat plane is normalised by the camera sample count. Rows are traced in fixed chunks whose
+// splat lists are added in chunk order (bit-identical for any thread count), while each row's
+// pixels take their own samples directly (rows are disjoint).
+SampleBuffer Renderer::render_bdpt(uint32_t pass, bool parallel) const {
+  const int w = scene_.film.width, h = scene_.film.height;
+  SampleBuffer buf(header(PassSet::range(pass, pass + 1)), Rect{0, 0, w, h}, true);
+  const RenderSettings& rs = scene_.render;
+  PerspectiveCamera camera(scene_.camera, w, h);
+  RenderContext ctx = context();
+  const uint64_t spp = rs.spp_per_pass();
+  constexpr int kRowsPerChunk = 4;
+  const int chunks = (h + kRowsPerChunk - 1) / kRowsPerChunk;
+  const int wave = parallel ? 8 * tbb::this_task_arena::max_concurrency() : 1;
+  std::vector<std::vector<Splat>> lists(size_t(std::min(wave, chunks)));
+  std::atomic<uint64_t> rays{0}, cpu_ns{0}, nonfinite{0};
+
+  auto trace_chunk = [&](int chunk, std::vector<Splat>& out) {
+    double t0 = thread_cpu_seconds();
+    out.clear();
+    TraceCounters counters;
+    uint64_t local_nonfinite = 0;
+    Sampler sampler(kind_from_name(rs.sampler));
+    SplatTarget target{&out, w, h, &scene_.film.filter};
+    for (int y = chunk * kRowsPerChunk; y < std::min(h, (chunk + 1) * kRowsPerChunk); ++y)
+      for (int x = 0; x < w; ++x)
+        for (uint64_t s = 0; s < spp; ++s) {
+          sampler.start_camera_sample(rs.seed, rs.frame, pass, x, y, s);
+          FilterSample fs = sample_filter(scene_.film.filter, sampler.get_2d());
+          Vec2 u_lens = sampler.get_2d();
+          Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x,
+                                        float(y) + 0.5f + fs.offset.y, u_lens);
+          RGB l = bdpt_sample(ctx, camera, ray, sampler, target, counters);
+          buf.add_sample(x, y, l * fs.weight, local_nonfinite);
+        }
+    rays += counters.rays;
+    nonfinite += local_nonfinite;
+    cpu_ns += uint64_t((thread_cpu_seconds() - t0) * 1e9);
+  };
+  for (int first = 0; first < chunks; first += int(lists.size())) {
+    int n = std::min(int(lists.size()), chunks - first);
+    if (parallel)
+      tbb::parallel_for(0, n, [&](int k) { trace_chunk(first + k, lists[size_t(k)]); });
+    else
+      for (int k = 0; k < n; ++k) trace_chunk(first + k, lists[size_t(k)]);
+    for (int k = 0; k < n; ++k)
+      for (const Splat& sp : lists[size_t(k)])
+        buf.add_splat(int(sp.pixel % uint32_t(w)), int(sp.pixel / uint32_t(w)), sp.value);
+  }
+  buf.light_paths = spp * uint64_t(w) * uint64_t(h);
+  buf.rays = rays;
+  buf.nonfinite_samples += nonfinite;
+  buf.header.core_seconds = double(cpu_ns.load()) * 1e-9;
+  buf.finish_pass();
+  return buf;
+}
+
+// Per-pass state, built by the first task of a pass that needs it and kept for the few passes
+// in flight (a local render works on a window of passes; a worker on one task at a time).
+template <class T, class Build>
+std::shared_ptr<const T> cached_pass_state(std::mutex& mu,
+                                           std::map<uint32_t, std::shared_ptr<const void>>& cache,
+                                           uint32_t pass, Build build) {
+  constexpr size_t kKeep = 8;
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    auto it = cache.find(pass);
+    if (it != cache.end()) return std::static_pointer_cast<const T>(it->second);
+  }
+  std::shared_ptr<const T> state = build();  // outside the lock: tiles of other passes go on
+  std::lock_guard<std::mutex> lock(mu);
+  auto [it, inserted] = cache.emplace(pass, state);
+  while (cache.size() > kKeep) cache.erase(cache.begin() == it ? std::next(cache.begin()) : cache.begin());
+  return std::static_pointer_cast<const T>(it->second);
+}
+
+std::shared_ptr<const VplSet> Renderer::pass_vpls(uint32_t pass, std::atomic<uint64_t>& rays) const {
+  return cached_pass_state<VplSet>(cache_mutex_, pass_cache_, pass, [&] {
+    TraceCounters counters;
+    auto v = build_vpls(context(), pass, counters);
+    rays += counters.rays;
+    return v;
+  });
+}
+
+std::shared_ptr<const PhotonMap> Renderer::pass_photons(uint32_t pass,
+                                                        std::atomic<uint64_t>& rays) const {
+  return cached_pass_state<PhotonMap>(cache_mutex_, pass_cache_, pass, [&] {
+    TraceCounters counters;
+    auto p = build_photon_map(context(), pass, counters);
+    rays += counters.rays;
+    return p;
+  });
 }
 
 }  // namespace rf

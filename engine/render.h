@@ -3,7 +3,10 @@
 // buffer; tasks are pure functions of (scene, settings, rect, pass), so they can run anywhere.
 #pragma once
 
+#include <atomic>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "engine/accel.h"
@@ -40,12 +43,18 @@ class Renderer {
  private:
   SampleBuffer render_camera_paths(const Rect& rect, uint32_t pass, bool parallel) const;
   SampleBuffer render_light_paths(uint32_t pass, bool parallel) const;
+  SampleBuffer render_bdpt(uint32_t pass, bool parallel) const;
+  std::shared_ptr<const VplSet> pass_vpls(uint32_t pass, std::atomic<uint64_t>& rays) const;
+  std::shared_ptr<const PhotonMap> pass_photons(uint32_t pass, std::atomic<uint64_t>& rays) const;
 
   const Scene& scene_;
   IntegratorKind kind_;
   std::unique_ptr<Accel> accel_;
   std::unique_ptr<LightSet> lights_;
   std::unique_ptr<TextureEvaluator> textures_;
+  // Per-pass state of IR / PPM (see integrator.h), shared by a pass's tiles.
+  mutable std::mutex cache_mutex_;
+  mutable std::map<uint32_t, std::shared_ptr<const void>> pass_cache_;
 };
 
 // Canonical text of the settings that change pixels, beside the scene digest (BufferHeader).

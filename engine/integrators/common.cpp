@@ -11,6 +11,9 @@ IntegratorKind integrator_kind(const std::string& name) {
   if (name == "direct") return IntegratorKind::Direct;
   if (name == "path") return IntegratorKind::Path;
   if (name == "light") return IntegratorKind::LightTracing;
+  if (name == "bdpt") return IntegratorKind::Bdpt;
+  if (name == "ir") return IntegratorKind::InstantRadiosity;
+  if (name == "ppm") return IntegratorKind::PhotonMapping;
   throw std::invalid_argument("unknown integrator '" + name + "'");
 }
 
