@@ -111,6 +111,7 @@ struct RenderArgs {
   std::optional<uint32_t> passes, frame;
   std::optional<int> max_depth;
   std::optional<double> noise_target;
+  double time_budget = 0;
   int threads = 0, tile = 32;
   float exposure = 0;
   bool quiet = false;
@@ -143,6 +144,7 @@ int cmd_render(const RenderArgs& a) {
       spdlog::warn("--noise-target is ignored for a partial render: the merge decides");
   }
   if (a.partial.empty()) opt.noise_target = scene.render.noise_target;
+  opt.time_budget_s = a.time_budget;
   ProgressPrinter printer(a.quiet);
   opt.progress = [&](const rf::LocalProgress& p) { printer(p); };
 
@@ -162,6 +164,9 @@ int cmd_render(const RenderArgs& a) {
   if (res.stopped_on_target)
     std::fprintf(stderr, "noise target %.4g reached after %u of %u passes\n",
                  scene.render.noise_target, res.passes_merged, scene.render.passes);
+  if (res.stopped_on_time)
+    std::fprintf(stderr, "time budget %.1f s reached after %u of %u passes\n", a.time_budget,
+                 res.passes_merged, scene.render.passes);
   print_summary(res.frame, res.seconds, res.rays);
   return 0;
 }
@@ -214,6 +219,8 @@ int main(int argc, char** argv) {
   render->add_option("--sampler", ra.sampler, "sampler (independent, sobol)");
   render->add_option("--threads", threads, "worker threads (default: all cores)");
   render->add_option("--noise-target", ra.noise_target, "stop when relMSE <= this");
+  render->add_option("--time-budget", ra.time_budget,
+                     "stop after this many seconds, on a completed prefix of passes (not reproducible)");
   render->add_option("--pass-range", ra.pass_range, "render only passes FIRST-LAST (inclusive)");
   render->add_option("--partial", ra.partial, "write the sample buffer (.rfb) of the pass range");
   render->add_option("--tile-size", ra.tile, "tile size in pixels")->check(CLI::PositiveNumber);

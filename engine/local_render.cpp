@@ -58,8 +58,14 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   });
 
   uint64_t rays = 0;
+  bool stopped_on_time = false;
   try {
     for (uint32_t p0 = opt.first_pass; p0 < opt.first_pass + count && !acc.done(); p0 += window) {
+      if (opt.time_budget_s > 0 && p0 > opt.first_pass &&
+          std::chrono::duration<double>(clock::now() - start).count() >= opt.time_budget_s) {
+        stopped_on_time = true;
+        break;
+      }
       uint32_t p1 = std::min(opt.first_pass + count, p0 + window);
       size_t n = size_t(p1 - p0) * tiles.size();
       std::vector<SampleBuffer> results(n);
@@ -97,6 +103,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   res.frame = acc.frame();
   res.passes_merged = acc.passes_merged();
   res.stopped_on_target = acc.stopped_on_target();
+  res.stopped_on_time = stopped_on_time;
   res.seconds = std::chrono::duration<double>(clock::now() - start).count();
   res.rays = rays;
   return res;

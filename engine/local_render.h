@@ -22,6 +22,10 @@ struct LocalRenderOptions {
   uint32_t first_pass = 0;
   uint32_t pass_count = 0;   // 0: all passes of the scene from first_pass on
   double noise_target = 0;   // relMSE; 0 = none
+  // Wall-clock budget in seconds (0 = none): no new window of passes starts after it. Unlike the
+  // other stops this depends on the machine's speed, so the image is a prefix of the job's passes
+  // but not a reproducible one; meant for equal-time comparisons.
+  double time_budget_s = 0;
   int tile_size = 32;
   // Called from a monitor thread about every 200 ms and once at the end.
   std::function<void(const LocalProgress&)> progress;
@@ -31,6 +35,7 @@ struct LocalRenderResult {
   SampleBuffer frame;        // the merged completed prefix
   uint32_t passes_merged = 0;
   bool stopped_on_target = false;
+  bool stopped_on_time = false;
   double seconds = 0;        // wall clock
   uint64_t rays = 0;         // traced for the merged passes
 };

@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Regenerates docs/integrators.md's comparison tables: for each scene, every integrator renders
+# for the same wall-clock time, and its RMSE against a long reference render is measured.
+#
+#   bench/compare_integrators.sh [SECONDS_PER_RENDER] [REFERENCE_SECONDS]
+#
+# Defaults: 20 s per integrator, 600 s per reference (the reference integrator is named per
+# scene below: one that converges well there). Renders at each scene's resolution halved.
+# Writes docs/img/compare/<scene>-<integrator>.png and prints the markdown tables on stdout.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+T=${1:-20}
+REF_T=${2:-600}
+OUT=${RAYFARM_COMPARE_DIR:-build/compare}
+IMG=docs/img/compare
+mkdir -p "$OUT" "$IMG"
+./rayfarm --help >/dev/null  # build first
+
+# scene, resolution, reference integrator, integrators to compare
+SCENES=(
+  "veach-mis 320x180 bdpt whitted direct path light ir bdpt ppm"
+  "caustic 160x120 bdpt path light ir bdpt ppm"
+  "hidden-light 160x120 bdpt path light ir bdpt ppm"
+)
+known=$(build/bin/rayfarm render scenes/cornell-box/scene.json --integrator nosuch -o /dev/null 2>&1 | sed -n 's/.*known: \(.*\))/\1/p' | tr -d ',')
+
+rmse() {  # RMS error of a against b, over RGB
+  oiiotool "$1" --ch R,G,B "$2" --ch R,G,B --diff 2>/dev/null | sed -n 's/.*RMS error = \([0-9.e+-]*\).*/\1/p' | head -1
+}
+
+for entry in "${SCENES[@]}"; do
+  read -r scene res ref integrators <<<"$entry"
+  case " $known " in *" $ref "*) ;; *) ref=path ;; esac
+  refexr="$OUT/$scene-reference-$ref.exr"
+  if [ ! -f "$refexr" ]; then
+    ./rayfarm render "scenes/$scene/scene.json" -o "$refexr" --integrator "$ref" --res "$res" \
+      --spp 1048576 --passes 65536 --time-budget "$REF_T" -q >&2
+  fi
+  echo
+  echo "### $scene ($res, ${T} s per render, reference: $ref for ${REF_T} s)"
+  echo
+  echo "| integrator | passes in ${T} s | RMSE vs reference | image |"
+  echo "|---|---:|---:|---|"
+  for integrator in $integrators; do
+    case " $known " in *" $integrator "*) ;; *) continue ;; esac
+    exr="$OUT/$scene-$integrator.exr"
+    log=$(./rayfarm render "scenes/$scene/scene.json" -o "$exr" --integrator "$integrator" \
+      --res "$res" --spp 1048576 --passes 65536 --time-budget "$T" -q 2>&1 || true)
+    if [ ! -f "$exr" ]; then
+      echo "| $integrator | — | cannot render: $(tail -1 <<<"$log" | sed 's/|/\\|/g') | |"
+      continue
+    fi
+    passes=$(sed -n 's/.*(\([0-9]*\) passes).*/\1/p' <<<"$log" | tail -1)
+    cp "${exr%.exr}.png" "$IMG/$scene-$integrator.png"
+    echo "| $integrator | $passes | $(rmse "$exr" "$refexr") | ![](img/compare/$scene-$integrator.png) |"
+  done
+done
