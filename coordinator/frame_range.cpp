@@ -1,0 +1,85 @@
+#include "coordinator/frame_range.h"
+
+#include <charconv>
+#include <set>
+
+namespace rf {
+
+namespace {
+
+int64_t parse_int(const std::string& s, const std::string& item, const char* what) {
+  int64_t v = 0;
+  const char* end = s.data() + s.size();
+  auto [p, ec] = std::from_chars(s.data(), end, v);
+  if (s.empty() || ec != std::errc() || p != end)
+    throw FrameRangeError("frame range item '" + item + "': " + what + " '" + s +
+                          "' is not an integer");
+  return v;
+}
+
+// Splits "A-B" where A may itself be negative ("-5-3"): the separator is the first '-' after
+// the first character.
+bool split_range(const std::string& s, std::string& a, std::string& b) {
+  size_t dash = s.find('-', 1);
+  if (dash == std::string::npos) return false;
+  a = s.substr(0, dash);
+  b = s.substr(dash + 1);
+  return true;
+}
+
+}  // namespace
+
+std::vector<uint32_t> parse_frame_range(const std::string& text) {
+  std::vector<uint32_t> frames;
+  std::set<uint32_t> seen;
+  if (text.find_first_not_of(" \t") == std::string::npos)
+    throw FrameRangeError("frame range is empty");
+  size_t start = 0;
+  while (start <= text.size()) {
+    size_t comma = text.find(',', start);
+    std::string item =
+        text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    start = comma == std::string::npos ? text.size() + 1 : comma + 1;
+    // Spaces around items and separators are allowed.
+    std::string s;
+    for (char c : item)
+      if (c != ' ' && c != '\t') s.push_back(c);
+    if (s.empty()) throw FrameRangeError("frame range '" + text + "' has an empty item");
+    std::string range = s, step_text;
+    if (size_t colon = s.find(':'); colon != std::string::npos) {
+      range = s.substr(0, colon);
+      step_text = s.substr(colon + 1);
+    }
+    std::string a, b;
+    int64_t first, last, step = 1;
+    if (split_range(range, a, b)) {
+      first = parse_int(a, item, "start");
+      last = parse_int(b, item, "end");
+      step = step_text.empty() ? (last >= first ? 1 : -1) : parse_int(step_text, item, "step");
+    } else {
+      if (!step_text.empty())
+        throw FrameRangeError("frame range item '" + item + "': a step needs a range");
+      first = last = parse_int(range, item, "frame");
+    }
+    if (step == 0) throw FrameRangeError("frame range item '" + item + "': step must not be 0");
+    if ((last - first) * step < 0)
+      throw FrameRangeError("frame range item '" + item + "': step " + std::to_string(step) +
+                            " goes away from the end");
+    if (first < 0 || last < 0)
+      throw FrameRangeError("frame range item '" + item + "': frames must be >= 0");
+    if (first > UINT32_MAX || last > UINT32_MAX)
+      throw FrameRangeError("frame range item '" + item + "': frame number too large");
+    for (int64_t f = first; step > 0 ? f <= last : f >= last; f += step) {
+      if (frames.size() >= kMaxFrames)
+        throw FrameRangeError("frame range has more than " + std::to_string(kMaxFrames) +
+                              " frames");
+      if (!seen.insert(uint32_t(f)).second)
+        throw FrameRangeError("frame range item '" + item + "': frame " + std::to_string(f) +
+                              " is listed twice");
+      frames.push_back(uint32_t(f));
+    }
+  }
+  return frames;
+}
+
+}  // namespace rf

@@ -1,0 +1,22 @@
+// Frame ranges in Open Job Description's range syntax: comma-separated items, each a frame
+// "7", a range "1-10" or a stepped range "1-10:2" / "10-1:-3" (the step's sign must match the
+// range's direction). Frames are non-negative, listed at most once, at most kMaxFrames in all.
+#pragma once
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace rf {
+
+struct FrameRangeError : std::invalid_argument {
+  using std::invalid_argument::invalid_argument;
+};
+
+inline constexpr size_t kMaxFrames = 1000000;
+
+// The frames in the order written. Throws FrameRangeError saying which item is wrong and why.
+std::vector<uint32_t> parse_frame_range(const std::string& text);
+
+}  // namespace rf

@@ -1,0 +1,45 @@
+// Open Job Description frame ranges, as `submit --frames` takes them.
+#include <gtest/gtest.h>
+
+#include "coordinator/frame_range.h"
+
+namespace rf {
+namespace {
+
+using V = std::vector<uint32_t>;
+
+TEST(FrameRange, Forms) {
+  EXPECT_EQ(parse_frame_range("7"), V({7}));
+  EXPECT_EQ(parse_frame_range("1-4"), V({1, 2, 3, 4}));
+  EXPECT_EQ(parse_frame_range("1-10:2"), V({1, 3, 5, 7, 9}));
+  EXPECT_EQ(parse_frame_range("1,3,7-9"), V({1, 3, 7, 8, 9}));
+  EXPECT_EQ(parse_frame_range("10-1:-3"), V({10, 7, 4, 1}));
+  EXPECT_EQ(parse_frame_range("5-2"), V({5, 4, 3, 2}));
+  EXPECT_EQ(parse_frame_range(" 1 - 3 , 9 "), V({1, 2, 3, 9}));
+  EXPECT_EQ(parse_frame_range("0-0"), V({0}));
+}
+
+void expect_error(const std::string& text, const std::string& what) {
+  try {
+    parse_frame_range(text);
+    ADD_FAILURE() << "accepted '" << text << "'";
+  } catch (const FrameRangeError& e) {
+    EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+  }
+}
+
+TEST(FrameRange, ErrorsSayWhichItemAndWhy) {
+  expect_error("", "empty");
+  expect_error("1,,3", "empty item");
+  expect_error("1-x", "item '1-x': end 'x' is not an integer");
+  expect_error("1-10:0", "step must not be 0");
+  expect_error("1-10:-1", "goes away from the end");
+  expect_error("-3", "frames must be >= 0");
+  expect_error("1-3,2", "frame 2 is listed twice");
+  expect_error("4:2", "a step needs a range");
+  expect_error("0-2000000", "more than 1000000 frames");
+  expect_error("1-99999999999", "too large");
+}
+
+}  // namespace
+}  // namespace rf
