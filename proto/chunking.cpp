@@ -1,0 +1,59 @@
+#include "proto/chunking.h"
+
+#include "engine/digest.h"
+
+namespace rf {
+
+void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::v1::Chunk&&)>& emit,
+                    size_t chunk_bytes) {
+  size_t offset = 0;
+  do {
+    rayfarm::v1::Chunk c;
+    size_t n = std::min(chunk_bytes, payload.size() - offset);
+    c.set_offset(offset);
+    c.set_data(std::string(payload.substr(offset, n)));
+    if (offset == 0) {
+      c.set_total_size(payload.size());
+      c.set_sha256(sha256_hex(payload));
+    }
+    offset += n;
+    emit(std::move(c));
+  } while (offset < payload.size());
+}
+
+ChunkAssembler::Status ChunkAssembler::add(const rayfarm::v1::Chunk& c) {
+  if (!started_) {
+    if (c.offset() != 0)
+      return fail(Status::InvalidArgument, "first chunk has offset " + std::to_string(c.offset()));
+    if (c.sha256().size() != 64)
+      return fail(Status::InvalidArgument, "first chunk lacks the payload's SHA-256");
+    if (c.total_size() > max_bytes_)
+      return fail(Status::ResourceExhausted, "payload of " + std::to_string(c.total_size()) +
+                                                 " bytes is over the limit of " +
+                                                 std::to_string(max_bytes_));
+    started_ = true;
+    total_ = c.total_size();
+    sha256_ = c.sha256();
+    data_.reserve(total_);
+  }
+  if (c.offset() != data_.size())
+    return fail(Status::InvalidArgument, "chunk at offset " + std::to_string(c.offset()) +
+                                             " where " + std::to_string(data_.size()) +
+                                             " was expected");
+  if (data_.size() + c.data().size() > total_)
+    return fail(Status::InvalidArgument,
+                "chunks run past the announced size of " + std::to_string(total_) + " bytes");
+  data_ += c.data();
+  return Status::Ok;
+}
+
+ChunkAssembler::Status ChunkAssembler::finish() {
+  if (!started_) return fail(Status::InvalidArgument, "no chunks");
+  if (data_.size() != total_)
+    return fail(Status::InvalidArgument, "payload ends at " + std::to_string(data_.size()) +
+                                             " of " + std::to_string(total_) + " bytes");
+  if (sha256_hex(data_) != sha256_) return fail(Status::DataLoss, "checksum mismatch");
+  return Status::Ok;
+}
+
+}  // namespace rf

@@ -1,0 +1,47 @@
+// Large payloads as streams of Chunk messages (rayfarm.proto): about 1 MiB each, offsets in
+// order, the first chunk carrying the total size and the SHA-256 of the whole payload. Never by
+// raising gRPC's 4 MiB message limit.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <string_view>
+
+#include "proto/rayfarm.pb.h"
+
+namespace rf {
+
+inline constexpr size_t kChunkBytes = 1 << 20;
+
+// Calls emit for each chunk of payload, in order (at least one chunk, even when empty).
+void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::v1::Chunk&&)>& emit,
+                    size_t chunk_bytes = kChunkBytes);
+
+// Reassembles chunks. Each problem maps to the gRPC status the receiver answers with.
+class ChunkAssembler {
+ public:
+  enum class Status { Ok, InvalidArgument, ResourceExhausted, DataLoss };
+  explicit ChunkAssembler(uint64_t max_bytes) : max_bytes_(max_bytes) {}
+
+  // Adds the next chunk; on a problem returns it and keeps the message for error().
+  Status add(const rayfarm::v1::Chunk& chunk);
+  // After the last chunk: checks completeness and the checksum.
+  Status finish();
+  const std::string& error() const { return error_; }
+  std::string take() { return std::move(data_); }
+
+ private:
+  Status fail(Status s, std::string why) {
+    error_ = std::move(why);
+    return s;
+  }
+  uint64_t max_bytes_;
+  uint64_t total_ = 0;
+  bool started_ = false;
+  std::string sha256_;
+  std::string data_;
+  std::string error_;
+};
+
+}  // namespace rf
