@@ -1,0 +1,121 @@
+// Task scheduling and leases (DESIGN.md "Work units", "Coordinator"), as plain logic with an
+// explicit clock so it is tested without servers or sleeps. The gRPC service and the SQLite
+// store drive it; it knows nothing of either.
+//
+// Order: jobs by priority (higher first), then submission; within a job, a window of at most
+// `window_frames` unfinished frames is open; within the window, passes in order (all tiles of
+// pass 0 of every open frame before pass 1), then frame, then tile.
+// Leases: a task leased to a worker must be renewed within lease_seconds or it is queued again.
+// The first completion of a task wins, from whichever lease (an expired one included): later
+// ones are answered accepted = false, and the task's other leases end. A task that fails on
+// max_failures different workers fails its job; a worker that fails max_failures tasks of a job
+// gets no more of them. A task handed back (worker shutting down) is re-queued without counting.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <set>
+#include <string>
+#include <tuple>
+#include <vector>
+
+namespace rf {
+
+struct SchedulerOptions {
+  double lease_seconds = 30;
+  int max_failures = 3;
+  uint32_t window_frames = 4;
+};
+
+struct TaskRef {
+  std::string job_id;
+  uint32_t frame = 0, pass = 0, tile = 0;
+  bool operator<(const TaskRef& o) const {
+    return std::tie(job_id, frame, pass, tile) < std::tie(o.job_id, o.frame, o.pass, o.tile);
+  }
+  bool operator==(const TaskRef&) const = default;
+};
+
+struct Lease {
+  std::string lease_id;
+  TaskRef task;
+  double expires_at = 0;
+};
+
+enum class LeaseOutcome { Ok, NotFound, Ended };
+enum class CompleteOutcome { Accepted, Duplicate, NotFound };
+
+class Scheduler {
+ public:
+  explicit Scheduler(SchedulerOptions options = {}) : options_(options) {}
+
+  // A job of `frames` (in order), each split into `tiles` x `passes` tasks.
+  void add_job(const std::string& job_id, const std::vector<uint32_t>& frames, uint32_t tiles,
+               uint32_t passes, int priority);
+  void cancel_job(const std::string& job_id);  // drops its queued tasks and ends its leases
+
+  // The next task for a worker, or nothing. Expires overdue leases first.
+  std::optional<Lease> lease(const std::string& worker_id, double now);
+  LeaseOutcome renew(const std::string& lease_id, double now);
+  // A result arrived for this lease (the caller merges it only on Accepted).
+  CompleteOutcome complete(const std::string& lease_id, double now);
+  // The worker could not render the task (or, handed_back, will not: it is shutting down).
+  LeaseOutcome fail(const std::string& lease_id, const std::string& message, bool handed_back,
+                    double now);
+  // The frame needs no more passes from `first_unneeded_pass` on (noise target met, or done):
+  // those tasks leave the queue, their leases end, and the frame's window slot frees when no
+  // needed task remains.
+  void stop_frame(const std::string& job_id, uint32_t frame, uint32_t first_unneeded_pass);
+
+  bool job_failed(const std::string& job_id) const;
+  std::string job_error(const std::string& job_id) const;  // the failing workers' messages
+  // Queued or leased tasks this worker could still get (for --exit-when-idle).
+  bool work_left_for(const std::string& worker_id) const;
+  size_t queued_tasks() const;
+
+ private:
+  struct TaskState {
+    bool done = false, stopped = false;
+    std::set<std::string> failed_workers;
+    std::vector<std::string> messages;
+    std::set<std::string> leases;  // live leases of this task
+  };
+  struct FrameState {
+    uint32_t frame;
+    uint32_t passes_needed;  // tasks of passes >= this are not needed
+    uint32_t open_tasks;     // needed tasks not done
+  };
+  struct JobState {
+    std::string id;
+    int priority;
+    uint64_t order;
+    uint32_t tiles, passes;
+    std::vector<FrameState> frames;
+    std::map<std::string, int> worker_failures;
+    bool failed = false, cancelled = false;
+    std::string error;
+  };
+  struct LeaseState {
+    TaskRef task;
+    std::string worker_id;
+    double expires_at;
+    bool live;
+  };
+
+  void expire(double now);
+  void drop_job_tasks(const std::string& job_id);
+  void end_task_leases(TaskState& t);
+  bool needed(const JobState& j, const FrameState& f, uint32_t pass) const;
+  JobState* job(const std::string& id);
+  FrameState* frame_of(JobState& j, uint32_t frame);
+
+  SchedulerOptions options_;
+  std::map<std::string, JobState> jobs_;
+  std::map<TaskRef, TaskState> tasks_;
+  std::map<std::string, LeaseState> leases_;
+  std::set<TaskRef> queue_;  // needed, not done, not leased
+  uint64_t next_order_ = 0, next_lease_ = 0;
+};
+
+}  // namespace rf

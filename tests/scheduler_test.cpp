@@ -1,0 +1,107 @@
+// Task order, leases, late results, failures and hand-backs, on an explicit clock.
+#include <gtest/gtest.h>
+
+#include "coordinator/scheduler.h"
+
+namespace rf {
+namespace {
+
+TEST(Scheduler, PassZeroOfEveryOpenFrameFirstThenWindowMoves) {
+  Scheduler s({30, 3, 2});
+  s.add_job("j", {1, 2, 3}, /*tiles=*/2, /*passes=*/2, 0);
+  std::vector<std::tuple<uint32_t, uint32_t, uint32_t>> got;  // (frame, pass, tile)
+  for (int i = 0; i < 8; ++i) {
+    auto l = s.lease("w", 0);
+    ASSERT_TRUE(l);
+    got.emplace_back(l->task.frame, l->task.pass, l->task.tile);
+    EXPECT_EQ(s.complete(l->lease_id, 0), CompleteOutcome::Accepted);
+  }
+  // Window of 2 frames: frames 1 and 2, all of pass 0 before pass 1; frame 3 only once one closes.
+  std::vector<std::tuple<uint32_t, uint32_t, uint32_t>> want = {
+      {1, 0, 0}, {1, 0, 1}, {2, 0, 0}, {2, 0, 1}, {1, 1, 0}, {1, 1, 1}, {3, 0, 0}, {3, 0, 1}};
+  EXPECT_EQ(got, want);
+}
+
+TEST(Scheduler, PriorityThenSubmissionOrder) {
+  Scheduler s;
+  s.add_job("low", {0}, 1, 1, 0);
+  s.add_job("high", {0}, 1, 1, 5);
+  EXPECT_EQ(s.lease("w", 0)->task.job_id, "high");
+  EXPECT_EQ(s.lease("w", 0)->task.job_id, "low");
+  EXPECT_FALSE(s.lease("w", 0));
+}
+
+TEST(Scheduler, ExpiredLeaseIsQueuedAgainAndLateResultStillCountsOnce) {
+  Scheduler s({10, 3, 4});
+  s.add_job("j", {0}, 1, 1, 0);
+  auto a = s.lease("slow", 0);
+  ASSERT_TRUE(a);
+  EXPECT_FALSE(s.lease("fast", 5)) << "leased and not expired: nothing to hand out";
+  EXPECT_EQ(s.renew(a->lease_id, 8), LeaseOutcome::Ok);  // renewed until 18
+  EXPECT_FALSE(s.lease("fast", 15));
+  auto b = s.lease("fast", 19);  // expired at 18: queued again
+  ASSERT_TRUE(b);
+  EXPECT_EQ(s.renew(a->lease_id, 19), LeaseOutcome::Ended) << "FAILED_PRECONDITION for the caller";
+  // The late result of the expired lease arrives first: it wins, and the other lease ends.
+  EXPECT_EQ(s.complete(a->lease_id, 20), CompleteOutcome::Accepted);
+  EXPECT_EQ(s.complete(b->lease_id, 21), CompleteOutcome::Duplicate);
+  EXPECT_EQ(s.renew(b->lease_id, 21), LeaseOutcome::Ended);
+  EXPECT_EQ(s.complete("nope", 21), CompleteOutcome::NotFound);
+  EXPECT_FALSE(s.work_left_for("fast"));
+}
+
+TEST(Scheduler, FailsJobAfterThreeDifferentWorkersAndSkipsFailedWorkers) {
+  Scheduler s({30, 3, 4});
+  s.add_job("j", {0}, 1, 1, 0);
+  for (const char* w : {"a", "b"}) {
+    auto l = s.lease(w, 0);
+    ASSERT_TRUE(l);
+    EXPECT_EQ(s.fail(l->lease_id, std::string("boom on ") + w, false, 0), LeaseOutcome::Ok);
+    EXPECT_FALSE(s.lease(w, 0)) << "a worker does not get back a task it failed";
+  }
+  EXPECT_FALSE(s.job_failed("j"));
+  auto l = s.lease("c", 0);
+  ASSERT_TRUE(l);
+  s.fail(l->lease_id, "boom on c", false, 0);
+  EXPECT_TRUE(s.job_failed("j"));
+  EXPECT_NE(s.job_error("j").find("boom on b"), std::string::npos) << s.job_error("j");
+  EXPECT_FALSE(s.lease("d", 0));
+}
+
+TEST(Scheduler, HandBackIsNotAFailure) {
+  Scheduler s({30, 1, 4});  // one failure would exclude the worker
+  s.add_job("j", {0}, 1, 1, 0);
+  auto l = s.lease("w", 0);
+  EXPECT_EQ(s.fail(l->lease_id, "SIGTERM", /*handed_back=*/true, 1), LeaseOutcome::Ok);
+  auto again = s.lease("w", 2);
+  ASSERT_TRUE(again) << "re-queued, and the worker is not excluded";
+  EXPECT_EQ(again->task, l->task);
+}
+
+TEST(Scheduler, StopFrameDropsLaterPassesAndFreesTheWindow) {
+  Scheduler s({30, 3, 1});
+  s.add_job("j", {7, 8}, 1, 4, 0);
+  auto a = s.lease("w", 0);
+  EXPECT_EQ(a->task.frame, 7u);
+  auto b = s.lease("w", 0);
+  EXPECT_EQ(b->task.pass, 1u);
+  s.complete(a->lease_id, 0);
+  s.stop_frame("j", 7, 1);  // noise target met after pass 0: passes 1.. not needed
+  EXPECT_EQ(s.complete(b->lease_id, 1), CompleteOutcome::Duplicate) << "beyond the stop: dropped";
+  auto c = s.lease("w", 1);
+  ASSERT_TRUE(c);
+  EXPECT_EQ(c->task.frame, 8u) << "frame 7 closed, the window moved on";
+}
+
+TEST(Scheduler, CancelEndsEverything) {
+  Scheduler s;
+  s.add_job("j", {0, 1}, 4, 4, 0);
+  auto l = s.lease("w", 0);
+  s.cancel_job("j");
+  EXPECT_EQ(s.renew(l->lease_id, 1), LeaseOutcome::Ended);
+  EXPECT_FALSE(s.lease("w", 1));
+  EXPECT_EQ(s.queued_tasks(), 0u);
+}
+
+}  // namespace
+}  // namespace rf
