@@ -219,6 +219,7 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
   while (pmf_[i] == 0 && i > 0) --i;
   if (pmf_[i] == 0) return false;
   es = EmissionSample{};
+  es.light = uint32_t(i);
   float pmf = pmf_[i];
   if (i < tris_.size()) {
     const Tri& tri = tris_[i];
@@ -252,6 +253,7 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
     es.radiance = emitted(m, es.n, es.dir);
     es.pdf_pos = pmf / tri.area;
     float pdf_dir = side_pdf * local.z * kInvPi;
+    es.pdf_dir = pdf_dir;
     es.beta = es.radiance * (local.z / (es.pdf_pos * pdf_dir));
     es.is_area = true;
     es.mesh = tri.mesh;
@@ -275,11 +277,44 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
                         ? smooth_step(dot(l.direction, es.dir), l.cos_falloff_end, l.cos_falloff_start)
                         : 1.0f;
     es.pdf_pos = pmf;  // a probability mass: the point is fixed
+    es.pdf_dir = pdf_dir;
     es.beta = l.intensity * (falloff / (pmf * pdf_dir));
   } else {
     return false;  // the environment: no finite emission position
   }
   return !is_black(es.beta) && is_finite(es.beta);
+}
+
+uint32_t LightSet::area_light_index(uint32_t mesh, uint32_t prim) const {
+  uint32_t first = mesh_first_light_[mesh];
+  return first == kNoLight ? kNoLight : first + prim;
+}
+
+void LightSet::pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos,
+                            float& pdf_dir) const {
+  pdf_pos = pdf_dir = 0;
+  if (light >= size()) return;
+  if (light < tris_.size()) {
+    const Tri& tri = tris_[light];
+    if (!(tri.area > 0)) return;
+    pdf_pos = pmf_[light] / tri.area;
+    float cos_t = dot(n, dir);
+    if (scene_.meshes[tri.mesh].emission->two_sided)
+      pdf_dir = 0.5f * std::fabs(cos_t) * kInvPi;
+    else
+      pdf_dir = cos_t > 0 ? cos_t * kInvPi : 0.0f;
+    return;
+  }
+  if (light >= tris_.size() + punctual_.size()) return;  // the environment
+  const Punctual& l = punctual_[light - tris_.size()];
+  if (l.type == LightType::Directional) return;
+  pdf_pos = pmf_[light];
+  if (l.type == LightType::Point)
+    pdf_dir = 1.0f / (4 * kPi);
+  else
+    pdf_dir = dot(l.direction, dir) >= l.cos_falloff_end
+                  ? 1.0f / (2 * kPi * (1.0f - l.cos_falloff_end))
+                  : 0.0f;
 }
 
 }  // namespace rf

@@ -57,8 +57,10 @@ struct EmissionSample {
   RGB beta;               // Le cos / (pdf_select pdf_pos pdf_dir): the path's initial throughput
   RGB radiance;           // Le(p, dir) for area lights (the vertex's own emission towards dir)
   float pdf_pos = 0;      // area density of p, including the selection probability
+  float pdf_dir = 0;      // solid-angle density of dir leaving p
   bool is_area = false;   // p lies on a surface (can be seen by the camera)
   uint32_t mesh = 0, prim = 0;
+  uint32_t light = 0;     // which light (the numbering above)
 };
 
 class LightSet {
@@ -90,6 +92,14 @@ class LightSet {
   // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from p, as
   // sample() would, including selection; 0 when that triangle is not a light.
   float pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light, Vec3 n_light) const;
+  // Light index of triangle prim of mesh, or ~0u when that triangle is not a light.
+  uint32_t area_light_index(uint32_t mesh, uint32_t prim) const;
+  // The densities with which sample_emission() starts a light path at a point of `light` (normal
+  // n for area lights) leaving in unit direction dir (BDPT's MIS weights): pdf_pos the area
+  // density of the point including selection (point and spot lights: the selection
+  // probability), pdf_dir the solid-angle density of dir (0 outside a spot's cone or behind a
+  // one-sided emitter). Both 0 for directional and environment lights, which never start paths.
+  void pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos, float& pdf_dir) const;
   // Probability of selecting each light (sums to 1 over size() lights).
   float selection_pmf(size_t light) const { return pmf_[light]; }
   // The power (Phi above) the selection is proportional to.

@@ -51,6 +51,12 @@ std::string settings_text(const Scene& s) {
   if (i.type == "direct")
     std::snprintf(buf + n, sizeof buf - size_t(n), ";direct=%d:%s:%d:%d", int(i.direct_strategy),
                   i.power_heuristic ? "power" : "balance", i.light_samples, i.bsdf_samples);
+  if (i.type == "ir")
+    std::snprintf(buf + n, sizeof buf - size_t(n), ";ir=%d:%.9g:%s", i.ir_vpl_paths,
+                  double(i.ir_clamp_distance), i.ir_compensation ? "comp" : "nocomp");
+  if (i.type == "ppm")
+    std::snprintf(buf + n, sizeof buf - size_t(n), ";ppm=%d:%.9g:%.9g", i.ppm_photons,
+                  double(i.ppm_radius), double(i.ppm_alpha));
   return buf;
 }
 
@@ -60,13 +66,17 @@ Renderer::Renderer(const Scene& scene)
       accel_(std::make_unique<Accel>(scene)),
       lights_(std::make_unique<LightSet>(scene)),
       textures_(std::make_unique<TextureEvaluator>(scene)) {
-  if (kind_ == IntegratorKind::LightTracing) {
+  // Integrators whose light paths start on the lights cannot use lights without a finite
+  // emission position: refuse the scene before any task runs.
+  if (kind_ == IntegratorKind::LightTracing || kind_ == IntegratorKind::InstantRadiosity ||
+      kind_ == IntegratorKind::PhotonMapping) {
     bool directional = false;
     for (const Light& l : scene.lights) directional |= l.type == LightType::Directional;
     if (scene.environment || directional)
-      throw SceneError(scene.path + ": the light tracer cannot start paths on " +
+      throw SceneError(scene.path + ": integrator '" + scene.render.integrator.type +
+                       "' cannot start light paths on " +
                        std::string(scene.environment ? "an environment" : "a directional light") +
-                       " (no finite emission position); use the path tracer for this scene");
+                       " (no finite emission position); use path or bdpt for this scene");
   }
 }
 

@@ -145,6 +145,14 @@ struct IntegratorSettings {
   bool power_heuristic = true;   // MIS: power (true) or balance heuristic
   int light_samples = 1;         // N light samples per hit
   int bsdf_samples = 1;          // M BSDF samples per hit
+  // ir (instant radiosity, engine/integrators/ir.cpp)
+  int ir_vpl_paths = 256;         // light paths per pass depositing virtual point lights
+  float ir_clamp_distance = 0;    // G is clamped at 1 / d^2; 0: 0.1 x LightSet::scene_radius()
+  bool ir_compensation = true;    // recover the clamped part (unbiased) or drop it (biased)
+  // ppm (progressive photon mapping, engine/integrators/ppm.cpp)
+  int ppm_photons = 100000;       // photon paths traced per pass
+  float ppm_radius = 0;           // r_1, the first pass's radius; 0: 0.02 x scene_radius()
+  float ppm_alpha = 2.0f / 3.0f;  // Knaus-Zwicker alpha in (0, 1)
 };
 
 struct RenderSettings {

@@ -556,6 +556,9 @@ class SceneParser {
     if (is.type == "ao") keys = {"type", "max_distance", "sampling", "samples"};
     if (is.type == "direct") keys = {"type", "strategy", "heuristic", "light_samples", "bsdf_samples"};
     if (is.type == "whitted") keys = {"type", "max_depth"};
+    if (is.type == "ir")
+      keys = {"type", "max_depth", "rr_min_depth", "vpl_paths", "clamp_distance", "compensation"};
+    if (is.type == "ppm") keys = {"type", "max_depth", "rr_min_depth", "photons", "radius", "alpha"};
     r_.check_keys(j, p, keys);
     if (const json* v = r_.find(j, "max_depth"))
       is.max_depth = int(r_.integer(*v, p + ".max_depth", 0, INT32_MAX));
@@ -590,6 +593,27 @@ class SceneParser {
       is.light_samples = int(r_.integer(*v, p + ".light_samples", 0, 1 << 16));
     if (const json* v = r_.find(j, "bsdf_samples"))
       is.bsdf_samples = int(r_.integer(*v, p + ".bsdf_samples", 0, 1 << 16));
+    if (const json* v = r_.find(j, "vpl_paths"))
+      is.ir_vpl_paths = int(r_.integer(*v, p + ".vpl_paths", 1, 1 << 24));
+    if (const json* v = r_.find(j, "clamp_distance")) {
+      is.ir_clamp_distance = r_.number(*v, p + ".clamp_distance");
+      if (is.ir_clamp_distance < 0)
+        r_.fail(p + ".clamp_distance", "must be >= 0 (0: automatic), got " + v->dump());
+    }
+    if (const json* v = r_.find(j, "compensation"))
+      is.ir_compensation = r_.boolean(*v, p + ".compensation");
+    if (const json* v = r_.find(j, "photons"))
+      is.ppm_photons = int(r_.integer(*v, p + ".photons", 1, 1 << 28));
+    if (const json* v = r_.find(j, "radius")) {
+      is.ppm_radius = r_.number(*v, p + ".radius");
+      if (is.ppm_radius < 0)
+        r_.fail(p + ".radius", "must be >= 0 (0: automatic), got " + v->dump());
+    }
+    if (const json* v = r_.find(j, "alpha")) {
+      is.ppm_alpha = r_.number(*v, p + ".alpha");
+      if (!(is.ppm_alpha > 0 && is.ppm_alpha < 1))
+        r_.fail(p + ".alpha", "must lie in (0, 1), got " + v->dump());
+    }
     if (is.type == "direct" && is.light_samples + is.bsdf_samples == 0)
       r_.fail(p, "light_samples and bsdf_samples cannot both be 0");
     if (is.type == "direct") is.max_depth = 1;  // direct lighting is exactly one bounce
@@ -1143,8 +1167,8 @@ void override_passes(RenderSettings& rs, const SceneOverrides& o) {
 }  // namespace
 
 const std::vector<std::string>& known_integrators() {
-  // Add a name here when its integrator lands (ir, bdpt, ppm come next).
-  static const std::vector<std::string> kNames = {"whitted", "ao", "direct", "path", "light"};
+  // One name per integrator (engine/integrators/); the parser checks each one's keys.
+  static const std::vector<std::string> kNames = {"whitted", "ao", "direct", "path", "light", "bdpt", "ir", "ppm"};
   return kNames;
 }
 

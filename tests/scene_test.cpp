@@ -465,7 +465,7 @@ TEST(Overrides, ValidatedAndNamedByFlag) {
   EXPECT_EQ(override_error(s, o), "--passes: must divide the scene's spp (256), got 3");
   o = {};
   o.integrator = "pathh";
-  EXPECT_EQ(override_error(s, o), "--integrator: unknown integrator 'pathh' (known: whitted, ao, direct, path, light)");
+  EXPECT_EQ(override_error(s, o), "--integrator: unknown integrator 'pathh' (known: whitted, ao, direct, path, light, bdpt, ir, ppm)");
   o = {};
   o.width = 0;
   EXPECT_EQ(override_error(s, o), "--res: width must be between 1 and 16384, got 0");
@@ -523,7 +523,7 @@ TEST(Overrides, Applied) {
 }
 
 TEST(Integrators, KnownNames) {
-  EXPECT_EQ(known_integrators(), (std::vector<std::string>{"whitted", "ao", "direct", "path", "light"}));
+  EXPECT_EQ(known_integrators(), (std::vector<std::string>{"whitted", "ao", "direct", "path", "light", "bdpt", "ir", "ppm"}));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -715,7 +715,7 @@ const std::vector<BadScene>& bad_scenes() {
       {"NegativeMaxDepth", edit([](json& j) { j["render"]["integrator"]["max_depth"] = -1; }),
        "render.integrator.max_depth", "must be at least 0, got -1"},
       {"UnknownIntegrator", edit([](json& j) { j["render"]["integrator"]["type"] = "pathh"; }),
-       "render.integrator.type", "unknown integrator 'pathh' (known: whitted, ao, direct, path, light)"},
+       "render.integrator.type", "unknown integrator 'pathh' (known: whitted, ao, direct, path, light, bdpt, ir, ppm)"},
       {"NegativeSeed", edit([](json& j) { j["render"]["seed"] = -1; }), "render.seed",
        "expected a non-negative integer, got number -1"},
       {"FovOutOfRange", edit([](json& j) { j["camera"]["fov_deg"] = 180; }), "camera.fov_deg",
