@@ -3,7 +3,10 @@
 #include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <OpenImageIO/imageio.h>
+
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -36,11 +39,13 @@ std::pair<uint32_t, uint32_t> parse_pass_range(const std::string& s, uint32_t pa
   unsigned a = 0, b = 0;
   char dash = 0, extra = 0;
   int n = std::sscanf(s.c_str(), "%u%c%u%c", &a, &dash, &b, &extra);
-  if (n == 1) b = a;
+  if (n == 1)
+    b = a;
   else if (n != 3 || dash != '-')
     throw UsageError("--pass-range: expected FIRST-LAST (inclusive, e.g. 0-7), got '" + s + "'");
-  if (a > b) throw UsageError("--pass-range: first pass " + std::to_string(a) + " is after last " +
-                              std::to_string(b));
+  if (a > b)
+    throw UsageError("--pass-range: first pass " + std::to_string(a) + " is after last " +
+                     std::to_string(b));
   if (b >= passes)
     throw UsageError("--pass-range: pass " + std::to_string(b) + " does not exist (the job has " +
                      std::to_string(passes) + " passes, 0-" + std::to_string(passes - 1) + ")");
@@ -49,10 +54,14 @@ std::pair<uint32_t, uint32_t> parse_pass_range(const std::string& s, uint32_t pa
 
 std::string human(double v) {
   char buf[32];
-  if (v >= 1e9) std::snprintf(buf, sizeof buf, "%.2f G", v / 1e9);
-  else if (v >= 1e6) std::snprintf(buf, sizeof buf, "%.2f M", v / 1e6);
-  else if (v >= 1e3) std::snprintf(buf, sizeof buf, "%.2f k", v / 1e3);
-  else std::snprintf(buf, sizeof buf, "%.0f ", v);
+  if (v >= 1e9)
+    std::snprintf(buf, sizeof buf, "%.2f G", v / 1e9);
+  else if (v >= 1e6)
+    std::snprintf(buf, sizeof buf, "%.2f M", v / 1e6);
+  else if (v >= 1e3)
+    std::snprintf(buf, sizeof buf, "%.2f k", v / 1e3);
+  else
+    std::snprintf(buf, sizeof buf, "%.0f ", v);
   return buf;
 }
 
@@ -74,8 +83,8 @@ class ProgressPrinter {
       if (p.tasks_done == p.tasks_total && done_printed_) return;
       done_printed_ = p.tasks_done == p.tasks_total;
       last_line_ = p.seconds;
-      std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s\n", 100 * frac,
-                   p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+      std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s\n",
+                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
     }
   }
 
@@ -129,7 +138,8 @@ int cmd_render(const RenderArgs& a) {
   if (!a.filter.empty()) ov.filter = a.filter;
   if (!a.sampler.empty()) ov.sampler = a.sampler;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
-  if (a.output.empty() && a.partial.empty()) throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
+  if (a.output.empty() && a.partial.empty())
+    throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
   if (!a.partial.empty() && a.pass_range.empty())
     throw UsageError("--partial needs --pass-range FIRST-LAST");
 
@@ -192,7 +202,41 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
   }
   std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
                acc.header.passes.to_string().c_str(),
-               double(acc.total_samples()) / double(acc.rect.area()), acc.rel_mse(), output.c_str());
+               double(acc.total_samples()) / double(acc.rect.area()), acc.rel_mse(),
+               output.c_str());
+  return 0;
+}
+
+// RGB of an image file, as floats.
+std::vector<float> read_rgb(const std::string& path, int& w, int& h) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) throw std::runtime_error(path + ": cannot open: " + OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.nchannels < 3) throw std::runtime_error(path + ": needs at least 3 channels");
+  w = spec.width, h = spec.height;
+  std::vector<float> px(size_t(w) * h * 3);
+  if (!in->read_image(0, 0, 0, 3, OIIO::TypeDesc::FLOAT, px.data()))
+    throw std::runtime_error(path + ": " + in->geterror());
+  return px;
+}
+
+// Error of an image against a reference: RMSE, relMSE (pbrt-v4's convention, the same as the
+// render's noise figure) and the mean absolute error, over pixels and RGB.
+int cmd_compare(const std::string& image, const std::string& reference) {
+  int w, h, rw, rh;
+  std::vector<float> a = read_rgb(image, w, h), b = read_rgb(reference, rw, rh);
+  if (w != rw || h != rh)
+    throw UsageError("compare: " + image + " is " + std::to_string(w) + "x" + std::to_string(h) +
+                     ", " + reference + " is " + std::to_string(rw) + "x" + std::to_string(rh));
+  double se = 0, rel = 0, abs_err = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    double d = double(a[i]) - double(b[i]);
+    se += d * d;
+    rel += d * d / (double(b[i]) * b[i] + 0.01);
+    abs_err += std::fabs(d);
+  }
+  double n = double(a.size());
+  std::printf("rmse %.6g relmse %.6g mae %.6g\n", std::sqrt(se / n), rel / n, abs_err / n);
   return 0;
 }
 
@@ -219,8 +263,9 @@ int main(int argc, char** argv) {
   render->add_option("--sampler", ra.sampler, "sampler (independent, sobol)");
   render->add_option("--threads", threads, "worker threads (default: all cores)");
   render->add_option("--noise-target", ra.noise_target, "stop when relMSE <= this");
-  render->add_option("--time-budget", ra.time_budget,
-                     "stop after this many seconds, on a completed prefix of passes (not reproducible)");
+  render->add_option(
+      "--time-budget", ra.time_budget,
+      "stop after this many seconds, on a completed prefix of passes (not reproducible)");
   render->add_option("--pass-range", ra.pass_range, "render only passes FIRST-LAST (inclusive)");
   render->add_option("--partial", ra.partial, "write the sample buffer (.rfb) of the pass range");
   render->add_option("--tile-size", ra.tile, "tile size in pixels")->check(CLI::PositiveNumber);
@@ -234,6 +279,11 @@ int main(int argc, char** argv) {
   merge->add_option("inputs", merge_inputs, "partial results")->required();
   merge->add_option("-o,--output", merge_output, "output .exr (plus .png) or .rfb")->required();
   merge->add_option("--exposure", merge_exposure, "PNG exposure in stops");
+
+  std::string cmp_image, cmp_reference;
+  auto* compare = app.add_subcommand("compare", "error of an image against a reference image");
+  compare->add_option("image", cmp_image, "the image (EXR)")->required();
+  compare->add_option("reference", cmp_reference, "the reference (EXR, same size)")->required();
 
   rf::BenchOptions bo;
   auto* bench = app.add_subcommand("bench", "throughput of the path tracer vs a bare Embree loop");
@@ -250,6 +300,7 @@ int main(int argc, char** argv) {
     if (render->parsed()) return cmd_render(ra);
     if (merge->parsed()) return cmd_merge(merge_inputs, merge_output, merge_exposure);
     if (bench->parsed()) return rf::run_bench(bo);
+    if (compare->parsed()) return cmd_compare(cmp_image, cmp_reference);
   } catch (const UsageError& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 2;

@@ -22,12 +22,12 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   ProgressiveOptions popt{opt.first_pass, count, opt.noise_target};
   FrameAccumulator acc(renderer.header(PassSet{}), tiles, renderer.splats(), popt);
 
-  // Passes are rendered in windows large enough to keep every thread busy; each window's tasks
-  // are merged in (pass, tile) order after it, and the stop test runs after every pass.
+  // Passes are rendered in windows of passes whose tasks run in parallel (each task also spreads
+  // its rows over threads: TBB balances the nesting), merged in (pass, tile) order after each
+  // window; the stop tests run after every pass. A window of one pass when a pass has enough
+  // tiles keeps the stop decisions (noise target, time budget) fine-grained.
   int threads = tbb::this_task_arena::max_concurrency();
-  uint32_t window =
-      uint32_t(std::max<size_t>(1, (4 * size_t(threads) + tiles.size() - 1) / tiles.size()));
-
+  uint32_t window = tiles.size() >= size_t(threads) ? 1u : 2u;
   auto start = clock::now();
   std::atomic<uint64_t> tasks_done{0};
   LocalProgress prog;
