@@ -2,7 +2,7 @@
 # Regenerates docs/integrators.md's comparison tables: for each scene, every integrator renders
 # for the same wall-clock time, and its RMSE against a long reference render is measured.
 #
-#   bench/compare_integrators.sh [SECONDS_PER_RENDER] [REFERENCE_SECONDS]
+#   bench/compare_integrators.sh [SECONDS_PER_RENDER] [REFERENCE_SECONDS] [SCENE...]
 #
 # Defaults: 20 s per integrator, 600 s per reference (the reference integrator is named per
 # scene below: one that converges well there; its seed differs from the compared renders', so
@@ -24,14 +24,20 @@ SCENES=(
   "caustic 160x120 bdpt path light ir bdpt ppm"
   "hidden-light 160x120 bdpt path light ir bdpt ppm"
 )
+# a region where the methods differ most, reported beside the whole image (x0,y0,x1,y1 pixels)
+declare -A REGION=(
+  [caustic]="40,76,150,120"        # the floor in front of the ball: caustic and shadow, no glass
+)
 known=$( (build/bin/rayfarm render scenes/cornell-box/scene.json --integrator nosuch -o /dev/null 2>&1 || true) | sed -n 's/.*known: \(.*\))/\1/p' | tr -d ',')
 
-errors() {  # "RMSE | relMSE" of a against b, over RGB
-  build/bin/rayfarm compare "$1" "$2" | awk '{printf "%.4g | %.4g", $2, $4}'
+errors() {  # "RMSE | relMSE" of a against b, over RGB (optionally in a window)
+  build/bin/rayfarm compare "$@" | awk '{printf "%.4g | %.4g", $2, $4}'
 }
 
+ONLY=" ${*:3} "
 for entry in "${SCENES[@]}"; do
   read -r scene res ref integrators <<<"$entry"
+  [ "$ONLY" = "  " ] || case "$ONLY" in *" $scene "*) ;; *) continue ;; esac
   case " $known " in *" $ref "*) ;; *) ref=path ;; esac
   refexr="$OUT/$scene-reference-$ref.exr"
   if [ ! -f "$refexr" ]; then
@@ -41,8 +47,14 @@ for entry in "${SCENES[@]}"; do
   echo
   echo "### $scene ($res, ${T} s per render, reference: $ref for ${REF_T} s)"
   echo
-  echo "| integrator | passes in ${T} s | RMSE | relMSE | image |"
-  echo "|---|---:|---:|---:|---|"
+  region=${REGION[$scene]:-}
+  if [ -n "$region" ]; then
+    echo "| integrator | passes in ${T} s | RMSE | relMSE | RMSE in $region | relMSE in $region | image |"
+    echo "|---|---:|---:|---:|---:|---:|---|"
+  else
+    echo "| integrator | passes in ${T} s | RMSE | relMSE | image |"
+    echo "|---|---:|---:|---:|---|"
+  fi
   for integrator in $integrators; do
     case " $known " in *" $integrator "*) ;; *) continue ;; esac
     exr="$OUT/$scene-$integrator.exr"
@@ -54,6 +66,8 @@ for entry in "${SCENES[@]}"; do
     fi
     passes=$(sed -n 's/.*(\([0-9]*\) passes).*/\1/p' <<<"$log" | tail -1)
     cp "${exr%.exr}.png" "$IMG/$scene-$integrator.png"
-    echo "| $integrator | $passes | $(errors "$exr" "$refexr") | ![](img/compare/$scene-$integrator.png) |"
+    row="$(errors "$exr" "$refexr")"
+    [ -n "$region" ] && row="$row | $(errors "$exr" "$refexr" --window "$region")"
+    echo "| $integrator | $passes | $row | ![](img/compare/$scene-$integrator.png) |"
   done
 done

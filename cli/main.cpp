@@ -222,20 +222,34 @@ std::vector<float> read_rgb(const std::string& path, int& w, int& h) {
 
 // Error of an image against a reference: RMSE, relMSE (pbrt-v4's convention, the same as the
 // render's noise figure) and the mean absolute error, over pixels and RGB.
-int cmd_compare(const std::string& image, const std::string& reference) {
+// `window` (x0,y0,x1,y1, pixels, half-open; empty = the whole image) restricts the comparison to
+// a region, e.g. the caustic that one integrator finds and another does not.
+int cmd_compare(const std::string& image, const std::string& reference,
+                const std::vector<int>& window) {
   int w, h, rw, rh;
   std::vector<float> a = read_rgb(image, w, h), b = read_rgb(reference, rw, rh);
   if (w != rw || h != rh)
     throw UsageError("compare: " + image + " is " + std::to_string(w) + "x" + std::to_string(h) +
                      ", " + reference + " is " + std::to_string(rw) + "x" + std::to_string(rh));
-  double se = 0, rel = 0, abs_err = 0;
-  for (size_t i = 0; i < a.size(); ++i) {
-    double d = double(a[i]) - double(b[i]);
-    se += d * d;
-    rel += d * d / (double(b[i]) * b[i] + 0.01);
-    abs_err += std::fabs(d);
+  int x0 = 0, y0 = 0, x1 = w, y1 = h;
+  if (!window.empty()) {
+    if (window.size() != 4 || window[0] < 0 || window[1] < 0 || window[2] > w ||
+        window[3] > h || window[0] >= window[2] || window[1] >= window[3])
+      throw UsageError("compare: --window must be X0,Y0,X1,Y1 with 0 <= X0 < X1 <= " +
+                       std::to_string(w) + " and 0 <= Y0 < Y1 <= " + std::to_string(h));
+    x0 = window[0], y0 = window[1], x1 = window[2], y1 = window[3];
   }
-  double n = double(a.size());
+  double se = 0, rel = 0, abs_err = 0;
+  for (int y = y0; y < y1; ++y)
+    for (int x = x0; x < x1; ++x)
+      for (int c = 0; c < 3; ++c) {
+        size_t i = (size_t(y) * w + x) * 3 + c;
+        double d = double(a[i]) - double(b[i]);
+        se += d * d;
+        rel += d * d / (double(b[i]) * b[i] + 0.01);
+        abs_err += std::fabs(d);
+      }
+  double n = double(x1 - x0) * (y1 - y0) * 3;
   std::printf("rmse %.6g relmse %.6g mae %.6g\n", std::sqrt(se / n), rel / n, abs_err / n);
   return 0;
 }
@@ -284,6 +298,9 @@ int main(int argc, char** argv) {
   auto* compare = app.add_subcommand("compare", "error of an image against a reference image");
   compare->add_option("image", cmp_image, "the image (EXR)")->required();
   compare->add_option("reference", cmp_reference, "the reference (EXR, same size)")->required();
+  std::vector<int> cmp_window;
+  compare->add_option("--window", cmp_window, "compare only pixels X0,Y0,X1,Y1 (half-open)")
+      ->delimiter(',');
 
   rf::BenchOptions bo;
   auto* bench = app.add_subcommand("bench", "throughput of the path tracer vs a bare Embree loop");
@@ -300,7 +317,7 @@ int main(int argc, char** argv) {
     if (render->parsed()) return cmd_render(ra);
     if (merge->parsed()) return cmd_merge(merge_inputs, merge_output, merge_exposure);
     if (bench->parsed()) return rf::run_bench(bo);
-    if (compare->parsed()) return cmd_compare(cmp_image, cmp_reference);
+    if (compare->parsed()) return cmd_compare(cmp_image, cmp_reference, cmp_window);
   } catch (const UsageError& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 2;
