@@ -1,4 +1,5 @@
-// The rayfarm command line: render, merge, bench (the farm commands come with the coordinator).
+// The rayfarm command line: render, merge, compare, bench, and the farm (coordinator, worker,
+// submit, status, watch, fetch, cancel, health; cli/farm.h).
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
@@ -14,11 +15,14 @@
 #include <string>
 
 #include "bench/bench.h"
+#include "cli/farm.h"
+#include "coordinator/service.h"
 #include "engine/film.h"
 #include "engine/image_io.h"
 #include "engine/local_render.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "worker/worker.h"
 
 namespace {
 
@@ -126,7 +130,7 @@ struct RenderArgs {
   bool quiet = false;
 };
 
-int cmd_render(const RenderArgs& a) {
+rf::SceneOverrides overrides_of(const RenderArgs& a) {
   rf::SceneOverrides ov;
   ov.spp = a.spp;
   ov.passes = a.passes;
@@ -138,6 +142,24 @@ int cmd_render(const RenderArgs& a) {
   if (!a.filter.empty()) ov.filter = a.filter;
   if (!a.sampler.empty()) ov.sampler = a.sampler;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
+  return ov;
+}
+
+// The overrides `render` and `submit` share.
+void add_override_options(CLI::App& cmd, RenderArgs& ra) {
+  cmd.add_option("--spp", ra.spp, "samples per pixel (all passes)");
+  cmd.add_option("--passes", ra.passes, "number of passes (spp must be a multiple)");
+  cmd.add_option("--integrator", ra.integrator, "integrator name");
+  cmd.add_option("--seed", ra.seed, "job seed");
+  cmd.add_option("--res", ra.res, "resolution WIDTHxHEIGHT");
+  cmd.add_option("--max-depth", ra.max_depth, "max scattering events");
+  cmd.add_option("--filter", ra.filter, "pixel filter (box, triangle, gaussian)");
+  cmd.add_option("--sampler", ra.sampler, "sampler (independent, sobol)");
+  cmd.add_option("--noise-target", ra.noise_target, "stop when relMSE <= this");
+}
+
+int cmd_render(const RenderArgs& a) {
+  rf::SceneOverrides ov = overrides_of(a);
   if (a.output.empty() && a.partial.empty())
     throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
   if (!a.partial.empty() && a.pass_range.empty())
@@ -266,17 +288,9 @@ int main(int argc, char** argv) {
   auto* render = app.add_subcommand("render", "render a scene locally to EXR + PNG");
   render->add_option("scene", ra.scene, "scene file (JSON)")->required();
   render->add_option("-o,--output", ra.output, "output EXR (a PNG preview is written beside it)");
-  render->add_option("--spp", ra.spp, "samples per pixel (all passes)");
-  render->add_option("--passes", ra.passes, "number of passes (spp must be a multiple)");
-  render->add_option("--integrator", ra.integrator, "integrator name");
-  render->add_option("--seed", ra.seed, "job seed");
+  add_override_options(*render, ra);
   render->add_option("--frame", ra.frame, "frame number (selects the seed stream)");
-  render->add_option("--res", ra.res, "resolution WIDTHxHEIGHT");
-  render->add_option("--max-depth", ra.max_depth, "max scattering events");
-  render->add_option("--filter", ra.filter, "pixel filter (box, triangle, gaussian)");
-  render->add_option("--sampler", ra.sampler, "sampler (independent, sobol)");
   render->add_option("--threads", threads, "worker threads (default: all cores)");
-  render->add_option("--noise-target", ra.noise_target, "stop when relMSE <= this");
   render->add_option(
       "--time-budget", ra.time_budget,
       "stop after this many seconds, on a completed prefix of passes (not reproducible)");
@@ -307,6 +321,72 @@ int main(int argc, char** argv) {
   rf::add_bench_options(*bench, bo);
   bench->add_option("--threads", threads, "worker threads (default: all cores)");
 
+  // The farm.
+  std::string addr = rf::default_coordinator();
+  auto add_addr = [&](CLI::App* c) {
+    c->add_option("--coordinator", addr,
+                  "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
+  };
+  rf::CoordinatorOptions co;
+  auto* coord = app.add_subcommand("coordinator", "serve jobs to workers (gRPC)");
+  coord->add_option("--listen", co.listen, "address to listen on (HOST:PORT; port 0 picks one)");
+  coord->add_option("--state-dir", co.state_dir, "durable state: database, checkpoints, blobs")
+      ->required();
+  coord->add_option("--lease-seconds", co.lease_seconds, "lease time of a task")
+      ->check(CLI::PositiveNumber);
+  coord->add_option("--window", co.window_frames, "frames open at once per job")
+      ->check(CLI::PositiveNumber);
+
+  rf::WorkerOptions wo;
+  auto* worker = app.add_subcommand("worker", "lease and render tasks from a coordinator");
+  add_addr(worker);
+  worker->add_option("--cache-dir", wo.cache_dir, "blob cache (default ~/.cache/rayfarm)");
+  worker->add_option("--drain-seconds", wo.drain_seconds,
+                     "on SIGTERM, finish the task in flight if done within this, else hand it back");
+  worker->add_flag("--exit-when-idle", wo.exit_when_idle,
+                   "exit once the coordinator has no queued or leased work left");
+  worker->add_option("--max-tasks", wo.max_tasks, "exit after this many tasks");
+  worker->add_option("--threads", threads, "render threads (default: all cores)");
+
+  RenderArgs sa;
+  rf::SubmitArgs sub;
+  auto* submit = app.add_subcommand("submit", "submit a job; prints its id");
+  add_addr(submit);
+  submit->add_option("scene", sub.scene, "scene file, or a per-frame pattern (shot.####.json)")
+      ->required();
+  add_override_options(*submit, sa);
+  submit->add_option("--frames", sub.frames, "frames, Open Job Description syntax (1-10:2,15)");
+  submit->add_option("--priority", sub.priority, "higher runs first");
+  submit->add_option("--name", sub.name, "job name (default: the scene's file name)");
+  submit->add_option("--tile-size", sub.tile_size, "tile size in pixels")->check(CLI::PositiveNumber);
+
+  std::string job;
+  bool json = false;
+  auto* status = app.add_subcommand("status", "all jobs (or one), one line each");
+  add_addr(status);
+  status->add_option("job", job, "one job");
+  status->add_flag("--json", json, "machine-readable");
+  auto* watch = app.add_subcommand("watch", "follow a job until it ends (exit 0: completed)");
+  add_addr(watch);
+  watch->add_option("job", job, "job id")->required();
+  std::string fetch_dir;
+  std::optional<uint32_t> fetch_frame;
+  float fetch_exposure = 0;
+  auto* fetch = app.add_subcommand("fetch", "write a job's frames (EXR + PNG), also mid-job");
+  add_addr(fetch);
+  fetch->add_option("job", job, "job id")->required();
+  fetch->add_option("-o,--output", fetch_dir, "output directory")->required();
+  fetch->add_option("--frame", fetch_frame, "only this frame");
+  fetch->add_option("--exposure", fetch_exposure, "PNG exposure in stops");
+  auto* cancel = app.add_subcommand("cancel", "cancel a job");
+  add_addr(cancel);
+  cancel->add_option("job", job, "job id")->required();
+  bool services = false;
+  std::string health_addr;
+  auto* health = app.add_subcommand("health", "check a coordinator's gRPC health service");
+  health->add_option("address", health_addr, "HOST:PORT (default: as --coordinator)");
+  health->add_flag("--services", services, "also list its services (server reflection)");
+
   CLI11_PARSE(app, argc, argv);
   std::unique_ptr<tbb::global_control> limit;
   if (threads > 0)
@@ -318,6 +398,23 @@ int main(int argc, char** argv) {
     if (merge->parsed()) return cmd_merge(merge_inputs, merge_output, merge_exposure);
     if (bench->parsed()) return rf::run_bench(bo);
     if (compare->parsed()) return cmd_compare(cmp_image, cmp_reference, cmp_window);
+    if (coord->parsed()) return rf::run_coordinator(co);
+    if (worker->parsed()) {
+      wo.coordinator = addr;
+      return rf::run_worker(wo);
+    }
+    if (submit->parsed()) {
+      sub.overrides = overrides_of(sa);
+      return rf::cmd_submit(addr, sub);
+    }
+    if (status->parsed()) return rf::cmd_status(addr, job, json);
+    if (watch->parsed()) return rf::cmd_watch(addr, job);
+    if (fetch->parsed()) return rf::cmd_fetch(addr, job, fetch_dir, fetch_frame, fetch_exposure);
+    if (cancel->parsed()) return rf::cmd_cancel(addr, job);
+    if (health->parsed()) return rf::cmd_health(health_addr.empty() ? addr : health_addr, services);
+  } catch (const rf::FarmError& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return e.exit_status;
   } catch (const UsageError& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 2;

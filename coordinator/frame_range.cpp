@@ -82,4 +82,21 @@ std::vector<uint32_t> parse_frame_range(const std::string& text) {
   return frames;
 }
 
+std::string expand_frame_pattern(const std::string& pattern, uint32_t frame) {
+  std::string out;
+  for (size_t i = 0; i < pattern.size();) {
+    if (pattern[i] != '#') {
+      out += pattern[i++];
+      continue;
+    }
+    size_t n = 0;
+    while (i + n < pattern.size() && pattern[i + n] == '#') ++n;
+    std::string digits = std::to_string(frame);
+    if (digits.size() < n) out.append(n - digits.size(), '0');
+    out += digits;
+    i += n;
+  }
+  return out;
+}
+
 }  // namespace rf

@@ -19,4 +19,8 @@ inline constexpr size_t kMaxFrames = 1000000;
 // The frames in the order written. Throws FrameRangeError saying which item is wrong and why.
 std::vector<uint32_t> parse_frame_range(const std::string& text);
 
+// A per-frame file pattern: each run of '#' becomes the frame number, zero-padded to the run's
+// length ("shot.####.json", 7 -> "shot.0007.json"). A name without '#' is returned unchanged.
+std::string expand_frame_pattern(const std::string& pattern, uint32_t frame);
+
 }  // namespace rf

@@ -96,7 +96,7 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now) 
     if (!best) continue;
     TaskRef ref = *best;
     queue_.erase(ref);
-    std::string id = "L" + std::to_string(++next_lease_);
+    std::string id = options_.lease_prefix + std::to_string(++next_lease_);
     leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
     tasks_[ref].leases.insert(id);
     return Lease{id, ref, now + options_.lease_seconds};
@@ -117,21 +117,42 @@ CompleteOutcome Scheduler::complete(const std::string& lease_id, double now) {
   expire(now);
   auto it = leases_.find(lease_id);
   if (it == leases_.end()) return CompleteOutcome::NotFound;
-  const TaskRef ref = it->second.task;
+  it->second.live = false;
+  tasks_[it->second.task].leases.erase(lease_id);
+  return complete_task(it->second.task);
+}
+
+CompleteOutcome Scheduler::complete(const std::string& lease_id, const TaskRef& task, double now) {
+  auto it = leases_.find(lease_id);
+  if (it != leases_.end() && it->second.task == task) return complete(lease_id, now);
+  expire(now);
+  if (!tasks_.count(task)) return CompleteOutcome::NotFound;
+  return complete_task(task);
+}
+
+CompleteOutcome Scheduler::complete_task(const TaskRef& ref) {
   TaskState& t = tasks_[ref];
   JobState* j = job(ref.job_id);
   FrameState* f = j ? frame_of(*j, ref.frame) : nullptr;
-  if (t.done || t.stopped || !f || !needed(*j, *f, ref.pass)) {
-    it->second.live = false;
-    t.leases.erase(lease_id);
-    return CompleteOutcome::Duplicate;
-  }
+  if (t.done || t.stopped || !f || !needed(*j, *f, ref.pass)) return CompleteOutcome::Duplicate;
   // First result wins, whichever lease it came from; the task's other leases end.
   t.done = true;
   end_task_leases(t);
   queue_.erase(ref);
   --f->open_tasks;
   return CompleteOutcome::Accepted;
+}
+
+void Scheduler::mark_done(const TaskRef& ref) {
+  auto it = tasks_.find(ref);
+  if (it == tasks_.end() || it->second.done) return;
+  complete_task(ref);
+}
+
+std::optional<TaskRef> Scheduler::lease_task(const std::string& lease_id) const {
+  auto it = leases_.find(lease_id);
+  if (it == leases_.end()) return std::nullopt;
+  return it->second.task;
 }
 
 LeaseOutcome Scheduler::fail(const std::string& lease_id, const std::string& message,

@@ -26,6 +26,7 @@ struct SchedulerOptions {
   double lease_seconds = 30;
   int max_failures = 3;
   uint32_t window_frames = 4;
+  std::string lease_prefix = "L";  // lease ids are prefix + a counter: unique per coordinator run
 };
 
 struct TaskRef {
@@ -60,6 +61,12 @@ class Scheduler {
   LeaseOutcome renew(const std::string& lease_id, double now);
   // A result arrived for this lease (the caller merges it only on Accepted).
   CompleteOutcome complete(const std::string& lease_id, double now);
+  // The same, for a result whose lease this scheduler does not know (issued before a coordinator
+  // restart): it is identified by its task. Results are deterministic, so it counts the same.
+  CompleteOutcome complete(const std::string& lease_id, const TaskRef& task, double now);
+  // Restoring from checkpoints: the task's result is already merged or stored.
+  void mark_done(const TaskRef& task);
+  std::optional<TaskRef> lease_task(const std::string& lease_id) const;
   // The worker could not render the task (or, handed_back, will not: it is shutting down).
   LeaseOutcome fail(const std::string& lease_id, const std::string& message, bool handed_back,
                     double now);
@@ -104,6 +111,7 @@ class Scheduler {
   };
 
   void expire(double now);
+  CompleteOutcome complete_task(const TaskRef& ref);
   void drop_job_tasks(const std::string& job_id);
   void end_task_leases(TaskState& t);
   bool needed(const JobState& j, const FrameState& f, uint32_t pass) const;

@@ -66,6 +66,30 @@ FrameAccumulator::AddResult FrameAccumulator::add(SampleBuffer task) {
   return merged_ > before ? AddResult::Merged : AddResult::Pending;
 }
 
+void FrameAccumulator::resume_from(SampleBuffer prefix) {
+  if (merged_ != 0 || !pending_.empty())
+    throw MergeError("resume_from needs a fresh accumulator");
+  if (std::string why = merge_incompatibility(base_, prefix.header); !why.empty())
+    throw MergeError("checkpoint is of another image: " + why);
+  uint32_t k = prefix.header.passes.count();
+  if (!(prefix.header.passes == PassSet::range(options_.first_pass, options_.first_pass + k)) ||
+      k > options_.pass_count)
+    throw MergeError("checkpoint holds passes " + prefix.header.passes.to_string() +
+                     ", not a prefix of this frame's passes");
+  if (!(prefix.rect == frame_.rect) || prefix.splat.size() != frame_.splat.size() ||
+      prefix.count.size() != frame_.count.size())
+    throw MergeError("checkpoint has another frame size or planes");
+  frame_ = std::move(prefix);
+  merged_ = k;
+  double rel = frame_.rel_mse();
+  rel_mse_history_.assign(k, rel);  // only the last value is known; it is the one that decides
+  if (merged_ == options_.pass_count)
+    done_ = true;
+  else if (options_.noise_target > 0 && merged_ >= std::min(options_.min_passes, options_.pass_count) &&
+           rel <= options_.noise_target)
+    done_ = stopped_on_target_ = true;
+}
+
 void FrameAccumulator::merge_ready_passes() {
   while (!done_) {
     auto it = pending_.find(options_.first_pass + merged_);

@@ -33,6 +33,11 @@ class FrameAccumulator {
   // pass lies beyond the stop point or outside the range. Throws MergeError on a mismatch.
   AddResult add(SampleBuffer task);
 
+  // Restores a checkpointed prefix (what frame() returned earlier, for passes [first_pass,
+  // first_pass + k)) into a fresh accumulator; the stop decision is taken again on it. Throws
+  // MergeError if it does not belong to this frame or is not such a prefix.
+  void resume_from(SampleBuffer prefix);
+
   bool done() const { return done_; }
   bool stopped_on_target() const { return stopped_on_target_; }
   uint32_t passes_merged() const { return merged_; }   // length of the merged prefix

@@ -80,30 +80,35 @@ Renderer::Renderer(const Scene& scene)
   }
 }
 
-BufferHeader Renderer::header(const PassSet& passes) const {
+BufferHeader frame_header(const Scene& scene, const PassSet& passes) {
   BufferHeader h;
-  h.scene_digest = scene_.digest;
-  h.seed = scene_.render.seed;
-  h.frame = scene_.render.frame;
-  h.integrator = scene_.render.integrator.type;
-  h.settings = settings_text(scene_);
-  h.width = scene_.film.width;
-  h.height = scene_.film.height;
+  h.scene_digest = scene.digest;
+  h.seed = scene.render.seed;
+  h.frame = scene.render.frame;
+  h.integrator = scene.render.integrator.type;
+  h.settings = settings_text(scene);
+  h.width = scene.film.width;
+  h.height = scene.film.height;
   h.passes = passes;
   h.build_id = build_id();
   h.isa = cpu_isa();
   return h;
 }
 
-std::vector<Rect> Renderer::tiles(int tile_size) const {
-  int w = scene_.film.width, h = scene_.film.height;
-  if (splats() || tile_size <= 0) return {Rect{0, 0, w, h}};
+std::vector<Rect> frame_tiles(const Scene& scene, int tile_size) {
+  int w = scene.film.width, h = scene.film.height;
+  if (integrator_splats(integrator_kind(scene.render.integrator.type)) || tile_size <= 0)
+    return {Rect{0, 0, w, h}};
   std::vector<Rect> out;
   for (int y = 0; y < h; y += tile_size)
     for (int x = 0; x < w; x += tile_size)
       out.push_back({x, y, std::min(tile_size, w - x), std::min(tile_size, h - y)});
   return out;
 }
+
+BufferHeader Renderer::header(const PassSet& passes) const { return frame_header(scene_, passes); }
+
+std::vector<Rect> Renderer::tiles(int tile_size) const { return frame_tiles(scene_, tile_size); }
 
 RenderContext Renderer::context() const {
   RenderContext ctx{scene_, *accel_, *lights_, *textures_};

@@ -60,4 +60,9 @@ class Renderer {
 // Canonical text of the settings that change pixels, beside the scene digest (BufferHeader).
 std::string settings_text(const Scene& scene);
 
+// What Renderer::header and Renderer::tiles return, without building a renderer (the
+// coordinator splits and checks frames from a parsed scene alone).
+BufferHeader frame_header(const Scene& scene, const PassSet& passes);
+std::vector<Rect> frame_tiles(const Scene& scene, int tile_size);
+
 }  // namespace rf

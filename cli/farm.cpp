@@ -1,0 +1,370 @@
+// The farm's client commands: submit, status, watch, fetch, cancel, health (and the coordinator
+// and worker entry points). Each talks to one coordinator: --coordinator ADDR, else
+// $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
+#include "cli/farm.h"
+
+#include <grpcpp/grpcpp.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <thread>
+
+#include "coordinator/blob_store.h"
+#include "coordinator/frame_range.h"
+#include "engine/digest.h"
+#include "engine/image_io.h"
+#include "proto/chunking.h"
+#include "proto/convert.h"
+#include "proto/probe.h"
+#include "proto/rayfarm.grpc.pb.h"
+
+namespace rf {
+
+namespace fs = std::filesystem;
+namespace pb = rayfarm::v1;
+
+std::string default_coordinator() {
+  const char* env = std::getenv("RAYFARM_COORDINATOR");
+  return env && *env ? env : "127.0.0.1:7070";
+}
+
+namespace {
+
+std::unique_ptr<pb::JobService::Stub> job_stub(const std::string& addr) {
+  return pb::JobService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+}
+
+void set_deadline(grpc::ClientContext& ctx, double seconds) {
+  ctx.set_deadline(std::chrono::system_clock::now() +
+                   std::chrono::milliseconds(int64_t(seconds * 1000)));
+}
+
+const char* code_name(grpc::StatusCode c) {
+  switch (c) {
+    case grpc::StatusCode::CANCELLED: return "CANCELLED";
+    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
+    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
+    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
+    case grpc::StatusCode::INTERNAL: return "INTERNAL";
+    default: return "ERROR";
+  }
+}
+
+void check(const grpc::Status& s, const std::string& what, const std::string& addr) {
+  if (s.ok()) return;
+  std::string msg = what + ": " + code_name(s.error_code()) + ": " + s.error_message();
+  if (s.error_code() == grpc::StatusCode::UNAVAILABLE)
+    msg += " (is a coordinator running at " + addr + "?)";
+  throw FarmError(msg, s.error_code() == grpc::StatusCode::INVALID_ARGUMENT ||
+                               s.error_code() == grpc::StatusCode::NOT_FOUND
+                           ? 2
+                           : 1);
+}
+
+const char* state_name(pb::JobState s) {
+  switch (s) {
+    case pb::JOB_QUEUED: return "queued";
+    case pb::JOB_RUNNING: return "running";
+    case pb::JOB_COMPLETED: return "completed";
+    case pb::JOB_FAILED: return "failed";
+    case pb::JOB_CANCELLED: return "cancelled";
+    default: return "unknown";
+  }
+}
+
+std::string eta_text(double s) {
+  if (s < 0) return "?";
+  char buf[32];
+  if (s < 120)
+    std::snprintf(buf, sizeof buf, "%.0f s", s);
+  else if (s < 7200)
+    std::snprintf(buf, sizeof buf, "%.0f min", s / 60);
+  else
+    std::snprintf(buf, sizeof buf, "%.1f h", s / 3600);
+  return buf;
+}
+
+}  // namespace
+
+int cmd_submit(const std::string& addr, const SubmitArgs& a) {
+  fs::path scene(a.scene);
+  fs::path dir = scene.parent_path();
+  std::string pattern = scene.filename().string();
+  // The bundle: every distinct scene file the frames name, and every asset they use, by path
+  // relative to the scene's directory. Parsing here also refuses a bad scene before upload.
+  std::vector<uint32_t> frames;
+  if (!a.frames.empty()) {
+    try {
+      frames = parse_frame_range(a.frames);
+    } catch (const FrameRangeError& e) {
+      throw FarmError(std::string("--frames: ") + e.what(), 2);
+    }
+  }
+  std::set<std::string> scene_files;
+  if (pattern.find('#') == std::string::npos || frames.empty())
+    scene_files.insert(pattern);
+  else
+    for (uint32_t f : frames) scene_files.insert(expand_frame_pattern(pattern, f));
+  std::map<std::string, std::string> files;  // path -> digest
+  for (const std::string& name : scene_files) {
+    if (!fs::exists(dir / name)) throw FarmError((dir / name).string() + ": no such scene file", 2);
+    for (const BundleEntry& e : bundle_of_scene((dir / name).string())) files[e.path] = e.sha256;
+  }
+  pb::JobSpec spec;
+  spec.set_name(a.name.empty() ? scene.stem().string() : a.name);
+  spec.set_scene_path(pattern);
+  spec.set_frames(a.frames);
+  *spec.mutable_overrides() = to_wire_overrides(a.overrides);
+  spec.set_priority(a.priority);
+  spec.set_tile_size(uint32_t(a.tile_size));
+  pb::MissingBlobsRequest missing_req;
+  for (const auto& [path, digest] : files) {
+    pb::BundleFile* f = spec.add_files();
+    f->set_path(path);
+    f->set_sha256(digest);
+    missing_req.add_sha256(digest);
+  }
+  auto stub = job_stub(addr);
+  pb::MissingBlobsResponse missing;
+  {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 30);
+    check(stub->MissingBlobs(&ctx, missing_req, &missing), "submit", addr);
+  }
+  std::set<std::string> upload(missing.sha256().begin(), missing.sha256().end());
+  grpc::ClientContext ctx;
+  set_deadline(ctx, 3600);
+  pb::SubmitResponse resp;
+  auto w = stub->Submit(&ctx, &resp);
+  pb::SubmitRequest first;
+  *first.mutable_spec() = spec;
+  bool ok = w->Write(first);
+  for (const auto& [path, digest] : files) {
+    if (!ok || !upload.count(digest)) continue;
+    upload.erase(digest);
+    std::string bytes = read_file_bytes((dir / path).string());
+    for_each_chunk(bytes, [&](pb::Chunk&& c) {
+      if (!ok) return;
+      pb::SubmitRequest m;
+      *m.mutable_blob_chunk() = std::move(c);
+      ok = w->Write(m);
+    });
+  }
+  if (ok) w->WritesDone();
+  check(w->Finish(), "submit", addr);
+  std::printf("%s\n", resp.job_id().c_str());
+  return 0;
+}
+
+namespace {
+
+nlohmann::json to_json(const pb::JobStatus& j) {
+  nlohmann::json frames = nlohmann::json::array();
+  for (const pb::FrameStatus& f : j.frames())
+    frames.push_back({{"frame", f.frame()},
+                      {"passes_merged", f.passes_merged()},
+                      {"passes_total", f.passes_total()},
+                      {"spp", f.spp()},
+                      {"rel_mse", f.rel_mse()},
+                      {"eta_seconds", f.eta_seconds()},
+                      {"done", f.done()},
+                      {"stopped_on_target", f.stopped_on_target()}});
+  return {{"job_id", j.job_id()},         {"name", j.name()},
+          {"state", state_name(j.state())}, {"error", j.error()},
+          {"core_seconds", j.core_seconds()}, {"submitted_unix", j.submitted_unix()},
+          {"frames", frames}};
+}
+
+std::string job_line(const pb::JobStatus& j) {
+  int done = 0;
+  uint64_t merged = 0, total = 0;
+  double worst = 0, eta = 0;
+  bool eta_known = true;
+  for (const pb::FrameStatus& f : j.frames()) {
+    done += f.done();
+    merged += f.passes_merged();
+    total += f.passes_total();
+    worst = std::max(worst, f.rel_mse());
+    if (!f.done()) {
+      if (f.eta_seconds() < 0) eta_known = false;
+      eta += f.eta_seconds();
+    }
+  }
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  ETA %s",
+                j.job_id().c_str(), j.name().c_str(), state_name(j.state()), done,
+                j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
+                j.core_seconds(), eta_known ? eta_text(eta).c_str() : "?");
+  return buf;
+}
+
+}  // namespace
+
+int cmd_status(const std::string& addr, const std::string& job, bool json) {
+  auto stub = job_stub(addr);
+  std::vector<pb::JobStatus> jobs;
+  grpc::ClientContext ctx;
+  set_deadline(ctx, 30);
+  if (job.empty()) {
+    pb::ListJobsResponse resp;
+    check(stub->ListJobs(&ctx, pb::ListJobsRequest{}, &resp), "status", addr);
+    jobs.assign(resp.jobs().begin(), resp.jobs().end());
+  } else {
+    pb::JobRef ref;
+    ref.set_job_id(job);
+    pb::JobStatus s;
+    check(stub->GetJob(&ctx, ref, &s), "status", addr);
+    jobs.push_back(s);
+  }
+  if (json) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& j : jobs) out.push_back(to_json(j));
+    std::printf("%s\n", (job.empty() ? out : out[0]).dump(2).c_str());
+    return 0;
+  }
+  for (const auto& j : jobs) {
+    std::printf("%s\n", job_line(j).c_str());
+    if (!j.error().empty()) std::printf("  error: %s\n", j.error().c_str());
+  }
+  return 0;
+}
+
+int cmd_watch(const std::string& addr, const std::string& job) {
+  auto stub = job_stub(addr);
+  std::map<uint32_t, std::string> last;
+  for (int attempt = 0;; ++attempt) {
+    grpc::ClientContext ctx;
+    pb::JobRef ref;
+    ref.set_job_id(job);
+    auto reader = stub->WatchJob(&ctx, ref);
+    pb::JobStatus s;
+    pb::JobState state = pb::JOB_STATE_UNSPECIFIED;
+    std::string error;
+    while (reader->Read(&s)) {
+      attempt = 0;
+      state = s.state();
+      error = s.error();
+      for (const pb::FrameStatus& f : s.frames()) {
+        char buf[256];
+        std::snprintf(buf, sizeof buf, "frame %u: passes %u/%u, %.0f spp, relMSE %.4g, %s", f.frame(),
+                      f.passes_merged(), f.passes_total(), f.spp(), f.rel_mse(),
+                      f.done() ? (f.stopped_on_target() ? "done (noise target)" : "done")
+                               : ("ETA " + eta_text(f.eta_seconds())).c_str());
+        if (last[f.frame()] != buf) {
+          std::printf("%s\n", buf);
+          last[f.frame()] = buf;
+        }
+      }
+      std::fflush(stdout);
+    }
+    grpc::Status st = reader->Finish();
+    if (state == pb::JOB_COMPLETED) {
+      std::printf("job %s completed (%.0f core-s)\n", job.c_str(), s.core_seconds());
+      return 0;
+    }
+    if (state == pb::JOB_FAILED || state == pb::JOB_CANCELLED) {
+      std::printf("job %s %s%s%s\n", job.c_str(), state_name(state), error.empty() ? "" : ": ",
+                  error.c_str());
+      return state == pb::JOB_FAILED ? 1 : 3;
+    }
+    // The stream broke (a coordinator restart, a partition): reconnect unless the job is gone.
+    if (!st.ok() && st.error_code() != grpc::StatusCode::UNAVAILABLE &&
+        st.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED)
+      check(st, "watch", addr);
+    if (attempt == 0) std::fprintf(stderr, "watch: connection lost (%s); reconnecting\n",
+                                   st.error_message().c_str());
+    std::this_thread::sleep_for(std::chrono::milliseconds(std::min(10000, 250 << std::min(attempt, 6))));
+  }
+}
+
+int cmd_fetch(const std::string& addr, const std::string& job, const std::string& out_dir,
+              std::optional<uint32_t> only_frame, float exposure) {
+  auto stub = job_stub(addr);
+  pb::JobStatus status;
+  {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 30);
+    pb::JobRef ref;
+    ref.set_job_id(job);
+    check(stub->GetJob(&ctx, ref, &status), "fetch", addr);
+  }
+  fs::create_directories(out_dir);
+  int written = 0;
+  for (const pb::FrameStatus& f : status.frames()) {
+    if (only_frame && f.frame() != *only_frame) continue;
+    if (f.passes_merged() == 0) {
+      std::fprintf(stderr, "frame %u: no complete pass yet; skipped\n", f.frame());
+      continue;
+    }
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 600);
+    pb::FetchRequest req;
+    req.set_job_id(job);
+    req.set_frame(f.frame());
+    auto reader = stub->FetchFrame(&ctx, req);
+    ChunkAssembler chunks(uint64_t(64) << 30);
+    pb::FetchResponse r;
+    std::string problem;
+    while (reader->Read(&r))
+      if (problem.empty() && chunks.add(r.chunk()) != ChunkAssembler::Status::Ok)
+        problem = chunks.error();
+    check(reader->Finish(), "fetch frame " + std::to_string(f.frame()), addr);
+    if (problem.empty() && chunks.finish() != ChunkAssembler::Status::Ok) problem = chunks.error();
+    if (!problem.empty()) throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
+    SampleBuffer frame = decode_buffer(chunks.take(), "frame " + std::to_string(f.frame()));
+    char name[64];
+    std::snprintf(name, sizeof name, "%s.%04u", job.c_str(), f.frame());
+    std::string exr = (fs::path(out_dir) / (std::string(name) + ".exr")).string();
+    std::string png = (fs::path(out_dir) / (std::string(name) + ".png")).string();
+    write_exr(exr, frame, {{"job", job}});
+    write_png(png, frame, exposure);
+    std::fprintf(stderr, "frame %u: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
+                 frame.header.passes.count(),
+                 double(frame.total_samples() ? frame.total_samples() : frame.light_paths) /
+                     double(frame.rect.area()),
+                 frame.rel_mse(), exr.c_str());
+    ++written;
+  }
+  if (only_frame && written == 0)
+    throw FarmError("job " + job + " has no fetchable frame " + std::to_string(*only_frame), 2);
+  return 0;
+}
+
+int cmd_cancel(const std::string& addr, const std::string& job) {
+  auto stub = job_stub(addr);
+  grpc::ClientContext ctx;
+  set_deadline(ctx, 30);
+  pb::JobRef ref;
+  ref.set_job_id(job);
+  pb::CancelResponse resp;
+  check(stub->CancelJob(&ctx, ref, &resp), "cancel", addr);
+  std::fprintf(stderr, "job %s cancelled\n", job.c_str());
+  return 0;
+}
+
+int cmd_health(const std::string& addr, bool services) {
+  try {
+    std::string s = check_health(addr);
+    std::printf("%s: %s\n", addr.c_str(), s.c_str());
+    if (services)
+      for (const std::string& name : list_services(addr)) std::printf("  %s\n", name.c_str());
+    return s == "SERVING" ? 0 : 1;
+  } catch (const ProbeError& e) {
+    std::printf("%s: unreachable: %s\n", addr.c_str(), e.what());
+    return 1;
+  }
+}
+
+}  // namespace rf

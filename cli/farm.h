@@ -1,0 +1,39 @@
+// The farm's client commands (`rayfarm submit | status | watch | fetch | cancel | health`).
+#pragma once
+
+#include <optional>
+#include <stdexcept>
+#include <string>
+
+#include "engine/scene.h"
+
+namespace rf {
+
+// A client-side failure with the process exit status to use (2: bad input, 1: anything else).
+struct FarmError : std::runtime_error {
+  FarmError(const std::string& what, int exit_status)
+      : std::runtime_error(what), exit_status(exit_status) {}
+  int exit_status;
+};
+
+// $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
+std::string default_coordinator();
+
+struct SubmitArgs {
+  std::string scene;  // a file, or a per-frame pattern ("shot.####.json")
+  std::string frames;  // Open Job Description range; empty: the scene's frame
+  std::string name;
+  SceneOverrides overrides;
+  int priority = 0;
+  int tile_size = 0;  // 0: the coordinator's default
+};
+
+int cmd_submit(const std::string& addr, const SubmitArgs& args);  // prints the job id
+int cmd_status(const std::string& addr, const std::string& job, bool json);
+int cmd_watch(const std::string& addr, const std::string& job);  // 0 completed, 1 failed, 3 cancelled
+int cmd_fetch(const std::string& addr, const std::string& job, const std::string& out_dir,
+              std::optional<uint32_t> frame, float exposure);
+int cmd_cancel(const std::string& addr, const std::string& job);
+int cmd_health(const std::string& addr, bool list_services);
+
+}  // namespace rf

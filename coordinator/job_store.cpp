@@ -1,0 +1,147 @@
+#include "coordinator/job_store.h"
+
+#include <sqlite3.h>
+
+namespace rf {
+
+namespace {
+
+// A prepared statement that finalizes itself; bind() takes values in order.
+class Stmt {
+ public:
+  Stmt(sqlite3* db, const char* sql, const std::string& path) : db_(db), path_(path) {
+    if (sqlite3_prepare_v2(db, sql, -1, &s_, nullptr) != SQLITE_OK) fail("prepare");
+  }
+  ~Stmt() { sqlite3_finalize(s_); }
+  Stmt& bind(const std::string& v) {
+    sqlite3_bind_text(s_, ++n_, v.data(), int(v.size()), SQLITE_TRANSIENT);
+    return *this;
+  }
+  Stmt& bind_blob(const std::string& v) {
+    sqlite3_bind_blob(s_, ++n_, v.data(), int(v.size()), SQLITE_TRANSIENT);
+    return *this;
+  }
+  Stmt& bind(int64_t v) {
+    sqlite3_bind_int64(s_, ++n_, v);
+    return *this;
+  }
+  Stmt& bind(double v) {
+    sqlite3_bind_double(s_, ++n_, v);
+    return *this;
+  }
+  bool step() {  // true while a row is available
+    int rc = sqlite3_step(s_);
+    if (rc == SQLITE_ROW) return true;
+    if (rc != SQLITE_DONE) fail("step");
+    return false;
+  }
+  std::string text(int col) const {
+    const void* p = sqlite3_column_blob(s_, col);
+    return p ? std::string(static_cast<const char*>(p), size_t(sqlite3_column_bytes(s_, col)))
+             : std::string();
+  }
+  int64_t integer(int col) const { return sqlite3_column_int64(s_, col); }
+  double real(int col) const { return sqlite3_column_double(s_, col); }
+
+ private:
+  [[noreturn]] void fail(const char* what) {
+    throw StoreError(path_ + ": SQLite " + what + ": " + sqlite3_errmsg(db_));
+  }
+  sqlite3* db_;
+  sqlite3_stmt* s_ = nullptr;
+  int n_ = 0;
+  const std::string& path_;
+};
+
+}  // namespace
+
+JobStore::JobStore(const std::string& path) : path_(path) {
+  if (sqlite3_open(path.c_str(), &db_) != SQLITE_OK) {
+    std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
+    sqlite3_close(db_);
+    throw StoreError(path + ": cannot open the job database: " + why);
+  }
+  sqlite3_busy_timeout(db_, 5000);
+  // WAL with synchronous=FULL: a committed transaction survives a power loss.
+  exec("PRAGMA journal_mode=WAL");
+  exec("PRAGMA synchronous=FULL");
+  exec(
+      "CREATE TABLE IF NOT EXISTS jobs (id TEXT PRIMARY KEY, seq INTEGER NOT NULL, spec BLOB NOT "
+      "NULL, state INTEGER NOT NULL, error TEXT NOT NULL DEFAULT '', submitted INTEGER NOT NULL, "
+      "core_seconds REAL NOT NULL DEFAULT 0)");
+  exec(
+      "CREATE TABLE IF NOT EXISTS task_events (job_id TEXT NOT NULL, frame INTEGER NOT NULL, "
+      "pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL, done INTEGER NOT NULL, "
+      "message TEXT NOT NULL DEFAULT '', at INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
+  exec("CREATE INDEX IF NOT EXISTS task_events_job ON task_events (job_id, done)");
+}
+
+JobStore::~JobStore() { sqlite3_close(db_); }
+
+void JobStore::exec(const std::string& sql) {
+  char* err = nullptr;
+  if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &err) != SQLITE_OK) {
+    std::string why = err ? err : "unknown error";
+    sqlite3_free(err);
+    throw StoreError(path_ + ": SQLite: " + why + " (in: " + sql.substr(0, 60) + ")");
+  }
+}
+
+uint64_t JobStore::next_seq() {
+  Stmt s(db_, "SELECT COALESCE(MAX(seq), 0) FROM jobs", path_);
+  return s.step() ? uint64_t(s.integer(0)) + 1 : 1;
+}
+
+void JobStore::insert_job(const StoredJob& j) {
+  Stmt s(db_, "INSERT INTO jobs (id, seq, spec, state, error, submitted) VALUES (?,?,?,?,?,?)",
+         path_);
+  s.bind(j.id).bind(int64_t(j.seq)).bind_blob(j.spec).bind(int64_t(j.state)).bind(j.error)
+      .bind(j.submitted_unix)
+      .step();
+}
+
+void JobStore::set_state(const std::string& id, int state, const std::string& error) {
+  Stmt s(db_, "UPDATE jobs SET state = ?, error = ? WHERE id = ?", path_);
+  s.bind(int64_t(state)).bind(error).bind(id).step();
+}
+
+void JobStore::add_core_seconds(const std::string& id, double seconds) {
+  Stmt s(db_, "UPDATE jobs SET core_seconds = core_seconds + ? WHERE id = ?", path_);
+  s.bind(seconds).bind(id).step();
+}
+
+void JobStore::task_done(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
+                         const std::string& worker) {
+  Stmt s(db_, "INSERT INTO task_events (job_id, frame, pass, tile, worker, done) VALUES (?,?,?,?,?,1)",
+         path_);
+  s.bind(id).bind(int64_t(frame)).bind(int64_t(pass)).bind(int64_t(tile)).bind(worker).step();
+}
+
+void JobStore::task_failed(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
+                           const std::string& worker, const std::string& message) {
+  Stmt s(db_,
+         "INSERT INTO task_events (job_id, frame, pass, tile, worker, done, message) VALUES "
+         "(?,?,?,?,?,0,?)",
+         path_);
+  s.bind(id).bind(int64_t(frame)).bind(int64_t(pass)).bind(int64_t(tile)).bind(worker)
+      .bind(message)
+      .step();
+}
+
+std::vector<StoredJob> JobStore::jobs() const {
+  Stmt s(db_, "SELECT id, seq, spec, state, error, submitted, core_seconds FROM jobs ORDER BY seq",
+         path_);
+  std::vector<StoredJob> out;
+  while (s.step())
+    out.push_back({s.text(0), uint64_t(s.integer(1)), s.text(2), int(s.integer(3)), s.text(4),
+                   s.integer(5), s.real(6)});
+  return out;
+}
+
+uint64_t JobStore::tasks_done(const std::string& id) const {
+  Stmt s(db_, "SELECT COUNT(*) FROM task_events WHERE job_id = ? AND done = 1", path_);
+  s.bind(id);
+  return s.step() ? uint64_t(s.integer(0)) : 0;
+}
+
+}  // namespace rf

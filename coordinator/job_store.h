@@ -1,0 +1,56 @@
+// The coordinator's durable job state (DESIGN.md "Coordinator": state survives a restart): an
+// embedded SQLite database in WAL mode with one writer connection, on local disk. It records each
+// job's spec (the serialized JobSpec), its state and error, and every task completion and
+// failure. Which task results an image contains is recorded by the frame checkpoints
+// (checkpoint.h), not here: on restart a task the database calls done but the checkpoint lacks
+// is rendered again.
+#pragma once
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+struct sqlite3;
+
+namespace rf {
+
+struct StoreError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct StoredJob {
+  std::string id;
+  uint64_t seq = 0;       // submission order
+  std::string spec;       // serialized rayfarm.v1.JobSpec
+  int state = 0;          // rayfarm.v1.JobState
+  std::string error;
+  int64_t submitted_unix = 0;
+  double core_seconds = 0;
+};
+
+class JobStore {
+ public:
+  explicit JobStore(const std::string& path);  // creates the schema if needed
+  ~JobStore();
+  JobStore(const JobStore&) = delete;
+  JobStore& operator=(const JobStore&) = delete;
+
+  uint64_t next_seq();  // one past the largest job sequence number stored
+  void insert_job(const StoredJob& job);
+  void set_state(const std::string& job_id, int state, const std::string& error);
+  void add_core_seconds(const std::string& job_id, double seconds);
+  void task_done(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
+                 const std::string& worker_id);
+  void task_failed(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
+                   const std::string& worker_id, const std::string& message);
+  std::vector<StoredJob> jobs() const;  // in submission order
+  uint64_t tasks_done(const std::string& job_id) const;
+
+ private:
+  void exec(const std::string& sql);
+  sqlite3* db_ = nullptr;
+  std::string path_;
+};
+
+}  // namespace rf

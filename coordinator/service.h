@@ -1,0 +1,46 @@
+// The coordinator (DESIGN.md "Coordinator"): the job service for users and the worker service for
+// workers on one gRPC port, beside the standard health service and server reflection.
+//
+// State: jobs and task events in SQLite (job_store.h), per-frame results in atomic checkpoint
+// files (checkpoint.h), scene bundles in a content-addressed blob store (blob_store.h); the task
+// queue and leases in memory (scheduler.h), rebuilt from those on start. The frame merge is the
+// engine's FrameAccumulator: passes merged in order, the stop taken on the completed prefix.
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <string>
+
+namespace rf {
+
+struct CoordinatorOptions {
+  std::string listen = "127.0.0.1:7070";
+  std::string state_dir;
+  double lease_seconds = 30;
+  uint32_t window_frames = 4;
+  uint64_t max_blob_bytes = 1ull << 30;    // one scene asset
+  uint64_t max_bundle_bytes = 4ull << 30;  // all assets of one submit
+  uint64_t max_buffer_bytes = 4ull << 30;  // one task's sample buffer
+};
+
+class CoordinatorCore;
+
+class CoordinatorServer {
+ public:
+  // Opens (or creates) the state directory, restores jobs from it and starts serving. Throws
+  // with a message naming the address or file on failure.
+  explicit CoordinatorServer(const CoordinatorOptions& options);
+  ~CoordinatorServer();
+  int port() const;          // the bound port (useful with --listen HOST:0)
+  void wait();               // until shutdown() is called
+  void shutdown();           // stops accepting, ends streams, waits for handlers
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// `rayfarm coordinator`: serves until SIGINT or SIGTERM.
+int run_coordinator(const CoordinatorOptions& options);
+
+}  // namespace rf

@@ -1,0 +1,417 @@
+#include "worker/worker.h"
+
+#include <grpcpp/grpcpp.h>
+#include <signal.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdlib>
+#include <ctime>
+#include <deque>
+#include <filesystem>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "coordinator/blob_store.h"
+#include "engine/build_info.h"
+#include "engine/digest.h"
+#include "engine/render.h"
+#include "engine/scene.h"
+#include "proto/chunking.h"
+#include "proto/convert.h"
+#include "proto/rayfarm.grpc.pb.h"
+
+namespace rf {
+
+namespace fs = std::filesystem;
+namespace pb = rayfarm::v1;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+std::string default_cache_dir() {
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/rayfarm";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::string(h) + "/.cache/rayfarm";
+  return "/tmp/rayfarm-cache-" + std::to_string(::getuid());
+}
+
+double cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+bool transient(const grpc::Status& s) {
+  return s.error_code() == grpc::StatusCode::UNAVAILABLE ||
+         s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
+}
+
+void set_deadline(grpc::ClientContext& ctx, double seconds) {
+  ctx.set_deadline(std::chrono::system_clock::now() +
+                   std::chrono::milliseconds(int64_t(seconds * 1000)));
+}
+
+struct TaskFailure : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace
+
+class Worker {
+ public:
+  explicit Worker(const WorkerOptions& o)
+      : o_(o),
+        cache_dir_(o.cache_dir.empty() ? default_cache_dir() : o.cache_dir),
+        blobs_(cache_dir_ + "/blobs"),
+        rng_(std::random_device{}()) {}
+
+  int run();
+
+ private:
+  enum class Outcome { Done, HandedBack };
+
+  void connect(int keepalive_seconds);
+  bool register_self();
+  Outcome run_task(const pb::Task& task);
+  const Renderer& prepare(const pb::Task& task);
+  void fetch_blob(const std::string& sha256);
+  void upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds);
+  void fail_task(const pb::Task& task, const std::string& message, bool handed_back);
+  // Sleeps with exponential, jittered backoff (capped); false if a stop was requested.
+  bool backoff(int attempt);
+  bool sleep_unless_stopped(double seconds);
+  bool stopping() const { return stop_.load(); }
+
+  WorkerOptions o_;
+  std::string cache_dir_;
+  BlobStore blobs_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<pb::WorkerService::Stub> stub_;
+  std::string worker_id_;
+  double lease_seconds_ = 30, keepalive_seconds_ = 10;
+  std::mt19937 rng_;
+
+  std::atomic<bool> stop_{false};
+  Clock::time_point stop_at_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::thread signal_thread_;
+
+  struct CachedScene {
+    std::string key;
+    std::unique_ptr<Scene> scene;
+    std::unique_ptr<Renderer> renderer;
+  };
+  std::deque<CachedScene> scenes_;  // most recently used first
+  static constexpr size_t kScenesKept = 2;
+};
+
+void Worker::connect(int keepalive_seconds) {
+  grpc::ChannelArguments args;
+  // Pings at most a third of the lease apart, so a partition is noticed within one lease.
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_seconds * 1000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, std::max(1, keepalive_seconds / 2) * 1000);
+  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 250);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 10000);
+  channel_ = grpc::CreateCustomChannel(o_.coordinator, grpc::InsecureChannelCredentials(), args);
+  stub_ = pb::WorkerService::NewStub(channel_);
+}
+
+bool Worker::backoff(int attempt) {
+  double cap = 15, base = 0.25 * std::pow(2.0, std::min(attempt, 10));
+  double d = std::min(cap, base) * std::uniform_real_distribution<double>(0.5, 1.0)(rng_);
+  return sleep_unless_stopped(d);
+}
+
+bool Worker::sleep_unless_stopped(double seconds) {
+  std::unique_lock lock(m_);
+  cv_.wait_for(lock, std::chrono::milliseconds(int64_t(seconds * 1000)), [&] { return stopping(); });
+  return !stopping();
+}
+
+bool Worker::register_self() {
+  pb::RegisterRequest req;
+  char host[256] = {};
+  ::gethostname(host, sizeof host - 1);
+  req.set_hostname(host);
+  req.set_cores(std::max(1u, std::thread::hardware_concurrency()));
+  req.set_build_id(build_id());
+  req.set_isa(cpu_isa());
+  for (int attempt = 0;; ++attempt) {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 10);
+    pb::RegisterResponse resp;
+    grpc::Status s = stub_->Register(&ctx, req, &resp);
+    if (s.ok()) {
+      worker_id_ = resp.worker_id();
+      lease_seconds_ = std::max(1u, resp.lease_seconds());
+      keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
+      return true;
+    }
+    if (!transient(s)) throw std::runtime_error("register with " + o_.coordinator + ": " +
+                                                s.error_message());
+    if (attempt == 0)
+      spdlog::warn("coordinator {} unreachable ({}); retrying", o_.coordinator, s.error_message());
+    if (!backoff(attempt)) return false;
+  }
+}
+
+void Worker::fetch_blob(const std::string& sha256) {
+  grpc::ClientContext ctx;
+  set_deadline(ctx, 600);
+  pb::BlobRequest req;
+  req.set_sha256(sha256);
+  auto reader = stub_->FetchBlob(&ctx, req);
+  ChunkAssembler chunks(uint64_t(64) << 30);
+  pb::Chunk c;
+  std::string problem;
+  while (reader->Read(&c))
+    if (problem.empty() && chunks.add(c) != ChunkAssembler::Status::Ok) problem = chunks.error();
+  grpc::Status s = reader->Finish();
+  if (!s.ok()) throw TaskFailure("fetching blob " + sha256 + ": " + s.error_message());
+  if (problem.empty() && chunks.finish() != ChunkAssembler::Status::Ok) problem = chunks.error();
+  if (!problem.empty()) throw TaskFailure("fetching blob " + sha256 + ": " + problem);
+  blobs_.put(chunks.take(), sha256);
+}
+
+const Renderer& Worker::prepare(const pb::Task& task) {
+  std::string files;
+  std::vector<BundleEntry> bundle;
+  for (const pb::BundleFile& f : task.files()) {
+    files += f.path() + "\t" + f.sha256() + "\n";
+    bundle.push_back({f.path(), f.sha256()});
+  }
+  std::string key = sha256_hex(task.scene_path() + "\n" + files +
+                               task.overrides().SerializeAsString() + "\n" +
+                               std::to_string(task.frame()));
+  for (auto it = scenes_.begin(); it != scenes_.end(); ++it)
+    if (it->key == key) {
+      if (it != scenes_.begin()) {
+        CachedScene c = std::move(*it);
+        scenes_.erase(it);
+        scenes_.push_front(std::move(c));
+      }
+      return *scenes_.front().renderer;
+    }
+  for (const BundleEntry& e : bundle)
+    if (!blobs_.has(e.sha256)) fetch_blob(e.sha256);
+  // One directory per bundle and process: workers sharing a cache never write the same files.
+  std::string dir = cache_dir_ + "/bundles/" + sha256_hex(files).substr(0, 16) + "-" +
+                    std::to_string(::getpid());
+  try {
+    blobs_.materialize(bundle, dir);
+  } catch (const std::exception& e) {
+    throw TaskFailure(e.what());
+  }
+  SceneOverrides ov = to_scene_overrides(task.overrides());
+  ov.frame = task.frame();
+  CachedScene c;
+  c.key = key;
+  try {
+    c.scene = std::make_unique<Scene>(load_scene(dir + "/" + task.scene_path(), ov));
+  } catch (const std::exception& e) {
+    throw TaskFailure(e.what());
+  }
+  if (c.scene->digest != task.scene_digest())
+    throw TaskFailure("scene digest " + c.scene->digest + " differs from the coordinator's " +
+                      task.scene_digest() + " (another build or a corrupted cache?)");
+  c.renderer = std::make_unique<Renderer>(*c.scene);
+  scenes_.push_front(std::move(c));
+  while (scenes_.size() > kScenesKept) scenes_.pop_back();
+  return *scenes_.front().renderer;
+}
+
+void Worker::fail_task(const pb::Task& task, const std::string& message, bool handed_back) {
+  pb::FailRequest req;
+  req.set_worker_id(worker_id_);
+  req.set_lease_id(task.lease_id());
+  req.set_task_id(task.task_id());
+  req.set_message(message);
+  req.set_handed_back(handed_back);
+  grpc::ClientContext ctx;
+  set_deadline(ctx, 10);
+  pb::FailResponse resp;
+  grpc::Status s = stub_->FailTask(&ctx, req, &resp);
+  if (!s.ok()) spdlog::warn("task {}: reporting {}: {}", task.task_id(),
+                            handed_back ? "the hand-back" : "the failure", s.error_message());
+}
+
+void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds) {
+  std::string bytes = encode_buffer(buffer);
+  for (int attempt = 0;; ++attempt) {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 600);
+    pb::CompleteResponse resp;
+    auto w = stub_->CompleteTask(&ctx, &resp);
+    pb::CompleteRequest head;
+    pb::CompleteHeader* h = head.mutable_header();
+    h->set_worker_id(worker_id_);
+    h->set_lease_id(task.lease_id());
+    h->set_task_id(task.task_id());
+    h->set_core_seconds(core_seconds);
+    bool ok = w->Write(head);
+    for_each_chunk(bytes, [&](pb::Chunk&& c) {
+      if (!ok) return;
+      pb::CompleteRequest m;
+      *m.mutable_chunk() = std::move(c);
+      ok = w->Write(m);
+    });
+    if (ok) w->WritesDone();
+    grpc::Status s = w->Finish();
+    if (s.ok()) {
+      spdlog::info("task {}: {}", task.task_id(),
+                   resp.accepted() ? "merged" : "not needed (another result was merged first)");
+      return;
+    }
+    if (!transient(s) || attempt >= 8) throw TaskFailure("upload: " + s.error_message());
+    spdlog::warn("task {}: upload failed ({}); retrying", task.task_id(), s.error_message());
+    if (!backoff(attempt)) throw TaskFailure("upload interrupted by shutdown");
+  }
+}
+
+Worker::Outcome Worker::run_task(const pb::Task& task) {
+  auto t0 = Clock::now();
+  double cpu0 = cpu_seconds();
+  const Renderer* renderer = nullptr;
+  try {
+    renderer = &prepare(task);
+  } catch (const TaskFailure& e) {
+    spdlog::error("task {}: {}", task.task_id(), e.what());
+    fail_task(task, e.what(), false);
+    return Outcome::Done;
+  }
+  Rect rect{task.rect().x0(), task.rect().y0(), task.rect().w(), task.rect().h()};
+  SampleBuffer result;
+  std::string render_error;
+  bool finished = false;
+  std::thread render([&] {
+    try {
+      result = renderer->render_task(rect, task.pass(), true);
+    } catch (const std::exception& e) {
+      render_error = e.what();
+    }
+    std::lock_guard lock(m_);
+    finished = true;
+    cv_.notify_all();
+  });
+  // Renew while rendering; a lease that ended still gets its result uploaded (results are
+  // deterministic and the first complete one is merged, whichever lease it came from).
+  bool renewing = true;
+  auto next_renew = Clock::now() + std::chrono::duration<double>(keepalive_seconds_);
+  std::unique_lock lock(m_);
+  while (!finished) {
+    auto wake = next_renew;
+    if (stopping()) wake = std::min(wake, stop_at_ + std::chrono::duration<double>(o_.drain_seconds));
+    cv_.wait_until(lock, wake, [&] { return finished; });
+    if (finished) break;
+    if (stopping() && Clock::now() >= stop_at_ + std::chrono::duration<double>(o_.drain_seconds)) {
+      lock.unlock();
+      spdlog::info("task {}: not finished within the drain time; handing it back", task.task_id());
+      fail_task(task, "worker shutting down", true);
+      render.detach();  // the process exits; the task is re-queued at the coordinator
+      return Outcome::HandedBack;
+    }
+    if (renewing && Clock::now() >= next_renew) {
+      lock.unlock();
+      pb::RenewRequest req;
+      req.set_worker_id(worker_id_);
+      req.set_lease_id(task.lease_id());
+      grpc::ClientContext ctx;
+      set_deadline(ctx, 10);
+      pb::RenewResponse resp;
+      grpc::Status s = stub_->RenewLease(&ctx, req, &resp);
+      if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
+          s.error_code() == grpc::StatusCode::NOT_FOUND) {
+        spdlog::info("task {}: lease ended ({}); finishing anyway", task.task_id(), s.error_message());
+        renewing = false;
+      }
+      next_renew = Clock::now() + std::chrono::duration<double>(keepalive_seconds_);
+      lock.lock();
+    }
+  }
+  lock.unlock();
+  render.join();
+  if (!render_error.empty()) {
+    spdlog::error("task {}: {}", task.task_id(), render_error);
+    fail_task(task, render_error, false);
+    return Outcome::Done;
+  }
+  double core_seconds = cpu_seconds() - cpu0;
+  result.header.core_seconds = core_seconds;
+  spdlog::info("task {}: rendered in {:.2f} s ({:.1f} core-s)", task.task_id(),
+               std::chrono::duration<double>(Clock::now() - t0).count(), core_seconds);
+  try {
+    upload(task, result, core_seconds);
+  } catch (const TaskFailure& e) {
+    spdlog::error("task {}: {}", task.task_id(), e.what());
+    if (!stopping()) fail_task(task, e.what(), false);
+  }
+  return Outcome::Done;
+}
+
+int Worker::run() {
+  // Signals go to one thread: it asks the loop to stop leasing and start the drain clock.
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  signal_thread_ = std::thread([this, set] {
+    int sig = 0;
+    sigwait(&set, &sig);
+    spdlog::info("signal {}: no more leases; draining for up to {:.0f} s", sig, o_.drain_seconds);
+    std::lock_guard lock(m_);
+    stop_at_ = Clock::now();
+    stop_ = true;
+    cv_.notify_all();
+  });
+  signal_thread_.detach();
+
+  connect(10);
+  if (!register_self()) return 0;
+  connect(int(keepalive_seconds_));
+  spdlog::info("worker {} connected to {} (lease {:.0f} s), cache {}", worker_id_, o_.coordinator,
+               lease_seconds_, cache_dir_);
+  int tasks = 0, attempt = 0;
+  while (!stopping()) {
+    pb::LeaseRequest req;
+    req.set_worker_id(worker_id_);
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 10);
+    pb::LeaseResponse resp;
+    grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
+    if (!s.ok()) {
+      if (!transient(s)) throw std::runtime_error("lease: " + s.error_message());
+      if (attempt == 0) spdlog::warn("lease: {}; retrying", s.error_message());
+      backoff(attempt++);
+      continue;
+    }
+    attempt = 0;
+    if (!resp.has_task()) {
+      if (o_.exit_when_idle && resp.no_more_work()) {
+        spdlog::info("no work left; exiting");
+        return 0;
+      }
+      sleep_unless_stopped(o_.idle_poll_seconds);
+      continue;
+    }
+    if (run_task(resp.task()) == Outcome::HandedBack) {
+      spdlog::shutdown();
+      std::_Exit(0);
+    }
+    if (o_.max_tasks > 0 && ++tasks >= o_.max_tasks) break;
+  }
+  spdlog::info("worker {} stopped", worker_id_);
+  return 0;
+}
+
+int run_worker(const WorkerOptions& o) {
+  Worker w(o);
+  return w.run();
+}
+
+}  // namespace rf

@@ -1,0 +1,29 @@
+// The worker (DESIGN.md "Worker"): registers with one coordinator, leases tasks, fetches the
+// scene bundle's blobs it lacks by digest, renders each task with the engine on all cores,
+// renews the lease while rendering, uploads the sample buffer in chunks, and repeats.
+//
+// Scenes and their Embree BVH are cached by (bundle, settings, frame), so consecutive tasks of one
+// frame neither re-parse nor rebuild. Blobs are cached on local disk by digest.
+// On SIGTERM or SIGINT it stops leasing; a task in flight is finished and uploaded if that takes
+// less than drain_seconds from the signal, else handed back (re-queued without counting as a
+// failure). With exit_when_idle it exits once the coordinator has no queued or leased work left
+// that it could get.
+#pragma once
+
+#include <string>
+
+namespace rf {
+
+struct WorkerOptions {
+  std::string coordinator = "127.0.0.1:7070";
+  std::string cache_dir;       // default: $XDG_CACHE_HOME/rayfarm or ~/.cache/rayfarm
+  double drain_seconds = 60;
+  bool exit_when_idle = false;
+  double idle_poll_seconds = 1;
+  int max_tasks = 0;           // exit after this many tasks (0: no limit); for tests and benches
+};
+
+// Runs until signalled (or idle with exit_when_idle). Returns the process exit status.
+int run_worker(const WorkerOptions& options);
+
+}  // namespace rf
