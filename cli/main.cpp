@@ -384,6 +384,7 @@ int main(int argc, char** argv) {
   bool services = false;
   std::string health_addr;
   auto* health = app.add_subcommand("health", "check a coordinator's gRPC health service");
+  add_addr(health);
   health->add_option("address", health_addr, "HOST:PORT (default: as --coordinator)");
   health->add_flag("--services", services, "also list its services (server reflection)");
 

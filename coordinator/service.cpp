@@ -889,7 +889,6 @@ int run_coordinator(const CoordinatorOptions& o) {
   CoordinatorServer server(o);
   spdlog::info("coordinator listening on {} (port {}), state in {}", o.listen, server.port(),
                o.state_dir);
-  std::fprintf(stderr, "listening on port %d\n", server.port());
   int sig = 0;
   sigwait(&set, &sig);
   spdlog::info("signal {}: shutting down", sig);

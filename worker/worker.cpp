@@ -399,6 +399,7 @@ int Worker::run() {
       sleep_unless_stopped(o_.idle_poll_seconds);
       continue;
     }
+    spdlog::info("task {}: leased ({})", resp.task().task_id(), resp.task().lease_id());
     if (run_task(resp.task()) == Outcome::HandedBack) {
       spdlog::shutdown();
       std::_Exit(0);

@@ -1,0 +1,484 @@
+// The farm end to end, with real processes on loopback (no mocks of gRPC): a coordinator, workers
+// and the client commands. The reference for every farm image is `rayfarm render` of the same
+// job: the determinism contract (DESIGN.md) says they are equal to within
+// |a-b| <= 1e-6 * max(|a|,|b|) + 1e-12 per channel (the farm merges passes in the same order as
+// the local renderer, so in practice they are bit-identical).
+// The protobuf and gRPC headers come before OpenImageIO's, which #undef the bswap_32/64 macros
+// protobuf relies on.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "proto/chunking.h"
+#include "proto/probe.h"
+#include "proto/rayfarm.grpc.pb.h"
+#include <signal.h>
+
+#include <OpenImageIO/imageio.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <thread>
+
+#include "engine/digest.h"
+#include "engine/film.h"
+#include "tests/support/process.h"
+#include "tests/support/test_support.h"
+
+namespace rf {
+namespace {
+
+namespace fs = std::filesystem;
+namespace pb = rayfarm::v1;
+using test::Process;
+
+const std::string kCornell = "scenes/cornell-box/scene.json";
+
+struct Image {
+  int w = 0, h = 0, nch = 0;
+  std::vector<float> px;
+  std::map<std::string, std::string> attrs;
+};
+
+Image read_image(const std::string& path) {
+  Image im;
+  auto in = OIIO::ImageInput::open(path);
+  EXPECT_TRUE(in) << path;
+  if (!in) return im;
+  const OIIO::ImageSpec& spec = in->spec();
+  im.w = spec.width, im.h = spec.height, im.nch = spec.nchannels;
+  for (const auto& p : spec.extra_attribs)
+    im.attrs[p.name().string()] = p.get_string();
+  im.px.resize(size_t(im.w) * im.h * im.nch);
+  in->read_image(0, 0, 0, im.nch, OIIO::TypeDesc::FLOAT, im.px.data());
+  return im;
+}
+
+// Every channel (RGBA and variance) within DESIGN.md's merge tolerance.
+void expect_same_image(const std::string& farm, const std::string& local) {
+  Image a = read_image(farm), b = read_image(local);
+  ASSERT_EQ(a.w, b.w);
+  ASSERT_EQ(a.h, b.h);
+  ASSERT_EQ(a.nch, b.nch);
+  size_t bad = 0;
+  for (size_t i = 0; i < a.px.size(); ++i) {
+    double x = a.px[i], y = b.px[i];
+    if (std::fabs(x - y) > 1e-6 * std::max(std::fabs(x), std::fabs(y)) + 1e-12) ++bad;
+  }
+  EXPECT_EQ(bad, 0u) << farm << " differs from " << local << " in " << bad << " of "
+                     << a.px.size() << " values";
+}
+
+class Farm {
+ public:
+  explicit Farm(const std::string& tag, double lease_seconds = 30)
+      : dir_(test::make_temp_dir(tag)), lease_seconds_(lease_seconds) {
+    start_coordinator(0);
+  }
+
+  void start_coordinator(int port) {
+    coordinator_ = std::make_unique<Process>(
+        std::vector<std::string>{test::rayfarm_binary(), "coordinator", "--listen",
+                                 "127.0.0.1:" + std::to_string(port), "--state-dir", dir_ + "/state",
+                                 "--lease-seconds", std::to_string(lease_seconds_)},
+        dir_ + "/coordinator" + std::to_string(starts_++) + ".log");
+    std::smatch m;
+    std::regex re("\\(port ([0-9]+)\\)");
+    std::string log;
+    for (int i = 0; i < 500; ++i) {
+      log = coordinator_->log();
+      if (std::regex_search(log, m, re)) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ASSERT_TRUE(std::regex_search(log, m, re)) << log;
+    port_ = std::stoi(m[1]);
+  }
+
+  Process& worker(const std::vector<std::string>& extra = {"--exit-when-idle"}) {
+    std::vector<std::string> argv{test::rayfarm_binary(), "worker", "--coordinator", address(),
+                                  "--cache-dir", dir_ + "/cache"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    workers_.push_back(std::make_unique<Process>(
+        argv, dir_ + "/worker" + std::to_string(workers_.size()) + ".log"));
+    return *workers_.back();
+  }
+
+  // A client command against this coordinator (run from the source tree).
+  test::CommandResult client(const std::string& args) const {
+    return test::run_command("cd " + test::source_dir() + " && " + test::rayfarm_binary() + " " +
+                             args + " --coordinator " + address());
+  }
+  std::string submit(const std::string& args) const {
+    test::CommandResult r = test::run_command("cd " + test::source_dir() + " && " +
+                                              test::rayfarm_binary() + " submit " + args +
+                                              " --coordinator " + address() + " 2>/dev/null");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    std::string id = r.output;
+    while (!id.empty() && (id.back() == '\n' || id.back() == ' ')) id.pop_back();
+    EXPECT_NE(id, "");
+    return id;
+  }
+  nlohmann::json status(const std::string& job) const {
+    test::CommandResult r = client("status " + job + " --json");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return nlohmann::json::parse(r.output, nullptr, false);
+  }
+  // A local render of the same job and frame, for comparison.
+  std::string local(const std::string& args, uint32_t frame) const {
+    std::string out = dir_ + "/local-" + std::to_string(local_count_++) + ".exr";
+    test::CommandResult r = test::run_command("cd " + test::source_dir() + " && " +
+                                              test::rayfarm_binary() + " render " + args +
+                                              " --frame " + std::to_string(frame) + " -q -o " + out);
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return out;
+  }
+
+  // SIGKILLs the coordinator and starts it again on the same port and state directory.
+  void restart_coordinator() {
+    coordinator_->signal(SIGKILL);
+    coordinator_->wait(10);
+    start_coordinator(port_);
+  }
+
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  const std::string& dir() const { return dir_; }
+  Process& coordinator() { return *coordinator_; }
+  std::shared_ptr<grpc::Channel> channel() const {
+    return grpc::CreateChannel(address(), grpc::InsecureChannelCredentials());
+  }
+
+ private:
+  std::string dir_;
+  double lease_seconds_;
+  int port_ = 0, starts_ = 0;
+  mutable int local_count_ = 0;
+  std::unique_ptr<Process> coordinator_;
+  std::vector<std::unique_ptr<Process>> workers_;
+};
+
+std::string fetched(const Farm& farm, const std::string& job, uint32_t frame) {
+  char name[64];
+  std::snprintf(name, sizeof name, "%s.%04u.exr", job.c_str(), frame);
+  return farm.dir() + "/out-" + job + "/" + name;
+}
+
+TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
+  Farm farm("farm-e2e");
+  const std::string tiled = kCornell + " --spp 16 --passes 16 --res 64x64";
+  const std::string splat = kCornell + " --integrator light --spp 16 --passes 16 --res 48x48";
+  std::string a = farm.submit(tiled + " --frames 1-4 --tile-size 32");
+  std::string b = farm.submit(splat + " --frames 1-4");
+  farm.worker();
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + a).exit_code, 0);
+  EXPECT_EQ(farm.client("watch " + b).exit_code, 0);
+  for (const std::string& job : {a, b}) {
+    test::CommandResult r = farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    nlohmann::json s = farm.status(job);
+    EXPECT_EQ(s["state"], "completed");
+    ASSERT_EQ(s["frames"].size(), 4u);
+    for (const auto& f : s["frames"]) {
+      EXPECT_EQ(f["passes_merged"], 16);
+      EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 16.0);
+    }
+  }
+  for (uint32_t f = 1; f <= 4; ++f) {
+    expect_same_image(fetched(farm, a, f), farm.local(tiled, f));
+    expect_same_image(fetched(farm, b, f), farm.local(splat, f));
+  }
+  // Frames differ from each other (each has its own seed stream).
+  Image f1 = read_image(fetched(farm, a, 1)), f2 = read_image(fetched(farm, a, 2));
+  EXPECT_NE(f1.px, f2.px);
+  // The workers parsed each frame's scene once: tasks reuse the cached scene and BVH.
+}
+
+TEST(Farm, SigkilledWorkerLosesNoWorkAndTheImageStillEqualsTheLocalRender) {
+  Farm farm("farm-kill", /*lease_seconds=*/2);
+  // Tasks of about 0.1-0.3 s each, so the killed worker is caught holding a lease.
+  const std::string job_args = kCornell + " --spp 256 --passes 8 --res 64x64";
+  std::string job = farm.submit(job_args + " --frames 1 --tile-size 32");
+  Process& victim = farm.worker({});
+  ASSERT_TRUE(victim.wait_for_log("merged", 60)) << victim.log();
+  ASSERT_TRUE(victim.wait_for_log("leased", 10));
+  // Kill it right after it leases its next task (its log's last task line is a lease).
+  std::string before = victim.log();
+  size_t merged_lines = 0;
+  for (size_t p = 0; (p = before.find(": merged", p)) != std::string::npos; ++p) ++merged_lines;
+  for (int i = 0; i < 500; ++i) {
+    std::string log = victim.log();
+    size_t leased = log.rfind(": leased"), merged = log.rfind(": merged");
+    if (leased != std::string::npos && (merged == std::string::npos || leased > merged)) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  victim.signal(SIGKILL);
+  EXPECT_EQ(victim.wait(10), 128 + SIGKILL);
+  std::string log = victim.log();
+  EXPECT_GT(log.rfind(": leased"), log.rfind(": merged")) << "the worker held no lease when killed";
+  EXPECT_GE(merged_lines, 1u);
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  nlohmann::json s = farm.status(job);
+  EXPECT_EQ(s["frames"][0]["passes_merged"], 8);
+  EXPECT_DOUBLE_EQ(s["frames"][0]["spp"].get<double>(), 256.0);  // the spp asked, no more
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(fetched(farm, job, 1), farm.local(job_args, 1));
+}
+
+TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
+  Farm farm("farm-restart", /*lease_seconds=*/3);
+  const std::string job_args = kCornell + " --spp 128 --passes 32 --res 64x64";
+  std::string job = farm.submit(job_args + " --frames 1-2 --tile-size 32");
+  farm.worker();
+  farm.worker();
+  nlohmann::json s;
+  for (int i = 0; i < 3000; ++i) {
+    s = farm.status(job);
+    if (s["frames"][0]["passes_merged"].get<int>() >= 4) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 4);
+  farm.restart_coordinator();
+  // The restored job keeps what was checkpointed, and the workers reconnect by themselves.
+  nlohmann::json after = farm.status(job);
+  EXPECT_GE(after["frames"][0]["passes_merged"].get<int>(), 4);
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  nlohmann::json done = farm.status(job);
+  for (const auto& f : done["frames"]) {
+    EXPECT_EQ(f["passes_merged"], 32);
+    EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 128.0);  // nothing lost, nothing counted twice
+  }
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  for (uint32_t f = 1; f <= 2; ++f) expect_same_image(fetched(farm, job, f), farm.local(job_args, f));
+}
+
+TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
+  Farm farm("farm-noise");
+  // At 64x64 and 4 spp per pass the Cornell box reaches relMSE 0.01 after roughly 10 passes.
+  const std::string job_args = kCornell + " --spp 256 --passes 64 --res 64x64 --noise-target 0.01";
+  std::string job = farm.submit(job_args + " --frames 3 --tile-size 32");
+  farm.worker();
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  nlohmann::json f = farm.status(job)["frames"][0];
+  EXPECT_TRUE(f["stopped_on_target"].get<bool>());
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  std::string local = farm.local(job_args, 3);
+  Image farm_image = read_image(fetched(farm, job, 3)), local_image = read_image(local);
+  EXPECT_EQ(farm_image.attrs["rayfarm:passes"], local_image.attrs["rayfarm:passes"]);
+  EXPECT_EQ(farm_image.attrs["rayfarm:passes"],
+            "0-" + std::to_string(f["passes_merged"].get<int>() - 1));
+  EXPECT_LT(f["passes_merged"].get<int>(), 64);
+  expect_same_image(fetched(farm, job, 3), local);
+}
+
+TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
+  Farm farm("farm-midjob");
+  std::string job = farm.submit(kCornell + " --spp 64 --passes 64 --res 64x64 --frames 1");
+  Process& worker = farm.worker();
+  nlohmann::json s;
+  for (int i = 0; i < 3000; ++i) {
+    s = farm.status(job);
+    if (s["frames"][0]["passes_merged"].get<int>() >= 3) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 3);
+  std::string mid_dir = farm.dir() + "/mid";
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + mid_dir).exit_code, 0);
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  EXPECT_EQ(worker.wait(30), 0);
+  Image mid = read_image(mid_dir + "/" + job + ".0001.exr");
+  Image fin = read_image(fetched(farm, job, 1));
+  ASSERT_EQ(mid.w, 64);
+  int mid_passes = std::stoi(mid.attrs["rayfarm:passes"].substr(2)) + 1;  // "0-K"
+  EXPECT_GE(mid_passes, 3);
+  EXPECT_LT(mid_passes, 64);
+  EXPECT_EQ(fin.attrs["rayfarm:passes"], "0-63");
+  EXPECT_GT(std::stod(mid.attrs["rayfarm:rel_mse"]), std::stod(fin.attrs["rayfarm:rel_mse"]));
+  for (float v : mid.px) EXPECT_TRUE(std::isfinite(v));
+}
+
+TEST(Farm, HealthAndReflectionNameBothServices) {
+  Farm farm("farm-health");
+  EXPECT_EQ(check_health(farm.address()), "SERVING");
+  std::vector<std::string> names = list_services(farm.address());
+  auto has = [&](const std::string& n) {
+    return std::find(names.begin(), names.end(), n) != names.end();
+  };
+  EXPECT_TRUE(has("rayfarm.v1.JobService"));
+  EXPECT_TRUE(has("rayfarm.v1.WorkerService"));
+  EXPECT_TRUE(has("grpc.health.v1.Health"));
+  test::CommandResult r = farm.client("health " + farm.address() + " --services");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("SERVING"), std::string::npos);
+  r = test::run_command(test::rayfarm_binary() + " health 127.0.0.1:1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.output.find("unreachable"), std::string::npos) << r.output;
+}
+
+// --- Bad requests, straight through the generated stubs ------------------------------------
+
+grpc::Status complete_with(pb::WorkerService::Stub& stub, const pb::Task& task,
+                           const std::vector<pb::Chunk>& chunks) {
+  grpc::ClientContext ctx;
+  pb::CompleteResponse resp;
+  auto w = stub.CompleteTask(&ctx, &resp);
+  pb::CompleteRequest head;
+  head.mutable_header()->set_worker_id("test");
+  head.mutable_header()->set_lease_id(task.lease_id());
+  head.mutable_header()->set_task_id(task.task_id());
+  w->Write(head);
+  for (const pb::Chunk& c : chunks) {
+    pb::CompleteRequest m;
+    *m.mutable_chunk() = c;
+    if (!w->Write(m)) break;
+  }
+  w->WritesDone();
+  return w->Finish();
+}
+
+std::vector<pb::Chunk> chunks_of(const std::string& bytes) {
+  std::vector<pb::Chunk> out;
+  for_each_chunk(bytes, [&](pb::Chunk&& c) { out.push_back(std::move(c)); });
+  return out;
+}
+
+TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
+  Farm farm("farm-bad");
+  auto jobs = pb::JobService::NewStub(farm.channel());
+  auto workers = pb::WorkerService::NewStub(farm.channel());
+  {  // unknown job
+    grpc::ClientContext ctx;
+    pb::JobRef ref;
+    ref.set_job_id("j999999");
+    pb::JobStatus s;
+    grpc::Status st = jobs->GetJob(&ctx, ref, &s);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_NE(st.error_message().find("j999999"), std::string::npos);
+  }
+  {  // malformed frame range, at submit and from the CLI
+    grpc::ClientContext ctx;
+    pb::SubmitResponse resp;
+    auto w = jobs->Submit(&ctx, &resp);
+    pb::SubmitRequest m;
+    m.mutable_spec()->set_scene_path("scene.json");
+    m.mutable_spec()->set_frames("1-x");
+    w->Write(m);
+    w->WritesDone();
+    grpc::Status st = w->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(st.error_message().find("frames"), std::string::npos) << st.error_message();
+    test::CommandResult r = farm.client("submit " + kCornell + " --frames 5-1:2");
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+  }
+  {  // a scene that does not parse is refused at submit with the parser's message
+    std::string bad = "{\"format\": \"rayfarm-scene\", \"version\": 1, \"camera\": 3}";
+    grpc::ClientContext ctx;
+    pb::SubmitResponse resp;
+    auto w = jobs->Submit(&ctx, &resp);
+    pb::SubmitRequest m;
+    m.mutable_spec()->set_scene_path("broken.json");
+    pb::BundleFile* f = m.mutable_spec()->add_files();
+    f->set_path("broken.json");
+    f->set_sha256(sha256_hex(bad));
+    w->Write(m);
+    for (pb::Chunk& c : chunks_of(bad)) {
+      pb::SubmitRequest cm;
+      *cm.mutable_blob_chunk() = c;
+      w->Write(cm);
+    }
+    w->WritesDone();
+    grpc::Status st = w->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(st.error_message().find("broken.json"), std::string::npos) << st.error_message();
+    EXPECT_NE(st.error_message().find("camera"), std::string::npos) << st.error_message();
+  }
+  // A real job and a lease on one of its tasks.
+  std::string job = farm.submit(kCornell + " --spp 4 --passes 4 --res 64x64 --tile-size 32");
+  pb::Task task;
+  {
+    grpc::ClientContext ctx;
+    pb::LeaseRequest req;
+    req.set_worker_id("test-worker");
+    pb::LeaseResponse resp;
+    ASSERT_TRUE(workers->LeaseTask(&ctx, req, &resp).ok());
+    ASSERT_TRUE(resp.has_task());
+    task = resp.task();
+  }
+  // A buffer of the wrong size for the task's tile.
+  BufferHeader h;
+  h.scene_digest = task.scene_digest();
+  h.passes = PassSet::range(task.pass(), task.pass() + 1);
+  h.width = 64, h.height = 64;
+  SampleBuffer wrong(h, Rect{0, 0, 8, 8}, false);
+  grpc::Status st = complete_with(*workers, task, chunks_of(encode_buffer(wrong)));
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
+  // Bytes that are not a sample buffer.
+  st = complete_with(*workers, task, chunks_of("not a sample buffer"));
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
+  // A checksum that does not match.
+  std::vector<pb::Chunk> corrupt = chunks_of(encode_buffer(wrong));
+  corrupt[0].mutable_data()->at(10) ^= 1;
+  st = complete_with(*workers, task, corrupt);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::DATA_LOSS) << st.error_message();
+  // Over the size limit (announced in the first chunk; nothing that large is sent).
+  std::vector<pb::Chunk> huge = chunks_of("x");
+  huge[0].set_total_size(uint64_t(64) << 30);
+  st = complete_with(*workers, task, huge);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << st.error_message();
+  // Offsets out of order.
+  std::vector<pb::Chunk> gap = chunks_of(std::string(3 << 20, 'x'));
+  gap.erase(gap.begin() + 1);
+  st = complete_with(*workers, task, gap);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
+  {  // Renewing: an unknown lease, then one that ended (handed back).
+    grpc::ClientContext c1, c2, c3;
+    pb::RenewRequest rr;
+    rr.set_worker_id("test-worker");
+    rr.set_lease_id("no-such-lease");
+    pb::RenewResponse rresp;
+    EXPECT_EQ(workers->RenewLease(&c1, rr, &rresp).error_code(), grpc::StatusCode::NOT_FOUND);
+    pb::FailRequest fr;
+    fr.set_worker_id("test-worker");
+    fr.set_lease_id(task.lease_id());
+    fr.set_task_id(task.task_id());
+    fr.set_handed_back(true);
+    pb::FailResponse fresp;
+    ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
+    rr.set_lease_id(task.lease_id());
+    st = workers->RenewLease(&c3, rr, &rresp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << st.error_message();
+  }
+  {  // Fetching a frame with no pass yet, and a frame the job does not have.
+    grpc::ClientContext c1, c2;
+    pb::FetchRequest fr;
+    fr.set_job_id(job);
+    fr.set_frame(0);
+    pb::FetchResponse resp;
+    auto r1 = jobs->FetchFrame(&c1, fr);
+    while (r1->Read(&resp)) {
+    }
+    EXPECT_EQ(r1->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+    fr.set_frame(77);
+    auto r2 = jobs->FetchFrame(&c2, fr);
+    while (r2->Read(&resp)) {
+    }
+    EXPECT_EQ(r2->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+  // Still serving: the job renders to completion and the coordinator never crashed.
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + job).exit_code, 0);
+  EXPECT_EQ(check_health(farm.address()), "SERVING");
+  EXPECT_TRUE(farm.coordinator().running());
+  // Cancelling a finished job is refused; status of an unknown job exits 2.
+  EXPECT_NE(farm.client("cancel " + job).exit_code, 0);
+  EXPECT_EQ(farm.client("status j424242").exit_code, 2);
+}
+
+}  // namespace
+}  // namespace rf
