@@ -9,8 +9,11 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <random>
 
 #include "engine/camera.h"
+#include "engine/film.h"
+#include "engine/progressive.h"
 #include "engine/render.h"
 #include "engine/sampler.h"
 #include "engine/sampling.h"
@@ -202,6 +205,51 @@ void add_bench_options(CLI::App& app, BenchOptions& o) {
   app.add_flag("--quick", o.quick, "a tiny run that only checks the benchmark works");
 }
 
+// Merge throughput, the coordinator's work per completed task: decode the task's wire bytes,
+// assemble the tile into its pass, merge each complete pass into the frame (FrameAccumulator),
+// on one core. Reported in GB/s of encoded task buffers.
+void bench_merge(bool quick) {
+  const int size = quick ? 64 : 512, tile = quick ? 32 : 64;
+  const uint32_t passes = quick ? 2 : 8;
+  BufferHeader h;
+  h.scene_digest = "bench";
+  h.integrator = "path";
+  h.width = h.height = size;
+  std::vector<Rect> tiles;
+  for (int y = 0; y < size; y += tile)
+    for (int x = 0; x < size; x += tile) tiles.push_back({x, y, tile, tile});
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<std::string> wire;
+  for (uint32_t p = 0; p < passes; ++p)
+    for (const Rect& r : tiles) {
+      BufferHeader th = h;
+      th.passes = PassSet::range(p, p + 1);
+      SampleBuffer b(th, r, false);
+      for (int y = r.y0; y < r.y1(); ++y)
+        for (int x = r.x0; x < r.x1(); ++x)
+          for (int s = 0; s < 4; ++s) b.add_sample(x, y, RGB(float(u(rng)), float(u(rng)), float(u(rng))));
+      b.finish_pass();
+      wire.push_back(encode_buffer(b));
+    }
+  double bytes = 0;
+  for (const std::string& w : wire) bytes += double(w.size());
+  ProgressiveOptions po{0, passes, 0};
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<SampleBuffer> decoded;
+  for (const std::string& w : wire) decoded.push_back(decode_buffer(w, "bench"));
+  auto t1 = std::chrono::steady_clock::now();
+  FrameAccumulator acc(h, tiles, false, po);
+  for (SampleBuffer& b : decoded) acc.add(std::move(b));
+  auto t2 = std::chrono::steady_clock::now();
+  double decode_s = std::chrono::duration<double>(t1 - t0).count();
+  double merge_s = std::chrono::duration<double>(t2 - t1).count();
+  std::printf("\nmerge (one core): %zu task buffers of %dx%d px, %.1f MB encoded, frame %dx%d, %u passes\n",
+              wire.size(), tile, tile, bytes / 1e6, size, size, passes);
+  std::printf("  decode + merge %.2f GB/s | merge alone %.2f GB/s | decode alone %.2f GB/s\n",
+              bytes / (decode_s + merge_s) / 1e9, bytes / merge_s / 1e9, bytes / decode_s / 1e9);
+}
+
 int run_bench(const BenchOptions& in) {
   BenchOptions o = in;
   if (o.quick) o.spp = 1, o.res = 32, o.triangles = 20000;
@@ -222,6 +270,7 @@ int run_bench(const BenchOptions& in) {
   }
   bench_integrators(cornell, ov);
   bench_splat_accumulation(o.quick);
+  bench_merge(o.quick);
   if (o.generated) {
     Scene s = load_scene(cornell, ov);
     bench_scene("generated (cornell+sphere)", with_generated_spheres(s, o.triangles, false), o.spp);

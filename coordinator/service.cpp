@@ -37,7 +37,7 @@ using grpc::StatusCode;
 
 namespace {
 
-constexpr int kDefaultTileSize = 64;
+constexpr int kDefaultTileSize = 128;  // big enough that per-task costs stay small
 
 Status error(StatusCode code, const std::string& message) { return Status(code, message); }
 

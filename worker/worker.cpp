@@ -106,6 +106,13 @@ class Worker {
     std::unique_ptr<Renderer> renderer;
   };
   std::deque<CachedScene> scenes_;  // most recently used first
+  // The previous task's upload runs while the next task renders, hiding the round trip and the
+  // coordinator's durable write. At most one upload is in flight.
+  std::thread uploader_;
+  void start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds);
+  void finish_upload() {
+    if (uploader_.joinable()) uploader_.join();
+  }
   static constexpr size_t kScenesKept = 2;
 };
 
@@ -344,13 +351,20 @@ Worker::Outcome Worker::run_task(const pb::Task& task) {
   result.header.core_seconds = core_seconds;
   spdlog::info("task {}: rendered in {:.2f} s ({:.1f} core-s)", task.task_id(),
                std::chrono::duration<double>(Clock::now() - t0).count(), core_seconds);
-  try {
-    upload(task, result, core_seconds);
-  } catch (const TaskFailure& e) {
-    spdlog::error("task {}: {}", task.task_id(), e.what());
-    if (!stopping()) fail_task(task, e.what(), false);
-  }
+  start_upload(task, std::move(result), core_seconds);
   return Outcome::Done;
+}
+
+void Worker::start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds) {
+  finish_upload();
+  uploader_ = std::thread([this, task, buffer = std::move(buffer), core_seconds] {
+    try {
+      upload(task, buffer, core_seconds);
+    } catch (const TaskFailure& e) {
+      spdlog::error("task {}: {}", task.task_id(), e.what());
+      if (!stopping()) fail_task(task, e.what(), false);
+    }
+  });
 }
 
 int Worker::run() {
@@ -392,8 +406,13 @@ int Worker::run() {
     }
     attempt = 0;
     if (!resp.has_task()) {
+      if (uploader_.joinable()) {  // our own upload may be what the coordinator waits for
+        finish_upload();
+        continue;
+      }
       if (o_.exit_when_idle && resp.no_more_work()) {
         spdlog::info("no work left; exiting");
+        finish_upload();
         return 0;
       }
       sleep_unless_stopped(o_.idle_poll_seconds);
@@ -401,11 +420,13 @@ int Worker::run() {
     }
     spdlog::info("task {}: leased ({})", resp.task().task_id(), resp.task().lease_id());
     if (run_task(resp.task()) == Outcome::HandedBack) {
+      finish_upload();
       spdlog::shutdown();
       std::_Exit(0);
     }
     if (o_.max_tasks > 0 && ++tasks >= o_.max_tasks) break;
   }
+  finish_upload();
   spdlog::info("worker {} stopped", worker_id_);
   return 0;
 }
