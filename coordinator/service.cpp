@@ -233,6 +233,7 @@ std::shared_ptr<JobRecord> CoordinatorCore::build_job(const std::string& id, uin
     frame_ov.frame = number;
     try {
       apply_overrides(scene, frame_ov);
+      check_renderable(scene);
     } catch (const std::exception& e) {
       throw RequestError{StatusCode::INVALID_ARGUMENT, e.what()};
     }

@@ -66,10 +66,15 @@ Renderer::Renderer(const Scene& scene)
       accel_(std::make_unique<Accel>(scene)),
       lights_(std::make_unique<LightSet>(scene)),
       textures_(std::make_unique<TextureEvaluator>(scene)) {
+  check_renderable(scene);
+}
+
+void check_renderable(const Scene& scene) {
   // Integrators whose light paths start on the lights cannot use lights without a finite
   // emission position: refuse the scene before any task runs.
-  if (kind_ == IntegratorKind::LightTracing || kind_ == IntegratorKind::InstantRadiosity ||
-      kind_ == IntegratorKind::PhotonMapping) {
+  IntegratorKind kind = integrator_kind(scene.render.integrator.type);
+  if (kind == IntegratorKind::LightTracing || kind == IntegratorKind::InstantRadiosity ||
+      kind == IntegratorKind::PhotonMapping) {
     bool directional = false;
     for (const Light& l : scene.lights) directional |= l.type == LightType::Directional;
     if (scene.environment || directional)

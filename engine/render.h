@@ -60,6 +60,10 @@ class Renderer {
 // Canonical text of the settings that change pixels, beside the scene digest (BufferHeader).
 std::string settings_text(const Scene& scene);
 
+// Throws SceneError when the scene's integrator cannot render it (the Renderer's own check, without
+// building one; the coordinator runs it at submit).
+void check_renderable(const Scene& scene);
+
 // What Renderer::header and Renderer::tiles return, without building a renderer (the
 // coordinator splits and checks frames from a parsed scene alone).
 BufferHeader frame_header(const Scene& scene, const PassSet& passes);

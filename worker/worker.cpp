@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <mutex>
 #include <random>
+#include <set>
 #include <thread>
 
 #include "coordinator/blob_store.h"
@@ -106,6 +107,7 @@ class Worker {
     std::unique_ptr<Renderer> renderer;
   };
   std::deque<CachedScene> scenes_;  // most recently used first
+  std::set<std::string> verified_;   // blob digests checked against their content
   // The previous task's upload runs while the next task renders, hiding the round trip and the
   // coordinator's durable write. At most one upload is in flight.
   std::thread uploader_;
@@ -204,8 +206,18 @@ const Renderer& Worker::prepare(const pb::Task& task) {
       }
       return *scenes_.front().renderer;
     }
-  for (const BundleEntry& e : bundle)
+  for (const BundleEntry& e : bundle) {
+    // A cached blob is checked once per process: a corrupted cache is fetched again, not rendered.
+    if (blobs_.has(e.sha256) && !verified_.count(e.sha256)) {
+      std::optional<std::string> bytes = blobs_.get(e.sha256);
+      if (!bytes || sha256_hex(*bytes) != e.sha256) {
+        spdlog::warn("cached blob {} is corrupted; fetching it again", e.sha256);
+        fs::remove(blobs_.path_of(e.sha256));
+      }
+    }
     if (!blobs_.has(e.sha256)) fetch_blob(e.sha256);
+    verified_.insert(e.sha256);
+  }
   // One directory per bundle and process: workers sharing a cache never write the same files.
   std::string dir = cache_dir_ + "/bundles/" + sha256_hex(files).substr(0, 16) + "-" +
                     std::to_string(::getpid());
@@ -313,7 +325,8 @@ Worker::Outcome Worker::run_task(const pb::Task& task) {
   while (!finished) {
     auto wake = next_renew;
     if (stopping()) wake = std::min(wake, stop_at_ + std::chrono::duration<double>(o_.drain_seconds));
-    cv_.wait_until(lock, wake, [&] { return finished; });
+    bool was_stopping = stopping();  // a signal moves the wake-up to the drain deadline
+    cv_.wait_until(lock, wake, [&] { return finished || stopping() != was_stopping; });
     if (finished) break;
     if (stopping() && Clock::now() >= stop_at_ + std::chrono::duration<double>(o_.drain_seconds)) {
       lock.unlock();
