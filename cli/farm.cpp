@@ -38,7 +38,12 @@ std::string default_coordinator() {
 namespace {
 
 std::unique_ptr<pb::JobService::Stub> job_stub(const std::string& addr) {
-  return pb::JobService::NewStub(grpc::CreateChannel(addr, grpc::InsecureChannelCredentials()));
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
+  return pb::JobService::NewStub(
+      grpc::CreateCustomChannel(addr, grpc::InsecureChannelCredentials(), args));
 }
 
 void set_deadline(grpc::ClientContext& ctx, double seconds) {
@@ -246,6 +251,7 @@ int cmd_watch(const std::string& addr, const std::string& job) {
   std::map<uint32_t, std::string> last;
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
+    if (attempt > 0) ctx.set_wait_for_ready(true);  // reconnecting: wait for the coordinator
     pb::JobRef ref;
     ref.set_job_id(job);
     auto reader = stub->WatchJob(&ctx, ref);

@@ -394,6 +394,8 @@ int main(int argc, char** argv) {
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                   size_t(threads));
   spdlog::set_pattern("%^%l%$: %v");
+  // Long-running services log with timestamps.
+  if (coord->parsed() || worker->parsed()) spdlog::set_pattern("[%Y-%m-%d %H:%M:%S.%e] %^%l%$: %v");
   try {
     if (render->parsed()) return cmd_render(ra);
     if (merge->parsed()) return cmd_merge(merge_inputs, merge_output, merge_exposure);

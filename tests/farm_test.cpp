@@ -231,8 +231,8 @@ TEST(Farm, SigkilledWorkerLosesNoWorkAndTheImageStillEqualsTheLocalRender) {
 
 TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
   Farm farm("farm-restart", /*lease_seconds=*/3);
-  // About 0.05 s per pass and frame, 3 s in all: the kill lands mid-job even on a loaded machine.
-  const std::string job_args = kCornell + " --spp 1024 --passes 32 --res 64x64";
+  // About 0.03 s per pass and frame, 2 s in all: the kill lands mid-job even on a loaded machine.
+  const std::string job_args = kCornell + " --spp 512 --passes 32 --res 64x64";
   std::string job = farm.submit(job_args + " --frames 1-2 --tile-size 32");
   farm.worker();
   farm.worker();
@@ -252,7 +252,7 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
   nlohmann::json done = farm.status(job);
   for (const auto& f : done["frames"]) {
     EXPECT_EQ(f["passes_merged"], 32);
-    EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 128.0);  // nothing lost, nothing counted twice
+    EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);  // nothing lost, nothing counted twice
   }
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   for (uint32_t f = 1; f <= 2; ++f) expect_same_image(fetched(farm, job, f), farm.local(job_args, f));

@@ -50,9 +50,12 @@ bool transient(const grpc::Status& s) {
          s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
 }
 
+// Every RPC has a deadline, and waits for the channel to (re)connect within it instead of failing
+// at once while the coordinator restarts.
 void set_deadline(grpc::ClientContext& ctx, double seconds) {
   ctx.set_deadline(std::chrono::system_clock::now() +
                    std::chrono::milliseconds(int64_t(seconds * 1000)));
+  ctx.set_wait_for_ready(true);
 }
 
 struct TaskFailure : std::runtime_error {
@@ -124,8 +127,11 @@ void Worker::connect(int keepalive_seconds) {
   args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_seconds * 1000);
   args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, std::max(1, keepalive_seconds / 2) * 1000);
   args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 250);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 10000);
+  // Reconnect attempts back off (jittered by gRPC) up to 2 s: a restarted coordinator is found
+  // again within about 2 s.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
   channel_ = grpc::CreateCustomChannel(o_.coordinator, grpc::InsecureChannelCredentials(), args);
   stub_ = pb::WorkerService::NewStub(channel_);
 }
@@ -408,7 +414,7 @@ int Worker::run() {
     pb::LeaseRequest req;
     req.set_worker_id(worker_id_);
     grpc::ClientContext ctx;
-    set_deadline(ctx, 10);
+    set_deadline(ctx, 5);
     pb::LeaseResponse resp;
     grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
     if (!s.ok()) {
