@@ -127,7 +127,10 @@ int cmd_submit(const std::string& addr, const SubmitArgs& a) {
     for (const BundleEntry& e : bundle_of_scene((dir / name).string())) files[e.path] = e.sha256;
   }
   pb::JobSpec spec;
-  spec.set_name(a.name.empty() ? scene.stem().string() : a.name);
+  // Default name: the scene's stem, or its directory's name for the usual "scene.json".
+  std::string stem = scene.stem().string();
+  if (stem == "scene" && !dir.filename().empty()) stem = dir.filename().string();
+  spec.set_name(a.name.empty() ? stem : a.name);
   spec.set_scene_path(pattern);
   spec.set_frames(a.frames);
   *spec.mutable_overrides() = to_wire_overrides(a.overrides);

@@ -718,21 +718,24 @@ Status CoordinatorCore::complete(grpc::ServerReaderInterface<pb::CompleteRequest
   } catch (const std::exception& e) {
     return error(StatusCode::INTERNAL, std::string("cannot store the result: ") + e.what());
   }
+  {
+    std::lock_guard lock(mu_);
+    if (scheduler_.complete(header.lease_id(), ref, now()) != CompleteOutcome::Accepted) {
+      out->set_accepted(false);  // the job was cancelled or failed meanwhile
+      return Status::OK;
+    }
+    auto lw = lease_worker_.find(header.lease_id());
+    std::string worker = lw != lease_worker_.end() ? lw->second : header.worker_id();
+    store_.task_done(job->id, ref.frame, ref.pass, ref.tile, worker);
+    job->core_seconds += buffer.header.core_seconds;
+    store_.add_core_seconds(job->id, buffer.header.core_seconds);
+  }
+  // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
+  // frames' merges go on meanwhile.
+  bool merged = f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
+  if (merged) f->checkpoint->save_prefix(f->acc->frame());
   std::lock_guard lock(mu_);
-  if (scheduler_.complete(header.lease_id(), ref, now()) != CompleteOutcome::Accepted) {
-    out->set_accepted(false);  // the job was cancelled or failed meanwhile
-    return Status::OK;
-  }
-  auto lw = lease_worker_.find(header.lease_id());
-  std::string worker = lw != lease_worker_.end() ? lw->second : header.worker_id();
-  store_.task_done(job->id, ref.frame, ref.pass, ref.tile, worker);
-  double core_seconds = buffer.header.core_seconds;
-  job->core_seconds += core_seconds;
-  store_.add_core_seconds(job->id, core_seconds);
-  if (f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged) {
-    f->checkpoint->save_prefix(f->acc->frame());
-    f->last_merge_at = now();
-  }
+  if (merged) f->last_merge_at = now();
   publish_frame(*job, *f);
   if (f->done) f->acc.reset();  // its image lives in the checkpoint now
   out->set_accepted(true);
