@@ -11,8 +11,8 @@ cd "$(dirname "$0")/.."
 TASKS=${1:-1000}
 shift || true
 JOB_ARGS=${*:-scenes/cornell-box/scene.json --spp 256 --passes 16 --res 256x256}
-./rayfarm --help >/dev/null  # build first
-B=build/bin/rayfarm
+B=${RAYFARM_BIN:-build/bin/rayfarm}
+[ -n "${RAYFARM_BIN:-}" ] || ./rayfarm --help >/dev/null  # build first
 DIR=$(mktemp -d)
 trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$DIR"' EXIT
 
@@ -58,5 +58,5 @@ $B watch "$job" >/dev/null
 t3=$(now)
 $B fetch "$job" -o "$DIR/out" 2>/dev/null
 same=$($B compare "$DIR/out/$job.0000.exr" "$DIR/local.exr" | awk '{print $2}')
-awk -v l="$(echo "$t1 - $t0" | bc)" -v f="$(echo "$t3 - $t2" | bc)" -v args="$JOB_ARGS" -v same="$same" \
-  'BEGIN{printf "overhead: %s\n  local render %.2f s | coordinator + 2 workers %.2f s | farm/local %.3f | farm vs local RMSE %s\n", args, l, f, f/l, same}'
+awk -v t0="$t0" -v t1="$t1" -v t2="$t2" -v t3="$t3" -v args="$JOB_ARGS" -v same="$same" \
+  'BEGIN{l = t1 - t0; f = t3 - t2; printf "overhead: %s\n  local render %.2f s | coordinator + 2 workers %.2f s | farm/local %.3f | farm vs local RMSE %s\n", args, l, f, f/l, same}'

@@ -388,6 +388,16 @@ TEST(Farm, CorruptedWorkerCacheIsFetchedAgain) {
   EXPECT_NE(w.log().find("corrupted; fetching it again"), std::string::npos) << w.log();
 }
 
+TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
+  // A tiny run that shows the script works (not how fast): its farm render must equal its local one.
+  test::CommandResult r = test::run_command(
+      "cd " + test::source_dir() + " && RAYFARM_BIN=" + test::rayfarm_binary() +
+      " bench/farm_bench.sh 20 scenes/cornell-box/scene.json --spp 4 --passes 2 --res 32x32");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("lease+complete round trips/s"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("farm vs local RMSE 0\n"), std::string::npos) << r.output;
+}
+
 // --- Bad requests, straight through the generated stubs ------------------------------------
 
 grpc::Status complete_with(pb::WorkerService::Stub& stub, const pb::Task& task,
