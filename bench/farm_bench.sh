@@ -18,6 +18,7 @@ trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$DIR"' EXIT
 
 start_coordinator() {
   $B coordinator --listen 127.0.0.1:0 --state-dir "$DIR/state-$1" >"$DIR/coord-$1.log" 2>&1 &
+  COORD=$!
   for _ in $(seq 500); do
     port=$(sed -n 's/.*(port \([0-9]*\)).*/\1/p' "$DIR/coord-$1.log")
     [ -n "$port" ] && break
@@ -33,30 +34,42 @@ for workers in 1 2; do
   job=$($B submit scenes/cornell-box/scene.json --res 8x8 --tile-size 8 --spp "$TASKS" \
     --passes "$TASKS" --name tiny 2>/dev/null)
   t0=$(now)
+  pids=()
   for w in $(seq "$workers"); do
     $B worker --exit-when-idle --cache-dir "$DIR/cache" --threads 1 >"$DIR/tiny-w$w.log" 2>&1 &
+    pids+=($!)
   done
   $B watch "$job" >/dev/null
   t1=$(now)
   echo "round trips: $TASKS tiny tasks, $workers worker(s): $(awk -v n="$TASKS" -v a="$t0" -v b="$t1" \
     'BEGIN{printf "%.2f s, %.0f lease+complete round trips/s", b-a, n/(b-a)}')"
-  wait $(jobs -p | tail -n "$workers") 2>/dev/null || true
-  kill %1 2>/dev/null || true
-  wait 2>/dev/null || true
+  wait "${pids[@]}" 2>/dev/null || true
+  kill "$COORD" 2>/dev/null || true
+  wait "$COORD" 2>/dev/null || true
 done
 
-start_coordinator overhead
 t0=$(now)
 $B render $JOB_ARGS -q -o "$DIR/local.exr" >/dev/null 2>&1
 t1=$(now)
-job=$($B submit $JOB_ARGS --name overhead 2>/dev/null)
-t2=$(now)
-for w in 1 2; do
-  $B worker --exit-when-idle --cache-dir "$DIR/cache" >"$DIR/over-w$w.log" 2>&1 &
+echo "overhead: $JOB_ARGS"
+awk -v a="$t0" -v b="$t1" 'BEGIN{printf "  local render %.2f s\n", b - a}'
+# One worker using all cores for one task at a time, against two sharing the machine.
+for workers in 1 2; do
+  start_coordinator "overhead$workers"
+  job=$($B submit $JOB_ARGS --name overhead 2>/dev/null)
+  t2=$(now)
+  pids=()
+  for w in $(seq "$workers"); do
+    $B worker --exit-when-idle --cache-dir "$DIR/cache" >"$DIR/over$workers-w$w.log" 2>&1 &
+    pids+=($!)
+  done
+  $B watch "$job" >/dev/null
+  t3=$(now)
+  $B fetch "$job" -o "$DIR/out$workers" 2>/dev/null
+  same=$($B compare "$DIR/out$workers/$job.0000.exr" "$DIR/local.exr" | awk '{print $2}')
+  awk -v t0="$t0" -v t1="$t1" -v t2="$t2" -v t3="$t3" -v n="$workers" -v same="$same" \
+    'BEGIN{l = t1 - t0; f = t3 - t2; printf "  coordinator + %d worker(s) %.2f s | farm/local %.3f | farm vs local RMSE %s\n", n, f, f/l, same}'
+  wait "${pids[@]}" 2>/dev/null || true
+  kill "$COORD" 2>/dev/null || true
+  wait "$COORD" 2>/dev/null || true
 done
-$B watch "$job" >/dev/null
-t3=$(now)
-$B fetch "$job" -o "$DIR/out" 2>/dev/null
-same=$($B compare "$DIR/out/$job.0000.exr" "$DIR/local.exr" | awk '{print $2}')
-awk -v t0="$t0" -v t1="$t1" -v t2="$t2" -v t3="$t3" -v args="$JOB_ARGS" -v same="$same" \
-  'BEGIN{l = t1 - t0; f = t3 - t2; printf "overhead: %s\n  local render %.2f s | coordinator + 2 workers %.2f s | farm/local %.3f | farm vs local RMSE %s\n", args, l, f, f/l, same}'

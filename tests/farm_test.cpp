@@ -395,7 +395,11 @@ TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
       " bench/farm_bench.sh 20 scenes/cornell-box/scene.json --spp 4 --passes 2 --res 32x32");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("lease+complete round trips/s"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("farm vs local RMSE 0\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("2 worker(s)"), std::string::npos) << r.output;
+  size_t equal = 0;  // one line per worker count, each with the farm image equal to the local one
+  for (size_t p = 0; (p = r.output.find("farm vs local RMSE 0\n", p)) != std::string::npos; ++p)
+    ++equal;
+  EXPECT_EQ(equal, 2u) << r.output;
 }
 
 // --- Bad requests, straight through the generated stubs ------------------------------------
