@@ -42,6 +42,7 @@ struct RenderContext {
   const LightSet& lights;
   const TextureEvaluator& textures;
   float pixel_spread = 0;  // angle one pixel subtends at the camera (for texture footprints)
+  uint32_t frame = 0;      // the frame rendered: its seed stream (DESIGN.md determinism contract)
 };
 
 // Per-thread counters an integrator updates; summed into the task's buffer.

@@ -63,6 +63,7 @@ std::string settings_text(const Scene& s) {
 Renderer::Renderer(const Scene& scene)
     : scene_(scene),
       kind_(integrator_kind(scene.render.integrator.type)),
+      frame_(scene.render.frame),
       accel_(std::make_unique<Accel>(scene)),
       lights_(std::make_unique<LightSet>(scene)),
       textures_(std::make_unique<TextureEvaluator>(scene)) {
@@ -111,12 +112,19 @@ std::vector<Rect> frame_tiles(const Scene& scene, int tile_size) {
   return out;
 }
 
-BufferHeader Renderer::header(const PassSet& passes) const { return frame_header(scene_, passes); }
+BufferHeader Renderer::header(const PassSet& passes) const {
+  BufferHeader h = frame_header(scene_, passes);
+  h.frame = frame_;
+  return h;
+}
+
+void Renderer::set_frame(uint32_t frame) { frame_ = frame; }
 
 std::vector<Rect> Renderer::tiles(int tile_size) const { return frame_tiles(scene_, tile_size); }
 
 RenderContext Renderer::context() const {
   RenderContext ctx{scene_, *accel_, *lights_, *textures_};
+  ctx.frame = frame_;
   float t = std::tan(0.5f * scene_.camera.fov_deg * kPi / 180.0f);
   ctx.pixel_spread = 2 * t / float(std::min(scene_.film.width, scene_.film.height));
   return ctx;
@@ -161,7 +169,7 @@ SampleBuffer Renderer::render_camera_paths(const Rect& rect, uint32_t pass, bool
     for (int y = y_begin; y < y_end; ++y)
       for (int x = rect.x0; x < rect.x1(); ++x)
         for (uint64_t s = 0; s < spp; ++s) {
-          sampler.start_camera_sample(rs.seed, rs.frame, pass, x, y, s);
+          sampler.start_camera_sample(rs.seed, frame_, pass, x, y, s);
           FilterSample fs = sample_filter(scene_.film.filter, sampler.get_2d());
           Vec2 u_lens = sampler.get_2d();
           Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x,
@@ -212,7 +220,7 @@ SampleBuffer Renderer::render_light_paths(uint32_t pass, bool parallel) const {
     Sampler sampler(Sampler::Kind::Independent);  // light paths: independent (sampler.h)
     SplatTarget target{&out, w, h, &scene_.film.filter};
     for (uint64_t i = chunk * kChunk; i < std::min(paths, (chunk + 1) * kChunk); ++i) {
-      sampler.start_light_path(rs.seed, rs.frame, pass, i);
+      sampler.start_light_path(rs.seed, frame_, pass, i);
       trace_light_path(ctx, camera, sampler, target, counters);
     }
     rays += counters.rays;
@@ -261,7 +269,7 @@ SampleBuffer Renderer::render_bdpt(uint32_t pass, bool parallel) const {
     for (int y = chunk * kRowsPerChunk; y < std::min(h, (chunk + 1) * kRowsPerChunk); ++y)
       for (int x = 0; x < w; ++x)
         for (uint64_t s = 0; s < spp; ++s) {
-          sampler.start_camera_sample(rs.seed, rs.frame, pass, x, y, s);
+          sampler.start_camera_sample(rs.seed, frame_, pass, x, y, s);
           FilterSample fs = sample_filter(scene_.film.filter, sampler.get_2d());
           Vec2 u_lens = sampler.get_2d();
           Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x,
@@ -295,8 +303,8 @@ SampleBuffer Renderer::render_bdpt(uint32_t pass, bool parallel) const {
 // in flight (a local render works on a window of passes; a worker on one task at a time).
 template <class T, class Build>
 std::shared_ptr<const T> cached_pass_state(std::mutex& mu,
-                                           std::map<uint32_t, std::shared_ptr<const void>>& cache,
-                                           uint32_t pass, Build build) {
+                                           std::map<uint64_t, std::shared_ptr<const void>>& cache,
+                                           uint64_t pass, Build build) {
   constexpr size_t kKeep = 8;
   {
     std::lock_guard<std::mutex> lock(mu);
@@ -311,7 +319,7 @@ std::shared_ptr<const T> cached_pass_state(std::mutex& mu,
 }
 
 std::shared_ptr<const VplSet> Renderer::pass_vpls(uint32_t pass, std::atomic<uint64_t>& rays) const {
-  return cached_pass_state<VplSet>(cache_mutex_, pass_cache_, pass, [&] {
+  return cached_pass_state<VplSet>(cache_mutex_, pass_cache_, pass_key(pass), [&] {
     TraceCounters counters;
     auto v = build_vpls(context(), pass, counters);
     rays += counters.rays;
@@ -321,7 +329,7 @@ std::shared_ptr<const VplSet> Renderer::pass_vpls(uint32_t pass, std::atomic<uin
 
 std::shared_ptr<const PhotonMap> Renderer::pass_photons(uint32_t pass,
                                                         std::atomic<uint64_t>& rays) const {
-  return cached_pass_state<PhotonMap>(cache_mutex_, pass_cache_, pass, [&] {
+  return cached_pass_state<PhotonMap>(cache_mutex_, pass_cache_, pass_key(pass), [&] {
     TraceCounters counters;
     auto p = build_photon_map(context(), pass, counters);
     rays += counters.rays;

@@ -40,6 +40,12 @@ class Renderer {
   // (a worker rendering one task on all cores); the pixels are the same either way.
   SampleBuffer render_task(const Rect& rect, uint32_t pass, bool parallel) const;
 
+  // Renders another frame of the same scene from now on (the frame only selects the seed stream,
+  // so the BVH, lights and textures are kept: a worker renders a sequence without rebuilding).
+  // Not concurrent with render_task.
+  void set_frame(uint32_t frame);
+  uint32_t frame() const { return frame_; }
+
  private:
   SampleBuffer render_camera_paths(const Rect& rect, uint32_t pass, bool parallel) const;
   SampleBuffer render_light_paths(uint32_t pass, bool parallel) const;
@@ -49,12 +55,15 @@ class Renderer {
 
   const Scene& scene_;
   IntegratorKind kind_;
+  uint32_t frame_;
   std::unique_ptr<Accel> accel_;
   std::unique_ptr<LightSet> lights_;
   std::unique_ptr<TextureEvaluator> textures_;
   // Per-pass state of IR / PPM (see integrator.h), shared by a pass's tiles.
   mutable std::mutex cache_mutex_;
-  mutable std::map<uint32_t, std::shared_ptr<const void>> pass_cache_;
+  // Keyed by (frame, pass): VPLs and photons belong to one frame's seed stream.
+  mutable std::map<uint64_t, std::shared_ptr<const void>> pass_cache_;
+  uint64_t pass_key(uint32_t pass) const { return (uint64_t(frame_) << 32) | pass; }
 };
 
 // Canonical text of the settings that change pixels, beside the scene digest (BufferHeader).

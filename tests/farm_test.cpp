@@ -144,6 +144,7 @@ class Farm {
     start_coordinator(port_);
   }
 
+  std::string worker_log(size_t i) const { return workers_.at(i)->log(); }
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   const std::string& dir() const { return dir_; }
   Process& coordinator() { return *coordinator_; }
@@ -194,7 +195,12 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
   // Frames differ from each other (each has its own seed stream).
   Image f1 = read_image(fetched(farm, a, 1)), f2 = read_image(fetched(farm, a, 2));
   EXPECT_NE(f1.px, f2.px);
-  // The workers parsed each frame's scene once: tasks reuse the cached scene and BVH.
+  // Each worker built at most one BVH per job, not one per frame: a frame only changes the seeds.
+  for (const std::string& log : {farm.worker_log(0), farm.worker_log(1)}) {
+    size_t builds = 0;
+    for (size_t p = 0; (p = log.find("BVH built", p)) != std::string::npos; ++p) ++builds;
+    EXPECT_LE(builds, 2u) << log;
+  }
 }
 
 TEST(Farm, SigkilledWorkerLosesNoWorkAndTheImageStillEqualsTheLocalRender) {

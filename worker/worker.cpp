@@ -80,7 +80,7 @@ class Worker {
   void connect(int keepalive_seconds);
   bool register_self();
   Outcome run_task(const pb::Task& task);
-  const Renderer& prepare(const pb::Task& task);
+  Renderer& prepare(const pb::Task& task);
   void fetch_blob(const std::string& sha256);
   void upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds);
   void fail_task(const pb::Task& task, const std::string& message, bool handed_back);
@@ -193,16 +193,17 @@ void Worker::fetch_blob(const std::string& sha256) {
   blobs_.put(chunks.take(), sha256);
 }
 
-const Renderer& Worker::prepare(const pb::Task& task) {
+Renderer& Worker::prepare(const pb::Task& task) {
   std::string files;
   std::vector<BundleEntry> bundle;
   for (const pb::BundleFile& f : task.files()) {
     files += f.path() + "\t" + f.sha256() + "\n";
     bundle.push_back({f.path(), f.sha256()});
   }
-  std::string key = sha256_hex(task.scene_path() + "\n" + files +
-                               task.overrides().SerializeAsString() + "\n" +
-                               std::to_string(task.frame()));
+  // Not keyed by frame: a frame only selects the seed stream (Renderer::set_frame), so a sequence
+  // of one scene file renders on one BVH.
+  std::string key =
+      sha256_hex(task.scene_path() + "\n" + files + task.overrides().SerializeAsString());
   for (auto it = scenes_.begin(); it != scenes_.end(); ++it)
     if (it->key == key) {
       if (it != scenes_.begin()) {
@@ -210,6 +211,7 @@ const Renderer& Worker::prepare(const pb::Task& task) {
         scenes_.erase(it);
         scenes_.push_front(std::move(c));
       }
+      scenes_.front().renderer->set_frame(task.frame());
       return *scenes_.front().renderer;
     }
   for (const BundleEntry& e : bundle) {
@@ -244,7 +246,11 @@ const Renderer& Worker::prepare(const pb::Task& task) {
   if (c.scene->digest != task.scene_digest())
     throw TaskFailure("scene digest " + c.scene->digest + " differs from the coordinator's " +
                       task.scene_digest() + " (another build or a corrupted cache?)");
+  auto t0 = Clock::now();
   c.renderer = std::make_unique<Renderer>(*c.scene);
+  spdlog::info("scene {} ({}): BVH built in {:.2f} s", task.scene_path(),
+               c.scene->digest.substr(0, 12),
+               std::chrono::duration<double>(Clock::now() - t0).count());
   scenes_.push_front(std::move(c));
   while (scenes_.size() > kScenesKept) scenes_.pop_back();
   return *scenes_.front().renderer;

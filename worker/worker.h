@@ -2,8 +2,9 @@
 // scene bundle's blobs it lacks by digest, renders each task with the engine on all cores,
 // renews the lease while rendering, uploads the sample buffer in chunks, and repeats.
 //
-// Scenes and their Embree BVH are cached by (bundle, settings, frame), so consecutive tasks of one
-// frame neither re-parse nor rebuild. Blobs are cached on local disk by digest.
+// Scenes and their Embree BVH are cached by (bundle, scene file, settings), so consecutive tasks
+// of one scene file, across frames, neither re-parse nor rebuild (a frame only selects the seed
+// stream). Blobs are cached on local disk by digest.
 // On SIGTERM or SIGINT it stops leasing; a task in flight is finished and uploaded if that takes
 // less than drain_seconds from the signal, else handed back (re-queued without counting as a
 // failure). With exit_when_idle it exits once the coordinator has no queued or leased work left

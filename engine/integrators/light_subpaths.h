@@ -91,7 +91,7 @@ std::vector<T> trace_pass(const RenderContext& ctx, uint32_t pass, uint64_t path
     TraceCounters local;
     Sampler sampler(Sampler::Kind::Independent);  // light paths: independent (sampler.h)
     for (uint64_t i = c * kChunk; i < std::min(paths, (c + 1) * kChunk); ++i) {
-      sampler.start_light_path(rs.seed, rs.frame, pass, i);
+      sampler.start_light_path(rs.seed, ctx.frame, pass, i);
       trace_one(sampler, outs[c], local);
     }
     rays[c] = local.rays;
