@@ -296,11 +296,14 @@ TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 3);
+  EXPECT_GT(s["frames"][0]["eta_seconds"].get<double>(), 0.0);  // known after the first passes
+  EXPECT_GT(s["frames"][0]["rel_mse"].get<double>(), 0.0);
   std::string mid_dir = farm.dir() + "/mid";
   ASSERT_EQ(farm.client("fetch " + job + " -o " + mid_dir).exit_code, 0);
   ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   EXPECT_EQ(worker.wait(30), 0);
+  EXPECT_EQ(farm.status(job)["frames"][0]["eta_seconds"].get<double>(), 0.0);
   Image mid = read_image(mid_dir + "/" + job + ".0001.exr");
   Image fin = read_image(fetched(farm, job, 1));
   ASSERT_EQ(mid.w, 64);

@@ -88,6 +88,16 @@ class Worker {
   bool backoff(int attempt);
   bool sleep_unless_stopped(double seconds);
   bool stopping() const { return stop_.load(); }
+  // This process's bundle layouts (hard links into the blob cache); the blobs stay cached.
+  void remove_bundle_dirs() {
+    std::error_code ec;
+    std::string suffix = "-" + std::to_string(::getpid());
+    for (const auto& e : fs::directory_iterator(cache_dir_ + "/bundles", ec)) {
+      std::string name = e.path().filename().string();
+      if (name.size() > suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0)
+        fs::remove_all(e.path(), ec);
+    }
+  }
 
   WorkerOptions o_;
   std::string cache_dir_;
@@ -438,6 +448,7 @@ int Worker::run() {
       if (o_.exit_when_idle && resp.no_more_work()) {
         spdlog::info("no work left; exiting");
         finish_upload();
+        remove_bundle_dirs();
         return 0;
       }
       sleep_unless_stopped(o_.idle_poll_seconds);
@@ -452,6 +463,7 @@ int Worker::run() {
     if (o_.max_tasks > 0 && ++tasks >= o_.max_tasks) break;
   }
   finish_upload();
+  remove_bundle_dirs();
   spdlog::info("worker {} stopped", worker_id_);
   return 0;
 }
