@@ -21,6 +21,7 @@
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <regex>
 #include <thread>
 
@@ -409,6 +410,43 @@ TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
   for (size_t p = 0; (p = r.output.find("farm vs local RMSE 0\n", p)) != std::string::npos; ++p)
     ++equal;
   EXPECT_EQ(equal, 2u) << r.output;
+}
+
+// Soak (label "long", `./rayfarm test --long`): workers SIGKILLed and replaced every ~0.7 s and
+// the coordinator SIGKILLed and restarted twice while a 4-frame job renders; the images must still
+// equal the local renders and every frame must have exactly the spp asked.
+TEST(LongFarm, RandomKillsOfWorkersAndCoordinatorLoseNothing) {
+  Farm farm("farm-soak", /*lease_seconds=*/2);
+  const std::string job_args = kCornell + " --spp 512 --passes 32 --res 96x96";
+  std::string job = farm.submit(job_args + " --frames 1-4 --tile-size 32");
+  std::vector<Process*> live{&farm.worker({}), &farm.worker({}), &farm.worker({})};
+  std::mt19937 rng(12345);
+  int kills = 0, restarts = 0;
+  for (int round = 0; round < 200; ++round) {
+    nlohmann::json s = farm.status(job);
+    if (s.is_object() && s["state"] == "completed") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(700));
+    size_t victim = std::uniform_int_distribution<size_t>(0, live.size() - 1)(rng);
+    live[victim]->signal(SIGKILL);
+    live[victim]->wait(10);
+    live[victim] = &farm.worker({});
+    ++kills;
+    if (round == 3 || round == 9) {
+      farm.restart_coordinator();
+      ++restarts;
+    }
+  }
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  std::printf("soak: %d worker kills, %d coordinator restarts\n", kills, restarts);
+  EXPECT_EQ(restarts, 2);
+  EXPECT_GE(kills, 10);
+  nlohmann::json s = farm.status(job);
+  for (const auto& f : s["frames"]) {
+    EXPECT_EQ(f["passes_merged"], 32);
+    EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);
+  }
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  for (uint32_t f = 1; f <= 4; ++f) expect_same_image(fetched(farm, job, f), farm.local(job_args, f));
 }
 
 // --- Bad requests, straight through the generated stubs ------------------------------------
