@@ -138,6 +138,19 @@ std::vector<StoredJob> JobStore::jobs() const {
   return out;
 }
 
+std::vector<JobStore::TaskFailure> JobStore::failures(const std::string& id) const {
+  Stmt s(db_,
+         "SELECT frame, pass, tile, worker, message FROM task_events WHERE job_id = ? AND done = 0 "
+         "ORDER BY rowid",
+         path_);
+  s.bind(id);
+  std::vector<TaskFailure> out;
+  while (s.step())
+    out.push_back({uint32_t(s.integer(0)), uint32_t(s.integer(1)), uint32_t(s.integer(2)),
+                   s.text(3), s.text(4)});
+  return out;
+}
+
 uint64_t JobStore::tasks_done(const std::string& id) const {
   Stmt s(db_, "SELECT COUNT(*) FROM task_events WHERE job_id = ? AND done = 1", path_);
   s.bind(id);

@@ -45,6 +45,12 @@ class JobStore {
   void task_failed(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
                    const std::string& worker_id, const std::string& message);
   std::vector<StoredJob> jobs() const;  // in submission order
+
+  struct TaskFailure {
+    uint32_t frame, pass, tile;
+    std::string worker_id, message;
+  };
+  std::vector<TaskFailure> failures(const std::string& job_id) const;  // in the order recorded
   uint64_t tasks_done(const std::string& job_id) const;
 
  private:

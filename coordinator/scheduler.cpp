@@ -166,24 +166,35 @@ LeaseOutcome Scheduler::fail(const std::string& lease_id, const std::string& mes
   TaskState& t = tasks_[l.task];
   t.leases.erase(lease_id);
   JobState* j = job(l.task.job_id);
-  if (!handed_back && j) {
-    t.failed_workers.insert(l.worker_id);
-    t.messages.push_back(l.worker_id + ": " + message);
-    ++j->worker_failures[l.worker_id];
-    if (int(t.failed_workers.size()) >= options_.max_failures) {
-      j->failed = true;
-      j->error = "task frame " + std::to_string(l.task.frame) + " pass " +
-                 std::to_string(l.task.pass) + " tile " + std::to_string(l.task.tile) +
-                 " failed on " + std::to_string(t.failed_workers.size()) + " workers:";
-      for (const std::string& m : t.messages) j->error += "\n  " + m;
-      drop_job_tasks(j->id);
-      return LeaseOutcome::Ok;
-    }
-  }
+  if (!handed_back && j && count_failure(l.task, l.worker_id, message)) return LeaseOutcome::Ok;
   FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
   if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
     queue_.insert(l.task);
   return LeaseOutcome::Ok;
+}
+
+bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,
+                              const std::string& message) {
+  JobState* j = job(ref.job_id);
+  auto it = tasks_.find(ref);
+  if (!j || it == tasks_.end() || j->failed) return false;
+  TaskState& t = it->second;
+  t.failed_workers.insert(worker_id);
+  t.messages.push_back(worker_id + ": " + message);
+  ++j->worker_failures[worker_id];
+  if (int(t.failed_workers.size()) < options_.max_failures) return false;
+  j->failed = true;
+  j->error = "task frame " + std::to_string(ref.frame) + " pass " + std::to_string(ref.pass) +
+             " tile " + std::to_string(ref.tile) + " failed on " +
+             std::to_string(t.failed_workers.size()) + " workers:";
+  for (const std::string& m : t.messages) j->error += "\n  " + m;
+  drop_job_tasks(j->id);
+  return true;
+}
+
+void Scheduler::restore_failure(const TaskRef& ref, const std::string& worker_id,
+                                const std::string& message) {
+  count_failure(ref, worker_id, message);
 }
 
 void Scheduler::stop_frame(const std::string& job_id, uint32_t frame, uint32_t first_unneeded) {

@@ -67,6 +67,9 @@ class Scheduler {
   // Restoring from checkpoints: the task's result is already merged or stored.
   void mark_done(const TaskRef& task);
   std::optional<TaskRef> lease_task(const std::string& lease_id) const;
+  // Restoring from the job store: a failure recorded before a restart counts as before.
+  void restore_failure(const TaskRef& task, const std::string& worker_id,
+                       const std::string& message);
   // The worker could not render the task (or, handed_back, will not: it is shutting down).
   LeaseOutcome fail(const std::string& lease_id, const std::string& message, bool handed_back,
                     double now);
@@ -112,6 +115,8 @@ class Scheduler {
 
   void expire(double now);
   CompleteOutcome complete_task(const TaskRef& ref);
+  // Counts a failure of `ref` on `worker_id`; true if it failed the job.
+  bool count_failure(const TaskRef& ref, const std::string& worker_id, const std::string& message);
   void drop_job_tasks(const std::string& job_id);
   void end_task_leases(TaskState& t);
   bool needed(const JobState& j, const FrameState& f, uint32_t pass) const;

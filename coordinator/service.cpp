@@ -311,7 +311,14 @@ void CoordinatorCore::restore(const StoredJob& stored) {
   for (auto& f : job->frames) numbers.push_back(f->number);
   scheduler_.add_job(job->id, numbers, uint32_t(job->tiles.size()), job->passes,
                      spec.priority());
-  if (terminal(job->state)) scheduler_.cancel_job(job->id);
+  if (terminal(job->state)) {
+    scheduler_.cancel_job(job->id);
+  } else {
+    // Failures before the restart still count toward failing a task (and skipping a worker).
+    for (const JobStore::TaskFailure& e : store_.failures(job->id))
+      scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id, e.message);
+    if (scheduler_.job_failed(job->id)) set_state(*job, pb::JOB_FAILED, scheduler_.job_error(job->id));
+  }
   for (auto& f : job->frames) resume_frame(*job, *f);
   jobs_[job->id] = job;
   spdlog::info("restored job {} ({}), {} tasks done in the database", job->id,
@@ -753,8 +760,9 @@ Status CoordinatorCore::fail(const pb::FailRequest& req) {
     case LeaseOutcome::Ok: break;
   }
   if (task && !req.handed_back()) {
-    store_.task_failed(task->job_id, task->frame, task->pass, task->tile, req.worker_id(),
-                       req.message());
+    auto lw = lease_worker_.find(req.lease_id());  // the id the scheduler counted it under
+    store_.task_failed(task->job_id, task->frame, task->pass, task->tile,
+                       lw != lease_worker_.end() ? lw->second : req.worker_id(), req.message());
     spdlog::warn("task {} failed on {}: {}",
                  task_id_text(task->job_id, task->frame, task->pass, task->tile), req.worker_id(),
                  req.message());

@@ -412,6 +412,39 @@ TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
   EXPECT_EQ(equal, 2u) << r.output;
 }
 
+TEST(Farm, FailuresCountAcrossACoordinatorRestart) {
+  Farm farm("farm-failures");
+  std::string job = farm.submit(kCornell + " --spp 1 --passes 1 --res 16x16");
+  auto fail_once = [&](int w) {
+    auto workers = pb::WorkerService::NewStub(farm.channel());
+    grpc::ClientContext c1, c2;
+    c1.set_wait_for_ready(true);
+    pb::LeaseRequest lr;
+    lr.set_worker_id("fake-" + std::to_string(w));
+    pb::LeaseResponse lresp;
+    ASSERT_TRUE(workers->LeaseTask(&c1, lr, &lresp).ok());
+    ASSERT_TRUE(lresp.has_task());
+    pb::FailRequest fr;
+    fr.set_worker_id(lr.worker_id());
+    fr.set_lease_id(lresp.task().lease_id());
+    fr.set_task_id(lresp.task().task_id());
+    fr.set_message("driver crash on fake-" + std::to_string(w));
+    pb::FailResponse fresp;
+    ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
+  };
+  fail_once(1);
+  fail_once(2);
+  farm.restart_coordinator();
+  EXPECT_EQ(farm.status(job)["state"], "running");  // two failures: not yet failed
+  fail_once(3);
+  nlohmann::json s = farm.status(job);
+  EXPECT_EQ(s["state"], "failed");
+  for (int w = 1; w <= 3; ++w)
+    EXPECT_NE(s["error"].get<std::string>().find("driver crash on fake-" + std::to_string(w)),
+              std::string::npos)
+        << s["error"];
+}
+
 // Soak (label "long", `./rayfarm test --long`): workers SIGKILLed and replaced every ~0.7 s and
 // the coordinator SIGKILLed and restarted twice while a 4-frame job renders; the images must still
 // equal the local renders and every frame must have exactly the spp asked.
