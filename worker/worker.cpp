@@ -75,11 +75,10 @@ class Worker {
   int run();
 
  private:
-  enum class Outcome { Done, HandedBack };
-
   void connect(int keepalive_seconds);
   bool register_self();
-  Outcome run_task(const pb::Task& task);
+  // Renders, then starts the upload; on a drain timeout hands the task back and exits.
+  void run_task(const pb::Task& task);
   Renderer& prepare(const pb::Task& task);
   void fetch_blob(const std::string& sha256);
   void upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds);
@@ -314,7 +313,7 @@ void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double cor
   }
 }
 
-Worker::Outcome Worker::run_task(const pb::Task& task) {
+void Worker::run_task(const pb::Task& task) {
   auto t0 = Clock::now();
   double cpu0 = cpu_seconds();
   const Renderer* renderer = nullptr;
@@ -323,7 +322,7 @@ Worker::Outcome Worker::run_task(const pb::Task& task) {
   } catch (const TaskFailure& e) {
     spdlog::error("task {}: {}", task.task_id(), e.what());
     fail_task(task, e.what(), false);
-    return Outcome::Done;
+    return;
   }
   Rect rect{task.rect().x0(), task.rect().y0(), task.rect().w(), task.rect().h()};
   SampleBuffer result;
@@ -353,9 +352,12 @@ Worker::Outcome Worker::run_task(const pb::Task& task) {
     if (stopping() && Clock::now() >= stop_at_ + std::chrono::duration<double>(o_.drain_seconds)) {
       lock.unlock();
       spdlog::info("task {}: not finished within the drain time; handing it back", task.task_id());
+      finish_upload();  // the previous task's result still counts
       fail_task(task, "worker shutting down", true);
-      render.detach();  // the process exits; the task is re-queued at the coordinator
-      return Outcome::HandedBack;
+      // Exit with the render still running (it cannot be interrupted, and its stack frame must
+      // outlive it); the coordinator re-queues the task without counting a failure.
+      spdlog::shutdown();
+      std::_Exit(0);
     }
     if (renewing && Clock::now() >= next_renew) {
       lock.unlock();
@@ -380,14 +382,13 @@ Worker::Outcome Worker::run_task(const pb::Task& task) {
   if (!render_error.empty()) {
     spdlog::error("task {}: {}", task.task_id(), render_error);
     fail_task(task, render_error, false);
-    return Outcome::Done;
+    return;
   }
   double core_seconds = cpu_seconds() - cpu0;
   result.header.core_seconds = core_seconds;
   spdlog::info("task {}: rendered in {:.2f} s ({:.1f} core-s)", task.task_id(),
                std::chrono::duration<double>(Clock::now() - t0).count(), core_seconds);
   start_upload(task, std::move(result), core_seconds);
-  return Outcome::Done;
 }
 
 void Worker::start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds) {
@@ -455,11 +456,7 @@ int Worker::run() {
       continue;
     }
     spdlog::info("task {}: leased ({})", resp.task().task_id(), resp.task().lease_id());
-    if (run_task(resp.task()) == Outcome::HandedBack) {
-      finish_upload();
-      spdlog::shutdown();
-      std::_Exit(0);
-    }
+    run_task(resp.task());
     if (o_.max_tasks > 0 && ++tasks >= o_.max_tasks) break;
   }
   finish_upload();
