@@ -412,25 +412,30 @@ TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
   EXPECT_EQ(equal, 2u) << r.output;
 }
 
+// A fake worker leases the next task and reports it failed with `message`.
+void lease_and_fail(const Farm& farm, const std::string& worker_id, const std::string& message) {
+  auto workers = pb::WorkerService::NewStub(farm.channel());
+  grpc::ClientContext c1, c2;
+  c1.set_wait_for_ready(true);
+  pb::LeaseRequest lr;
+  lr.set_worker_id(worker_id);
+  pb::LeaseResponse lresp;
+  ASSERT_TRUE(workers->LeaseTask(&c1, lr, &lresp).ok());
+  ASSERT_TRUE(lresp.has_task());
+  pb::FailRequest fr;
+  fr.set_worker_id(worker_id);
+  fr.set_lease_id(lresp.task().lease_id());
+  fr.set_task_id(lresp.task().task_id());
+  fr.set_message(message);
+  pb::FailResponse fresp;
+  ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
+}
+
 TEST(Farm, FailuresCountAcrossACoordinatorRestart) {
   Farm farm("farm-failures");
   std::string job = farm.submit(kCornell + " --spp 1 --passes 1 --res 16x16");
   auto fail_once = [&](int w) {
-    auto workers = pb::WorkerService::NewStub(farm.channel());
-    grpc::ClientContext c1, c2;
-    c1.set_wait_for_ready(true);
-    pb::LeaseRequest lr;
-    lr.set_worker_id("fake-" + std::to_string(w));
-    pb::LeaseResponse lresp;
-    ASSERT_TRUE(workers->LeaseTask(&c1, lr, &lresp).ok());
-    ASSERT_TRUE(lresp.has_task());
-    pb::FailRequest fr;
-    fr.set_worker_id(lr.worker_id());
-    fr.set_lease_id(lresp.task().lease_id());
-    fr.set_task_id(lresp.task().task_id());
-    fr.set_message("driver crash on fake-" + std::to_string(w));
-    pb::FailResponse fresp;
-    ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
+    lease_and_fail(farm, "fake-" + std::to_string(w), "driver crash on fake-" + std::to_string(w));
   };
   fail_once(1);
   fail_once(2);
@@ -643,21 +648,8 @@ TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
   }
   {  // A task failing on 3 different workers fails the job with their messages.
     std::string doomed = farm.submit(kCornell + " --spp 1 --passes 1 --res 16x16");
-    for (int w = 1; w <= 3; ++w) {
-      grpc::ClientContext c1, c2;
-      pb::LeaseRequest lr;
-      lr.set_worker_id("fake-" + std::to_string(w));
-      pb::LeaseResponse lresp;
-      ASSERT_TRUE(workers->LeaseTask(&c1, lr, &lresp).ok());
-      ASSERT_TRUE(lresp.has_task());
-      pb::FailRequest fr;
-      fr.set_worker_id(lr.worker_id());
-      fr.set_lease_id(lresp.task().lease_id());
-      fr.set_task_id(lresp.task().task_id());
-      fr.set_message("out of memory on fake-" + std::to_string(w));
-      pb::FailResponse fresp;
-      ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
-    }
+    for (int w = 1; w <= 3; ++w)
+      lease_and_fail(farm, "fake-" + std::to_string(w), "out of memory on fake-" + std::to_string(w));
     test::CommandResult r = farm.client("watch " + doomed);
     EXPECT_EQ(r.exit_code, 1) << r.output;
     nlohmann::json s = farm.status(doomed);
