@@ -54,6 +54,10 @@ struct TraceCounters {
 Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
 // Whether a light sample is visible from a hit (a ray to infinity for infinite lights).
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);
+// Next-event estimation at a non-delta vertex: one light sample, weighted by the power heuristic
+// against BSDF sampling (1 for delta lights); f * Le * |cos| * w / pdf, or 0 when occluded.
+RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
+                     float u_light, Vec2 u_point, TraceCounters& counters);
 
 // Radiance arriving along a camera ray, one function per camera-path integrator.
 RGB whitted_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters);

@@ -107,19 +107,6 @@ RGB gather_vpls(const RenderContext& ctx, const VplSet& set, const SurfaceHit& h
   return sum;
 }
 
-// One light sample at a non-delta vertex, weighted by MIS against the BSDF sample (path.cpp).
-RGB direct_light(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
-                 float u_light, Vec2 u_point, TraceCounters& counters) {
-  LightSample ls;
-  if (!ctx.lights.sample(hit.p, u_light, u_point, ls)) return RGB(0.0f);
-  RGB f = bsdf.eval(wo, ls.wi);
-  if (is_black(f)) return RGB(0.0f);
-  ++counters.rays;
-  if (!light_visible(ctx, hit, ls)) return RGB(0.0f);
-  float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
-  float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
-  return f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
-}
 
 }  // namespace
 
@@ -165,7 +152,7 @@ RGB ir_radiance(const RenderContext& ctx, const VplSet& set, Ray ray, Sampler& s
     float u_light = sampler.get_1d();
     Vec2 u_point = sampler.get_2d();
     if (!bsdf.is_delta() && residual > 0) {
-      RGB terms = direct_light(ctx, hit, bsdf, wo, u_light, u_point, counters) +
+      RGB terms = light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters) +
                   gather_vpls(ctx, set, hit, bsdf, wo, depth, counters);
       radiance += beta * terms * residual;
     }

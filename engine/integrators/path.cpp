@@ -56,18 +56,8 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
     // not reshuffle the random numbers of later bounces).
     float u_light = sampler.get_1d();
     Vec2 u_point = sampler.get_2d();
-    LightSample ls;
-    if (!bsdf.is_delta() && ctx.lights.sample(hit.p, u_light, u_point, ls)) {
-      RGB f = bsdf.eval(wo, ls.wi);
-      if (!is_black(f)) {
-        ++counters.rays;
-        if (light_visible(ctx, hit, ls)) {
-          float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
-          float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
-          radiance += beta * f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
-        }
-      }
-    }
+    if (!bsdf.is_delta())
+      radiance += beta * light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters);
 
     // BSDF sampling for the next vertex.
     BsdfSample bs;
