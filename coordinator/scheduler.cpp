@@ -192,6 +192,11 @@ bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,
   return true;
 }
 
+std::string Scheduler::lease_worker(const std::string& lease_id) const {
+  auto it = leases_.find(lease_id);
+  return it == leases_.end() ? "" : it->second.worker_id;
+}
+
 void Scheduler::restore_failure(const TaskRef& ref, const std::string& worker_id,
                                 const std::string& message) {
   count_failure(ref, worker_id, message);

@@ -67,6 +67,7 @@ class Scheduler {
   // Restoring from checkpoints: the task's result is already merged or stored.
   void mark_done(const TaskRef& task);
   std::optional<TaskRef> lease_task(const std::string& lease_id) const;
+  std::string lease_worker(const std::string& lease_id) const;  // "" for an unknown lease
   // Restoring from the job store: a failure recorded before a restart counts as before.
   void restore_failure(const TaskRef& task, const std::string& worker_id,
                        const std::string& message);

@@ -150,7 +150,6 @@ class CoordinatorCore {
   bool closing_ = false;
   Scheduler scheduler_;
   std::map<std::string, std::shared_ptr<JobRecord>> jobs_;
-  std::map<std::string, std::string> lease_worker_;  // lease id -> worker id (for task events)
   uint64_t next_seq_ = 1, next_worker_ = 1;
 };
 
@@ -591,7 +590,6 @@ Status CoordinatorCore::lease(const pb::LeaseRequest& req, pb::LeaseResponse* ou
   FrameRecord* f = job->by_number.at(l->task.frame);
   if (f->first_lease_at < 0) f->first_lease_at = now();
   if (job->state == pb::JOB_QUEUED) set_state(*job, pb::JOB_RUNNING, "");
-  lease_worker_[l->lease_id] = req.worker_id();
   pb::Task* t = out->mutable_task();
   t->set_task_id(task_id_text(job->id, l->task.frame, l->task.pass, l->task.tile));
   t->set_lease_id(l->lease_id);
@@ -731,8 +729,8 @@ Status CoordinatorCore::complete(grpc::ServerReaderInterface<pb::CompleteRequest
       out->set_accepted(false);  // the job was cancelled or failed meanwhile
       return Status::OK;
     }
-    auto lw = lease_worker_.find(header.lease_id());
-    std::string worker = lw != lease_worker_.end() ? lw->second : header.worker_id();
+    std::string worker = scheduler_.lease_worker(header.lease_id());
+    if (worker.empty()) worker = header.worker_id();  // a lease from before a restart
     store_.task_done(job->id, ref.frame, ref.pass, ref.tile, worker);
     job->core_seconds += buffer.header.core_seconds;
     store_.add_core_seconds(job->id, buffer.header.core_seconds);
@@ -760,9 +758,9 @@ Status CoordinatorCore::fail(const pb::FailRequest& req) {
     case LeaseOutcome::Ok: break;
   }
   if (task && !req.handed_back()) {
-    auto lw = lease_worker_.find(req.lease_id());  // the id the scheduler counted it under
+    // Recorded under the id the scheduler counted it under (the lease's worker).
     store_.task_failed(task->job_id, task->frame, task->pass, task->tile,
-                       lw != lease_worker_.end() ? lw->second : req.worker_id(), req.message());
+                       scheduler_.lease_worker(req.lease_id()), req.message());
     spdlog::warn("task {} failed on {}: {}",
                  task_id_text(task->job_id, task->frame, task->pass, task->tile), req.worker_id(),
                  req.message());
