@@ -1,42 +1,22 @@
 // The command line end to end: render, partial renders + merge, refusals, repeatability.
 #include <gtest/gtest.h>
 
-#include <OpenImageIO/imageio.h>
-
 #include <filesystem>
 
 #include "engine/film.h"
+#include "tests/support/exr.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
 namespace {
 
+using test::Exr;
+using test::read_exr;
+
 const std::string kScene = "scenes/cornell-box/scene.json";
 
 std::string cli(const std::string& args) {
   return "cd " + test::source_dir() + " && " + test::rayfarm_binary() + " " + args;
-}
-
-struct Exr {
-  int w = 0, h = 0, nch = 0;
-  std::vector<std::string> names;
-  std::vector<float> px;
-  std::string attr(const std::string& name) const { return attrs.count(name) ? attrs.at(name) : ""; }
-  std::map<std::string, std::string> attrs;
-};
-
-Exr read_exr(const std::string& path) {
-  Exr e;
-  auto in = OIIO::ImageInput::open(path);
-  EXPECT_TRUE(in) << path;
-  if (!in) return e;
-  const OIIO::ImageSpec& spec = in->spec();
-  e.w = spec.width, e.h = spec.height, e.nch = spec.nchannels;
-  e.names = spec.channelnames;
-  for (const auto& p : spec.extra_attribs) e.attrs[p.name().string()] = spec.get_string_attribute(p.name().string());
-  e.px.resize(size_t(e.w) * e.h * e.nch);
-  in->read_image(0, 0, 0, e.nch, OIIO::TypeDesc::FLOAT, e.px.data());
-  return e;
 }
 
 TEST(Cli, RenderWritesExrAndPngWithProvenance) {

@@ -3,8 +3,6 @@
 // job: the determinism contract (DESIGN.md) says they are equal to within
 // |a-b| <= 1e-6 * max(|a|,|b|) + 1e-12 per channel (the farm merges passes in the same order as
 // the local renderer, so in practice they are bit-identical).
-// The protobuf and gRPC headers come before OpenImageIO's, which #undef the bswap_32/64 macros
-// protobuf relies on.
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
@@ -12,8 +10,6 @@
 #include "proto/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
 #include <signal.h>
-
-#include <OpenImageIO/imageio.h>
 
 #include <chrono>
 #include <cmath>
@@ -27,6 +23,7 @@
 
 #include "engine/digest.h"
 #include "engine/film.h"
+#include "tests/support/exr.h"
 #include "tests/support/process.h"
 #include "tests/support/test_support.h"
 
@@ -35,33 +32,15 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace pb = rayfarm::v1;
+using test::Exr;
 using test::Process;
+using test::read_exr;
 
 const std::string kCornell = "scenes/cornell-box/scene.json";
 
-struct Image {
-  int w = 0, h = 0, nch = 0;
-  std::vector<float> px;
-  std::map<std::string, std::string> attrs;
-};
-
-Image read_image(const std::string& path) {
-  Image im;
-  auto in = OIIO::ImageInput::open(path);
-  EXPECT_TRUE(in) << path;
-  if (!in) return im;
-  const OIIO::ImageSpec& spec = in->spec();
-  im.w = spec.width, im.h = spec.height, im.nch = spec.nchannels;
-  for (const auto& p : spec.extra_attribs)
-    im.attrs[p.name().string()] = p.get_string();
-  im.px.resize(size_t(im.w) * im.h * im.nch);
-  in->read_image(0, 0, 0, im.nch, OIIO::TypeDesc::FLOAT, im.px.data());
-  return im;
-}
-
 // Every channel (RGBA and variance) within DESIGN.md's merge tolerance.
 void expect_same_image(const std::string& farm, const std::string& local) {
-  Image a = read_image(farm), b = read_image(local);
+  Exr a = read_exr(farm), b = read_exr(local);
   ASSERT_EQ(a.w, b.w);
   ASSERT_EQ(a.h, b.h);
   ASSERT_EQ(a.nch, b.nch);
@@ -194,7 +173,7 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
     expect_same_image(fetched(farm, b, f), farm.local(splat, f));
   }
   // Frames differ from each other (each has its own seed stream).
-  Image f1 = read_image(fetched(farm, a, 1)), f2 = read_image(fetched(farm, a, 2));
+  Exr f1 = read_exr(fetched(farm, a, 1)), f2 = read_exr(fetched(farm, a, 2));
   EXPECT_NE(f1.px, f2.px);
   // Each worker built at most one BVH per job, not one per frame: a frame only changes the seeds.
   for (const std::string& log : {farm.worker_log(0), farm.worker_log(1)}) {
@@ -277,9 +256,9 @@ TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
   EXPECT_TRUE(f["stopped_on_target"].get<bool>());
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   std::string local = farm.local(job_args, 3);
-  Image farm_image = read_image(fetched(farm, job, 3)), local_image = read_image(local);
-  EXPECT_EQ(farm_image.attrs["rayfarm:passes"], local_image.attrs["rayfarm:passes"]);
-  EXPECT_EQ(farm_image.attrs["rayfarm:passes"],
+  Exr farm_image = read_exr(fetched(farm, job, 3)), local_image = read_exr(local);
+  EXPECT_EQ(farm_image.attr("rayfarm:passes"), local_image.attr("rayfarm:passes"));
+  EXPECT_EQ(farm_image.attr("rayfarm:passes"),
             "0-" + std::to_string(f["passes_merged"].get<int>() - 1));
   EXPECT_LT(f["passes_merged"].get<int>(), 64);
   expect_same_image(fetched(farm, job, 3), local);
@@ -305,14 +284,14 @@ TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   EXPECT_EQ(worker.wait(30), 0);
   EXPECT_EQ(farm.status(job)["frames"][0]["eta_seconds"].get<double>(), 0.0);
-  Image mid = read_image(mid_dir + "/" + job + ".0001.exr");
-  Image fin = read_image(fetched(farm, job, 1));
+  Exr mid = read_exr(mid_dir + "/" + job + ".0001.exr");
+  Exr fin = read_exr(fetched(farm, job, 1));
   ASSERT_EQ(mid.w, 64);
-  int mid_passes = std::stoi(mid.attrs["rayfarm:passes"].substr(2)) + 1;  // "0-K"
+  int mid_passes = std::stoi(mid.attr("rayfarm:passes").substr(2)) + 1;  // "0-K"
   EXPECT_GE(mid_passes, 3);
   EXPECT_LT(mid_passes, 64);
-  EXPECT_EQ(fin.attrs["rayfarm:passes"], "0-63");
-  EXPECT_GT(std::stod(mid.attrs["rayfarm:rel_mse"]), std::stod(fin.attrs["rayfarm:rel_mse"]));
+  EXPECT_EQ(fin.attr("rayfarm:passes"), "0-63");
+  EXPECT_GT(std::stod(mid.attr("rayfarm:rel_mse")), std::stod(fin.attr("rayfarm:rel_mse")));
   for (float v : mid.px) EXPECT_TRUE(std::isfinite(v));
 }
 
@@ -357,7 +336,7 @@ TEST(Farm, PerFramePatternRendersEachFramesOwnSceneAndAMissingFrameFileIsRefused
     std::snprintf(name, sizeof name, "/shot.%04u.json", f);
     expect_same_image(fetched(farm, job, f), farm.local(shots + name + settings, f));
   }
-  Image dark = read_image(fetched(farm, job, 1)), bright = read_image(fetched(farm, job, 2));
+  Exr dark = read_exr(fetched(farm, job, 1)), bright = read_exr(fetched(farm, job, 2));
   double sum1 = 0, sum2 = 0;
   for (size_t i = 0; i < dark.px.size(); ++i) sum1 += dark.px[i], sum2 += bright.px[i];
   EXPECT_LT(sum1, sum2);  // the floor's reflectance differs between the two files
