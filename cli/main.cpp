@@ -20,6 +20,7 @@
 #include "engine/film.h"
 #include "engine/image_io.h"
 #include "engine/local_render.h"
+#include "engine/progress.h"
 #include "engine/render.h"
 #include "engine/scene.h"
 #include "worker/worker.h"
@@ -110,11 +111,10 @@ void warn_nonfinite(const rf::SampleBuffer& b) {
 }
 
 void print_summary(const rf::SampleBuffer& frame, double seconds, uint64_t rays) {
-  double pixels = double(frame.rect.area());
-  // Splatting integrators count light paths (one per pixel sample's worth of work).
-  double samples = double(frame.total_samples() ? frame.total_samples() : frame.light_paths);
+  double spp = rf::samples_per_pixel(frame);
+  double samples = spp * double(frame.rect.area());
   std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n",
-              pixels > 0 ? samples / pixels : 0.0, seconds, human(samples / seconds).c_str(),
+              spp, seconds, human(samples / seconds).c_str(),
               human(double(rays) / seconds).c_str(), frame.rel_mse(), frame.header.passes.count());
 }
 
@@ -223,8 +223,7 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
     rf::write_png(png_path_for(output), acc, exposure);
   }
   std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
-               acc.header.passes.to_string().c_str(),
-               double(acc.total_samples()) / double(acc.rect.area()), acc.rel_mse(),
+               acc.header.passes.to_string().c_str(), rf::samples_per_pixel(acc), acc.rel_mse(),
                output.c_str());
   return 0;
 }
