@@ -12,8 +12,8 @@
 #include <random>
 
 #include "engine/camera.h"
-#include "engine/film.h"
-#include "engine/progressive.h"
+#include "engine/buffer_file.h"
+#include "engine/frame_accumulator.h"
 #include "engine/render.h"
 #include "engine/sampler.h"
 #include "engine/sampling.h"
@@ -96,7 +96,7 @@ void bench_scene(const std::string& label, const Scene& scene, int spp) {
 
   auto t0 = Clock::now();
   Rect full{0, 0, scene.film.width, scene.film.height};
-  SampleBuffer b = r.render_task(full, 0, /*parallel=*/true);
+  SampleBuffer b = r.render(TaskKey{0, full, 0}, /*parallel=*/true);
   double secs = seconds_since(t0);
   double samples = double(b.total_samples());
   double path_rays = double(b.rays) / secs;
@@ -145,7 +145,7 @@ void bench_integrators(const std::string& cornell, SceneOverrides ov) {
     Scene s = load_scene(cornell, ov);
     Renderer r(s);
     auto t0 = Clock::now();
-    SampleBuffer b = r.render_task(Rect{0, 0, s.film.width, s.film.height}, 0, true);
+    SampleBuffer b = r.render(TaskKey{0, Rect{0, 0, s.film.width, s.film.height}, 0}, true);
     double secs = seconds_since(t0);
     double work = double(b.total_samples() ? b.total_samples() : b.light_paths);
     std::printf("  %-8s %8.3f M%s/s %8.2f Mrays/s\n", name.c_str(), work / secs / 1e6,

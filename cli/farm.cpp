@@ -18,6 +18,7 @@
 
 #include "coordinator/blob_store.h"
 #include "coordinator/frame_range.h"
+#include "engine/buffer_file.h"
 #include "engine/digest.h"
 #include "engine/image_io.h"
 #include "proto/chunking.h"

@@ -17,7 +17,8 @@
 #include "bench/bench.h"
 #include "cli/farm.h"
 #include "coordinator/service.h"
-#include "engine/film.h"
+#include "engine/buffer_file.h"
+#include "engine/buffer_merge.h"
 #include "engine/image_io.h"
 #include "engine/local_render.h"
 #include "engine/progress.h"
@@ -135,7 +136,6 @@ rf::SceneOverrides overrides_of(const RenderArgs& a) {
   ov.spp = a.spp;
   ov.passes = a.passes;
   ov.seed = a.seed;
-  ov.frame = a.frame;
   ov.max_depth = a.max_depth;
   ov.noise_target = a.noise_target;
   if (!a.integrator.empty()) ov.integrator = a.integrator;
@@ -168,6 +168,7 @@ int cmd_render(const RenderArgs& a) {
   rf::Scene scene = rf::load_scene(a.scene, ov);
   rf::LocalRenderOptions opt;
   opt.tile_size = a.tile;
+  opt.frame = a.frame.value_or(0);
   if (!a.pass_range.empty()) {
     auto [p0, p1] = parse_pass_range(a.pass_range, scene.render.passes);
     opt.first_pass = p0;

@@ -1,5 +1,7 @@
 #include "coordinator/checkpoint.h"
 
+#include "engine/buffer_file.h"
+
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>

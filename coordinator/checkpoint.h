@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/film.h"
+#include "engine/sample_buffer.h"
 
 namespace rf {
 

@@ -20,9 +20,10 @@
 #include "coordinator/frame_range.h"
 #include "coordinator/job_store.h"
 #include "coordinator/scheduler.h"
+#include "engine/buffer_file.h"
 #include "engine/digest.h"
-#include "engine/progressive.h"
-#include "engine/render.h"
+#include "engine/frame_accumulator.h"
+#include "engine/work_units.h"
 #include "proto/chunking.h"
 #include "proto/convert.h"
 #include "proto/rayfarm.grpc.pb.h"
@@ -222,25 +223,22 @@ std::shared_ptr<JobRecord> CoordinatorCore::build_job(const std::string& id, uin
       throw RequestError{StatusCode::INVALID_ARGUMENT, e.what()};
     }
   };
-  if (frames.empty()) frames.push_back(scene_for(expand_frame_pattern(spec.scene_path(), 0)).render.frame);
+  if (frames.empty()) frames.push_back(0);  // a single-frame job renders frame 0
   for (uint32_t number : frames) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
     f->scene_path = expand_frame_pattern(spec.scene_path(), number);
-    Scene scene = scene_for(f->scene_path);
-    SceneOverrides frame_ov;
-    frame_ov.frame = number;
+    const Scene& scene = scene_for(f->scene_path);
     try {
-      apply_overrides(scene, frame_ov);
       check_renderable(scene);
     } catch (const std::exception& e) {
       throw RequestError{StatusCode::INVALID_ARGUMENT, e.what()};
     }
-    f->base = frame_header(scene, PassSet{});
-    std::vector<Rect> tiles = frame_tiles(scene, tile_size);
+    f->base = frame_header(scene, number, PassSet{});
+    std::vector<Rect> tiles = work_units(scene, tile_size);
     if (job->frames.empty()) {
       job->tiles = tiles;
-      job->splats = integrator_splats(integrator_kind(scene.render.integrator.type));
+      job->splats = integrator_splats(scene.render.integrator.method);
       job->passes = scene.render.passes;
       job->noise_target = scene.render.noise_target;
     } else if (tiles != job->tiles || scene.render.passes != job->passes) {

@@ -180,4 +180,45 @@ void write_png(const std::string& path, const SampleBuffer& frame, float exposur
   write_image_atomic(path, "png", spec, pixels.data());
 }
 
+RgbImage read_rgb(const std::string& path) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) throw ImageIOError(path + ": cannot open: " + OIIO::geterror());
+  const ImageSpec& spec = in->spec();
+  if (spec.nchannels < 3) throw ImageIOError(path + ": needs at least 3 channels");
+  RgbImage img;
+  img.width = spec.width, img.height = spec.height;
+  img.rgb.resize(size_t(img.width) * size_t(img.height) * 3);
+  if (!in->read_image(0, 0, 0, 3, TypeDesc::FLOAT, img.rgb.data()))
+    throw ImageIOError(path + ": " + in->geterror());
+  return img;
+}
+
+ImageError image_error(const RgbImage& a, const RgbImage& b, PixelWindow win) {
+  if (a.width != b.width || a.height != b.height)
+    throw std::invalid_argument("the image is " + std::to_string(a.width) + "x" +
+                                std::to_string(a.height) + ", the reference " +
+                                std::to_string(b.width) + "x" + std::to_string(b.height));
+  if (win.x0 < 0 || win.y0 < 0 || win.x1 > a.width || win.y1 > a.height || win.x0 >= win.x1 ||
+      win.y0 >= win.y1)
+    throw std::invalid_argument("the window must satisfy 0 <= X0 < X1 <= " +
+                                std::to_string(a.width) + " and 0 <= Y0 < Y1 <= " +
+                                std::to_string(a.height));
+  double se = 0, rel = 0, abs_err = 0;
+  for (int y = win.y0; y < win.y1; ++y)
+    for (int x = win.x0; x < win.x1; ++x)
+      for (int c = 0; c < 3; ++c) {
+        size_t i = (size_t(y) * size_t(a.width) + size_t(x)) * 3 + size_t(c);
+        double d = double(a.rgb[i]) - double(b.rgb[i]);
+        se += d * d;
+        rel += relative_error(d * d, double(b.rgb[i]));
+        abs_err += std::fabs(d);
+      }
+  double n = double(win.x1 - win.x0) * double(win.y1 - win.y0) * 3;
+  return {std::sqrt(se / n), rel / n, abs_err / n};
+}
+
+ImageError image_error(const RgbImage& image, const RgbImage& reference) {
+  return image_error(image, reference, PixelWindow{0, 0, image.width, image.height});
+}
+
 }  // namespace rf

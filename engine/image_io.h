@@ -3,9 +3,11 @@
 #pragma once
 
 #include <map>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
-#include "engine/film.h"
+#include "engine/sample_buffer.h"
 
 namespace rf {
 
@@ -24,5 +26,27 @@ void write_exr(const std::string& path, const SampleBuffer& frame, const Attribu
 
 // sRGB-encoded 8-bit PNG of the estimate scaled by 2^exposure_stops (clamped), written atomically.
 void write_png(const std::string& path, const SampleBuffer& frame, float exposure_stops = 0.0f);
+
+// An image's RGB as floats, row-major, 3 per pixel.
+struct RgbImage {
+  int width = 0, height = 0;
+  std::vector<float> rgb;
+};
+// Reads the first three channels of any image OpenImageIO reads (EXR, PNG, ...). Throws
+// ImageIOError naming the path.
+RgbImage read_rgb(const std::string& path);
+
+// The error of an image against a reference, over a window of pixels and RGB: root mean square,
+// relative MSE (pbrt-v4's convention: squared error / (reference^2 + 0.01), the same as the
+// render's noise figure) and mean absolute error.
+struct ImageError {
+  double rmse = 0, rel_mse = 0, mae = 0;
+};
+struct PixelWindow {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // half-open
+};
+// Throws std::invalid_argument when the sizes differ or the window is not inside the image.
+ImageError image_error(const RgbImage& image, const RgbImage& reference, PixelWindow window);
+ImageError image_error(const RgbImage& image, const RgbImage& reference);  // the whole image
 
 }  // namespace rf

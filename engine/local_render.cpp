@@ -9,7 +9,7 @@
 #include <mutex>
 #include <thread>
 
-#include "engine/progressive.h"
+#include "engine/frame_accumulator.h"
 
 namespace rf {
 
@@ -20,7 +20,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   uint32_t count = opt.pass_count ? opt.pass_count : total_passes - opt.first_pass;
   std::vector<Rect> tiles = renderer.tiles(opt.tile_size);
   ProgressiveOptions popt{opt.first_pass, count, opt.noise_target};
-  FrameAccumulator acc(renderer.header(PassSet{}), tiles, renderer.splats(), popt);
+  FrameAccumulator acc(renderer.header(opt.frame, PassSet{}), tiles, renderer.splats(), popt);
 
   // Passes are rendered in windows of passes whose tasks run in parallel (each task also spreads
   // its rows over threads: TBB balances the nesting), merged in (pass, tile) order after each
@@ -70,8 +70,8 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
       size_t n = size_t(p1 - p0) * tiles.size();
       std::vector<SampleBuffer> results(n);
       tbb::parallel_for(size_t(0), n, [&](size_t i) {
-        results[i] = renderer.render_task(tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size()),
-                                          /*parallel=*/true);  // nested: TBB balances
+        TaskKey task{opt.frame, tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size())};
+        results[i] = renderer.render(task, /*parallel=*/true);  // nested: TBB balances
         ++tasks_done;
       });
       for (auto& r : results) {

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <functional>
 
-#include "engine/film.h"
+#include "engine/sample_buffer.h"
 #include "engine/render.h"
 
 namespace rf {
@@ -19,6 +19,7 @@ struct LocalProgress {
 };
 
 struct LocalRenderOptions {
+  uint32_t frame = 0;        // selects the seed stream (DESIGN.md determinism contract)
   uint32_t first_pass = 0;
   uint32_t pass_count = 0;   // 0: all passes of the scene from first_pass on
   double noise_target = 0;   // relMSE; 0 = none

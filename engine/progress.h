@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <string>
 
-#include "engine/film.h"
+#include "engine/sample_buffer.h"
 
 namespace rf {
 

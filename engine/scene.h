@@ -8,15 +8,11 @@
 #include <string>
 #include <vector>
 
+#include "engine/integrators/registry.h"
 #include "engine/math.h"
+#include "engine/scene_error.h"
 
 namespace rf {
-
-// Thrown for any bad scene input. The message names the file, the JSON path (or line) and what
-// was expected, e.g. "scene.json: shapes[3].material: unknown material 'flor'".
-struct SceneError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
 
 // A material parameter: a constant, or (texture >= 0) a lookup in Scene::textures at the hit's uv.
 struct ColorParam {
@@ -129,30 +125,19 @@ struct Environment {
   Mat4 to_world;                // rotation of the map
 };
 
-// Integrator parameters; each integrator reads those its doc block names
-// (engine/integrators/*.cpp), the parser accepts only those for the chosen type.
+// The integrator and its settings: max depth and Russian roulette are common to all (DESIGN.md
+// "Max depth"); `method` is the integrator itself with its own parameters
+// (engine/integrators/registry.h lists them).
 struct IntegratorSettings {
-  std::string type = "path";
   int max_depth = 5;      // scattering events (DESIGN.md "Max depth", pbrt-v4's meaning)
   int rr_min_depth = 3;   // Russian roulette starts after this many bounces
-  // ao
-  float ao_max_distance = kInf;  // occluders farther than this do not count
-  bool ao_cosine = true;         // cosine-weighted (true) or uniform hemisphere sampling
-  int ao_samples = 1;            // occlusion rays per camera sample
-  // direct
-  enum class Strategy : uint8_t { Light, Bsdf, Mis };
-  Strategy direct_strategy = Strategy::Mis;
-  bool power_heuristic = true;   // MIS: power (true) or balance heuristic
-  int light_samples = 1;         // N light samples per hit
-  int bsdf_samples = 1;          // M BSDF samples per hit
-  // ir (instant radiosity, engine/integrators/ir.cpp)
-  int ir_vpl_paths = 256;         // light paths per pass depositing virtual point lights
-  float ir_clamp_distance = 0;    // G is clamped at 1 / d^2; 0: 0.1 x LightSet::scene_radius()
-  bool ir_compensation = true;    // recover the clamped part (unbiased) or drop it (biased)
-  // ppm (progressive photon mapping, engine/integrators/ppm.cpp)
-  int ppm_photons = 100000;       // photon paths traced per pass
-  float ppm_radius = 0;           // r_1, the first pass's radius; 0: 0.02 x scene_radius()
-  float ppm_alpha = 2.0f / 3.0f;  // Knaus-Zwicker alpha in (0, 1)
+  Integrator method = PathIntegrator{};
+
+  std::string type() const { return integrator_name(method); }  // "path", "bdpt", ...
+  template <class T>
+  T& as() { return std::get<T>(method); }  // throws std::bad_variant_access for another type
+  template <class T>
+  const T& as() const { return std::get<T>(method); }
 };
 
 struct RenderSettings {
@@ -160,7 +145,6 @@ struct RenderSettings {
   uint64_t spp = 64;          // total samples per pixel over all passes
   uint32_t passes = 16;       // spp must be a multiple of passes
   uint64_t seed = 0;
-  uint32_t frame = 0;
   double noise_target = 0;    // relMSE to stop at; 0 = render all passes
   std::string sampler = "independent";  // or "sobol": Owen-scrambled, scrambled per pass
   uint64_t spp_per_pass() const { return spp / passes; }
@@ -190,7 +174,6 @@ struct SceneOverrides {
   std::optional<int> max_depth;
   std::optional<std::string> filter;
   std::optional<double> noise_target;
-  std::optional<uint32_t> frame;
   std::optional<std::string> sampler;
 };
 
@@ -201,7 +184,5 @@ Scene load_scene(const std::string& path, const SceneOverrides& overrides = {});
 // Applies and validates overrides on an already loaded scene (throws SceneError naming the flag).
 void apply_overrides(Scene& scene, const SceneOverrides& overrides);
 
-// The names accepted for "integrator.type" and --integrator.
-const std::vector<std::string>& known_integrators();
 
 }  // namespace rf

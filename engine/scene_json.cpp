@@ -15,6 +15,7 @@
 #include <string_view>
 
 #include "engine/digest.h"
+#include "engine/json_reader.h"
 #include "engine/mesh_io.h"
 #include "engine/scene.h"
 
@@ -67,239 +68,6 @@ float default_filter_radius(FilterType t) {
   return 0.5f;
 }
 
-std::string join(const std::vector<std::string>& names) {
-  std::string out;
-  for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
-  return out;
-}
-
-bool contains(const std::vector<std::string>& names, const std::string& n) {
-  return std::find(names.begin(), names.end(), n) != names.end();
-}
-
-// "a.b", "a[3]"; keys that are not plain identifiers are quoted: materials["my wall"].
-std::string child(const std::string& parent, std::string_view key) {
-  bool plain = !key.empty() && std::all_of(key.begin(), key.end(), [](char c) {
-    return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
-  });
-  if (!plain) return parent + "[\"" + std::string(key) + "\"]";
-  return parent.empty() ? std::string(key) : parent + "." + std::string(key);
-}
-std::string child(const std::string& parent, size_t index) {
-  return parent + "[" + std::to_string(index) + "]";
-}
-
-// Short description of a JSON value for "got ..." in messages.
-std::string describe(const json& j) {
-  if (j.is_array()) return "an array of " + std::to_string(j.size()) + " elements";
-  if (j.is_object()) return "an object";
-  std::string s = j.dump();
-  if (s.size() > 40) s = s.substr(0, 37) + "...";
-  return j.type_name() + std::string(" ") + s;
-}
-
-std::string format_number(double v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
-}
-
-// ---------------------------------------------------------------------------------------------
-// JSON text -> json, with positions for syntax errors and a check for duplicate keys (nlohmann
-// silently keeps the last one, which would hide e.g. two materials of the same name).
-
-struct JsonFrame {
-  bool is_array = false;
-  size_t count = 0;  // elements started so far (arrays)
-  std::string key;   // current key (objects)
-  std::set<std::string> keys;
-};
-
-std::string frames_path(const std::vector<JsonFrame>& frames) {
-  std::string path;
-  for (size_t i = 0; i + 1 < frames.size(); ++i)
-    path = frames[i].is_array ? child(path, frames[i].count - 1) : child(path, frames[i].key);
-  return path;
-}
-
-std::string line_column(std::string_view text, size_t byte) {
-  size_t line = 1, col = 1;
-  for (size_t i = 0; i < byte && i < text.size(); ++i) text[i] == '\n' ? (++line, col = 1) : ++col;
-  return "line " + std::to_string(line) + ", column " + std::to_string(col);
-}
-
-json parse_json_text(const std::string& text, const std::string& file) {
-  std::vector<JsonFrame> frames;
-  auto callback = [&](int, json::parse_event_t ev, json& parsed) {
-    using E = json::parse_event_t;
-    bool starts = ev == E::object_start || ev == E::array_start || ev == E::value;
-    if (starts && !frames.empty() && frames.back().is_array) ++frames.back().count;
-    if (ev == E::object_start || ev == E::array_start) {
-      frames.emplace_back();
-      frames.back().is_array = ev == E::array_start;
-    }
-    if (ev == E::object_end || ev == E::array_end) frames.pop_back();
-    if (ev == E::key) {
-      std::string k = parsed.get<std::string>();
-      if (!frames.back().keys.insert(k).second)
-        throw SceneError(file + ": " + child(frames_path(frames), k) + ": duplicate key");
-      frames.back().key = k;
-    }
-    return true;
-  };
-  try {
-    return json::parse(text, callback);
-  } catch (const json::parse_error& e) {
-    // Keep nlohmann's explanation, but put the position in our own "file: where: what" form.
-    std::string what = e.what();
-    size_t col = what.find("column ");
-    size_t colon = col == std::string::npos ? col : what.find(": ", col);
-    std::string why = colon == std::string::npos ? what : what.substr(colon + 2);
-    throw SceneError(file + ": " + line_column(text, e.byte ? e.byte - 1 : 0) + ": " + why);
-  } catch (const json::out_of_range& e) {
-    // Number overflow (e.g. 1e999) carries no position; find the literal it names.
-    std::string what = e.what();
-    size_t q1 = what.find('\''), q2 = what.rfind('\'');
-    std::string literal = q1 < q2 ? what.substr(q1 + 1, q2 - q1 - 1) : "";
-    size_t at = literal.empty() ? std::string::npos : text.find(literal);
-    std::string where = at == std::string::npos ? "(unknown position)" : line_column(text, at);
-    throw SceneError(file + ": " + where + ": number " + literal +
-                     " is out of range (JSON numbers must be finite)");
-  }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Typed access to JSON values, each failing with the value's path.
-
-class Reader {
- public:
-  explicit Reader(std::string file) : file_(std::move(file)) {}
-
-  [[noreturn]] void fail(const std::string& path, const std::string& what) const {
-    throw SceneError(file_ + ": " + (path.empty() ? "(top level)" : path) + ": " + what);
-  }
-
-  const std::string& file() const { return file_; }
-
-  void expect_object(const json& j, const std::string& path) const {
-    if (!j.is_object()) fail(path, "expected an object, got " + describe(j));
-  }
-
-  // j must be an object whose keys are all in `allowed`: typos are errors, not silently ignored.
-  void check_keys(const json& j, const std::string& path,
-                  const std::vector<std::string>& allowed) const {
-    expect_object(j, path);
-    for (auto it = j.begin(); it != j.end(); ++it)
-      if (!contains(allowed, it.key()))
-        fail(child(path, it.key()), "unknown key (expected one of: " + join(allowed) + ")");
-  }
-
-  const json* find(const json& j, const std::string& key) const {
-    auto it = j.find(key);
-    return it == j.end() ? nullptr : &*it;
-  }
-
-  const json& require(const json& j, const std::string& path, const std::string& key) const {
-    const json* v = find(j, key);
-    if (!v) fail(child(path, key), "required key is missing");
-    return *v;
-  }
-
-  // A number that is finite also in single precision (geometry and colours are float).
-  float number(const json& j, const std::string& path) const {
-    if (!j.is_number()) fail(path, "expected a number, got " + describe(j));
-    double v = j.get<double>();
-    if (!std::isfinite(static_cast<float>(v)))
-      fail(path, "number " + format_number(v) + " is not finite in single precision");
-    return static_cast<float>(v);
-  }
-
-  double real(const json& j, const std::string& path) const {
-    if (!j.is_number()) fail(path, "expected a number, got " + describe(j));
-    return j.get<double>();  // finite: nlohmann refuses overflowing literals
-  }
-
-  int64_t integer(const json& j, const std::string& path, int64_t lo, int64_t hi) const {
-    if (!j.is_number_integer()) fail(path, "expected an integer, got " + describe(j));
-    if (j.is_number_unsigned() && j.get<uint64_t>() > static_cast<uint64_t>(hi))
-      fail(path, "must be at most " + std::to_string(hi) + ", got " + j.dump());
-    int64_t v = j.get<int64_t>();
-    if (v < lo) fail(path, "must be at least " + std::to_string(lo) + ", got " + j.dump());
-    if (v > hi) fail(path, "must be at most " + std::to_string(hi) + ", got " + j.dump());
-    return v;
-  }
-
-  uint64_t unsigned_integer(const json& j, const std::string& path, uint64_t lo) const {
-    if (!j.is_number_unsigned()) fail(path, "expected a non-negative integer, got " + describe(j));
-    uint64_t v = j.get<uint64_t>();
-    if (v < lo) fail(path, "must be at least " + std::to_string(lo) + ", got " + j.dump());
-    return v;
-  }
-
-  bool boolean(const json& j, const std::string& path) const {
-    if (!j.is_boolean()) fail(path, "expected true or false, got " + describe(j));
-    return j.get<bool>();
-  }
-
-  std::string string(const json& j, const std::string& path) const {
-    if (!j.is_string()) fail(path, "expected a string, got " + describe(j));
-    return j.get<std::string>();
-  }
-
-  const json& array(const json& j, const std::string& path, size_t n = 0) const {
-    if (!j.is_array()) fail(path, "expected an array, got " + describe(j));
-    if (n && j.size() != n)
-      fail(path, "expected " + std::to_string(n) + " elements, got " + std::to_string(j.size()));
-    return j;
-  }
-
-  Vec3 vec3(const json& j, const std::string& path) const {
-    array(j, path, 3);
-    return {number(j[0], child(path, 0)), number(j[1], child(path, 1)),
-            number(j[2], child(path, 2))};
-  }
-
-  // A colour: [r, g, b] or one number for grey; each component in [0, max].
-  RGB rgb(const json& j, const std::string& path, float max) const {
-    if (!j.is_number() && !j.is_array())
-      fail(path, "expected [r, g, b] or a number, got " + describe(j));
-    RGB c = j.is_number() ? RGB(number(j, path)) : vec3(j, path);
-    for (int i = 0; i < 3; ++i) {
-      std::string p = j.is_number() ? path : child(path, i);
-      if (c[i] < 0) fail(p, "must be at least 0, got " + format_number(c[i]));
-      if (c[i] > max)
-        fail(p, "must be at most " + format_number(max) + ", got " + format_number(c[i]));
-    }
-    return c;
-  }
-
-  // 16 numbers, row-major, affine (last row 0 0 0 1) and invertible.
-  Mat4 matrix(const json& j, const std::string& path) const {
-    array(j, path, 16);
-    Mat4 m;
-    for (int i = 0; i < 16; ++i) m.m[i / 4][i % 4] = number(j[i], child(path, i));
-    if (m.m[3][0] != 0 || m.m[3][1] != 0 || m.m[3][2] != 0 || m.m[3][3] != 1)
-      fail(path, "last row must be [0, 0, 0, 1] (affine transforms only)");
-    check_invertible(m, path);
-    return m;
-  }
-
-  // Singular when the rows of the linear part are (nearly) dependent: |det| is small relative to
-  // the product of the row lengths (Hadamard's bound, equal to |det| for orthogonal rows).
-  void check_invertible(const Mat4& m, const std::string& path) const {
-    double bound = 1;
-    for (int r = 0; r < 3; ++r)
-      bound *= std::sqrt(double(m.m[r][0]) * m.m[r][0] + double(m.m[r][1]) * m.m[r][1] +
-                         double(m.m[r][2]) * m.m[r][2]);
-    double det = m.det3();
-    if (!m.is_finite() || !std::isfinite(det)) fail(path, "matrix is not finite");
-    if (bound == 0 || std::fabs(det) <= 1e-6 * bound)
-      fail(path, "matrix is singular (determinant " + format_number(det) + ")");
-  }
-
- private:
-  std::string file_;
-};
 
 // ---------------------------------------------------------------------------------------------
 // Built-in shapes in object space.
@@ -390,10 +158,10 @@ class SceneParser {
     if (const json* t = r_.find(root, "textures")) parse_textures(*t);
     parse_materials(r_.require(root, "", "materials"));
     const json& shapes = r_.array(r_.require(root, "", "shapes"), "shapes");
-    for (size_t i = 0; i < shapes.size(); ++i) parse_shape(shapes[i], child("shapes", i));
+    for (size_t i = 0; i < shapes.size(); ++i) parse_shape(shapes[i], json_child("shapes", i));
     if (const json* l = r_.find(root, "lights")) {
       r_.array(*l, "lights");
-      for (size_t i = 0; i < l->size(); ++i) parse_light((*l)[i], child("lights", i));
+      for (size_t i = 0; i < l->size(); ++i) parse_light((*l)[i], json_child("lights", i));
     }
     if (const json* e = r_.find(root, "environment")) parse_environment(*e);
   }
@@ -417,7 +185,7 @@ class SceneParser {
   void parse_version(const json& root) {
     if (const json* f = r_.find(root, "format"))
       if (r_.string(*f, "format") != "rayfarm-scene")
-        r_.fail("format", "expected \"rayfarm-scene\", got " + describe(*f));
+        r_.fail("format", "expected \"rayfarm-scene\", got " + describe_json(*f));
     const json* v = r_.find(root, "version");
     if (!v) r_.fail("version", "required key is missing (this build reads version 1)");
     if (!v->is_number_integer() || v->get<int64_t>() != kFormatVersion)
@@ -494,9 +262,9 @@ class SceneParser {
     if (const json* f = r_.find(j, "filter")) {
       r_.check_keys(*f, "film.filter", {"type", "radius", "sigma"});
       std::string type = r_.string(r_.require(*f, "film.filter", "type"), "film.filter.type");
-      if (!contains(kFilterTypes, type))
+      if (!contains_name(kFilterTypes, type))
         r_.fail("film.filter.type",
-                "unknown filter '" + type + "' (known: " + join(kFilterTypes) + ")");
+                "unknown filter '" + type + "' (known: " + join_names(kFilterTypes) + ")");
       scene_.film.filter.type = filter_type(type);
       scene_.film.filter.radius = default_filter_radius(scene_.film.filter.type);
       if (const json* sg = r_.find(*f, "sigma")) {
@@ -517,7 +285,8 @@ class SceneParser {
     const std::string p = "render";
     r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target", "sampler"});
     RenderSettings& rs = scene_.render;
-    if (const json* i = r_.find(j, "integrator")) parse_integrator(*i);
+    if (const json* i = r_.find(j, "integrator"))
+      rf::parse_integrator(r_, *i, "render.integrator", rs.integrator);
     if (const json* v = r_.find(j, "spp")) rs.spp = r_.unsigned_integer(*v, "render.spp", 1);
     if (const json* v = r_.find(j, "passes")) {
       rs.passes = uint32_t(r_.integer(*v, "render.passes", 1, UINT32_MAX));
@@ -530,8 +299,8 @@ class SceneParser {
     if (const json* v = r_.find(j, "seed")) rs.seed = r_.unsigned_integer(*v, "render.seed", 0);
     if (const json* v = r_.find(j, "sampler")) {
       rs.sampler = r_.string(*v, "render.sampler");
-      if (!contains(kSamplers, rs.sampler))
-        r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join(kSamplers) + ")");
+      if (!contains_name(kSamplers, rs.sampler))
+        r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join_names(kSamplers) + ")");
     }
     if (const json* v = r_.find(j, "noise_target")) {
       rs.noise_target = r_.real(*v, "render.noise_target");
@@ -542,81 +311,6 @@ class SceneParser {
 
   void set_default_passes() {
     scene_.render.passes = uint32_t(std::gcd(scene_.render.spp, uint64_t(kDefaultPassCap)));
-  }
-
-  void parse_integrator(const json& j) {
-    const std::string p = "render.integrator";
-    r_.expect_object(j, p);
-    IntegratorSettings& is = scene_.render.integrator;
-    is.type = r_.string(r_.require(j, p, "type"), p + ".type");
-    if (!contains(known_integrators(), is.type))
-      r_.fail(p + ".type",
-              "unknown integrator '" + is.type + "' (known: " + join(known_integrators()) + ")");
-    std::vector<std::string> keys = {"type", "max_depth", "rr_min_depth"};
-    if (is.type == "ao") keys = {"type", "max_distance", "sampling", "samples"};
-    if (is.type == "direct") keys = {"type", "strategy", "heuristic", "light_samples", "bsdf_samples"};
-    if (is.type == "whitted") keys = {"type", "max_depth"};
-    if (is.type == "ir")
-      keys = {"type", "max_depth", "rr_min_depth", "vpl_paths", "clamp_distance", "compensation"};
-    if (is.type == "ppm") keys = {"type", "max_depth", "rr_min_depth", "photons", "radius", "alpha"};
-    r_.check_keys(j, p, keys);
-    if (const json* v = r_.find(j, "max_depth"))
-      is.max_depth = int(r_.integer(*v, p + ".max_depth", 0, INT32_MAX));
-    if (const json* v = r_.find(j, "rr_min_depth"))
-      is.rr_min_depth = int(r_.integer(*v, p + ".rr_min_depth", 1, INT32_MAX));
-    if (const json* v = r_.find(j, "max_distance")) {
-      is.ao_max_distance = r_.number(*v, p + ".max_distance");
-      if (!(is.ao_max_distance > 0)) r_.fail(p + ".max_distance", "must be > 0, got " + v->dump());
-    }
-    if (const json* v = r_.find(j, "sampling")) {
-      std::string s = r_.string(*v, p + ".sampling");
-      if (s != "cosine" && s != "uniform")
-        r_.fail(p + ".sampling", "expected \"cosine\" or \"uniform\", got '" + s + "'");
-      is.ao_cosine = s == "cosine";
-    }
-    if (const json* v = r_.find(j, "samples")) is.ao_samples = int(r_.integer(*v, p + ".samples", 1, 1 << 16));
-    if (const json* v = r_.find(j, "strategy")) {
-      std::string s = r_.string(*v, p + ".strategy");
-      using S = IntegratorSettings::Strategy;
-      if (s == "light") is.direct_strategy = S::Light;
-      else if (s == "bsdf") is.direct_strategy = S::Bsdf;
-      else if (s == "mis") is.direct_strategy = S::Mis;
-      else r_.fail(p + ".strategy", "expected \"light\", \"bsdf\" or \"mis\", got '" + s + "'");
-    }
-    if (const json* v = r_.find(j, "heuristic")) {
-      std::string s = r_.string(*v, p + ".heuristic");
-      if (s != "power" && s != "balance")
-        r_.fail(p + ".heuristic", "expected \"power\" or \"balance\", got '" + s + "'");
-      is.power_heuristic = s == "power";
-    }
-    if (const json* v = r_.find(j, "light_samples"))
-      is.light_samples = int(r_.integer(*v, p + ".light_samples", 0, 1 << 16));
-    if (const json* v = r_.find(j, "bsdf_samples"))
-      is.bsdf_samples = int(r_.integer(*v, p + ".bsdf_samples", 0, 1 << 16));
-    if (const json* v = r_.find(j, "vpl_paths"))
-      is.ir_vpl_paths = int(r_.integer(*v, p + ".vpl_paths", 1, 1 << 24));
-    if (const json* v = r_.find(j, "clamp_distance")) {
-      is.ir_clamp_distance = r_.number(*v, p + ".clamp_distance");
-      if (is.ir_clamp_distance < 0)
-        r_.fail(p + ".clamp_distance", "must be >= 0 (0: automatic), got " + v->dump());
-    }
-    if (const json* v = r_.find(j, "compensation"))
-      is.ir_compensation = r_.boolean(*v, p + ".compensation");
-    if (const json* v = r_.find(j, "photons"))
-      is.ppm_photons = int(r_.integer(*v, p + ".photons", 1, 1 << 28));
-    if (const json* v = r_.find(j, "radius")) {
-      is.ppm_radius = r_.number(*v, p + ".radius");
-      if (is.ppm_radius < 0)
-        r_.fail(p + ".radius", "must be >= 0 (0: automatic), got " + v->dump());
-    }
-    if (const json* v = r_.find(j, "alpha")) {
-      is.ppm_alpha = r_.number(*v, p + ".alpha");
-      if (!(is.ppm_alpha > 0 && is.ppm_alpha < 1))
-        r_.fail(p + ".alpha", "must lie in (0, 1), got " + v->dump());
-    }
-    if (is.type == "direct" && is.light_samples + is.bsdf_samples == 0)
-      r_.fail(p, "light_samples and bsdf_samples cannot both be 0");
-    if (is.type == "direct") is.max_depth = 1;  // direct lighting is exactly one bounce
   }
 
   void parse_materials(const json& j) {
@@ -643,12 +337,12 @@ class SceneParser {
   }
 
   Material parse_material(const std::string& name, const json& j) {
-    const std::string p = child("materials", name);
+    const std::string p = json_child("materials", name);
     r_.expect_object(j, p);
     std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
-    if (!contains(kMaterialTypes, type))
+    if (!contains_name(kMaterialTypes, type))
       r_.fail(p + ".type",
-              "unknown material type '" + type + "' (known: " + join(kMaterialTypes) + ")");
+              "unknown material type '" + type + "' (known: " + join_names(kMaterialTypes) + ")");
     std::vector<std::string> keys = material_keys(type);
     keys.push_back("type");
     r_.check_keys(j, p, keys);
@@ -690,8 +384,8 @@ class SceneParser {
         names.push_back(c.name);
         if (name == c.name) m.eta = c.eta, m.k = c.k;
       }
-      if (!contains(names, name))
-        r_.fail(p + ".preset", "unknown conductor '" + name + "' (known: " + join(names) + ")");
+      if (!contains_name(names, name))
+        r_.fail(p + ".preset", "unknown conductor '" + name + "' (known: " + join_names(names) + ")");
     } else if (const json* v = r_.find(j, "tint")) {
       m.conductor_tint = true;
       m.specular = color_param(*v, p + ".tint", 1);
@@ -733,13 +427,13 @@ class SceneParser {
     std::vector<std::string> known;
     for (const Texture& t : scene_.textures) known.push_back(t.name);
     r_.fail(p + ".texture", "unknown texture '" + name +
-                                "' (known: " + (known.empty() ? std::string("none") : join(known)) + ")");
+                                "' (known: " + (known.empty() ? std::string("none") : join_names(known)) + ")");
   }
 
   void parse_textures(const json& j) {
     r_.expect_object(j, "textures");
     for (auto it = j.begin(); it != j.end(); ++it) {
-      const std::string p = child("textures", it.key());
+      const std::string p = json_child("textures", it.key());
       const json& t = it.value();
       r_.expect_object(t, p);
       std::string type = r_.string(r_.require(t, p, "type"), p + ".type");
@@ -765,7 +459,7 @@ class SceneParser {
         tex.resolved_path = (dir_ / tex.file).string();
         if (const json* d = r_.find(t, "data")) tex.is_data = r_.boolean(*d, p + ".data");
       } else {
-        r_.fail(p + ".type", "unknown texture type '" + type + "' (known: " + join(kTextureTypes) + ")");
+        r_.fail(p + ".type", "unknown texture type '" + type + "' (known: " + join_names(kTextureTypes) + ")");
       }
       if (const json* v = r_.find(t, "scale")) {
         if (v->is_number()) {
@@ -799,7 +493,7 @@ class SceneParser {
       r_.check_keys(j, p, {"type", "name", "direction", "irradiance"});
       l.type = LightType::Directional;
     } else {
-      r_.fail(p + ".type", "unknown light type '" + type + "' (known: " + join(kLightTypes) + ")");
+      r_.fail(p + ".type", "unknown light type '" + type + "' (known: " + join_names(kLightTypes) + ")");
     }
     if (const json* n = r_.find(j, "name")) l.name = r_.string(*n, p + ".name");
     if (l.type != LightType::Directional) {
@@ -893,7 +587,7 @@ class SceneParser {
     else if (type == "disk")
       keys.insert(keys.end(), {"segments"});
     else if (type != "rectangle" && type != "cube")
-      r_.fail(p + ".type", "unknown shape type '" + type + "' (known: " + join(kShapeTypes) + ")");
+      r_.fail(p + ".type", "unknown shape type '" + type + "' (known: " + join_names(kShapeTypes) + ")");
     r_.check_keys(j, p, keys);
 
     Mesh mesh;
@@ -933,7 +627,7 @@ class SceneParser {
       std::vector<std::string> known;
       for (const Material& m : scene_.materials) known.push_back(m.name);
       r_.fail(p, "unknown material '" + name +
-                     "' (known: " + (known.empty() ? std::string("none") : join(known)) + ")");
+                     "' (known: " + (known.empty() ? std::string("none") : join_names(known)) + ")");
     }
     return it->second;
   }
@@ -952,7 +646,7 @@ class SceneParser {
     if (j.is_object()) return parse_transform_op(j, p);
     r_.array(j, p);
     Mat4 m = Mat4::identity();
-    for (size_t i = 0; i < j.size(); ++i) m = parse_transform_op(j[i], child(p, i)) * m;
+    for (size_t i = 0; i < j.size(); ++i) m = parse_transform_op(j[i], json_child(p, i)) * m;
     r_.check_invertible(m, p);
     return m;
   }
@@ -965,7 +659,7 @@ class SceneParser {
     r_.check_keys(j, p, {"translate", "scale", "rotate", "matrix"});
     const std::string& op = j.begin().key();
     const json& v = j.begin().value();
-    const std::string vp = child(p, op);
+    const std::string vp = json_child(p, op);
     if (op == "translate") return Mat4::translate(r_.vec3(v, vp));
     if (op == "matrix") return r_.matrix(v, vp);
     if (op == "scale") {
@@ -1008,7 +702,7 @@ class SceneParser {
     if (idx.size() % 3 != 0)
       r_.fail(p + ".indices", "expected 3 indices per triangle, got " + std::to_string(idx.size()));
     for (size_t i = 0; i < idx.size(); ++i)
-      m.indices.push_back(uint32_t(r_.integer(idx[i], child(p + ".indices", i), 0, UINT32_MAX)));
+      m.indices.push_back(uint32_t(r_.integer(idx[i], json_child(p + ".indices", i), 0, UINT32_MAX)));
     if (const json* n = r_.find(j, "normals")) {
       std::vector<float> v = flat_numbers(*n, p + ".normals", 3);
       for (size_t i = 0; i < v.size(); i += 3) m.normals.emplace_back(v[i], v[i + 1], v[i + 2]);
@@ -1026,7 +720,7 @@ class SceneParser {
       r_.fail(p, "expected a flat array of " + std::to_string(group) + "*n numbers, got " +
                      std::to_string(j.size()));
     std::vector<float> out;
-    for (size_t i = 0; i < j.size(); ++i) out.push_back(r_.number(j[i], child(p, i)));
+    for (size_t i = 0; i < j.size(); ++i) out.push_back(r_.number(j[i], json_child(p, i)));
     return out;
   }
 
@@ -1125,7 +819,7 @@ class SceneParser {
     mesh.uvs = std::move(m.uvs);
   }
 
-  Reader r_;
+  JsonReader r_;
   Scene& scene_;
   fs::path dir_;
   std::map<std::string, uint32_t> material_ids_;
@@ -1166,43 +860,36 @@ void override_passes(RenderSettings& rs, const SceneOverrides& o) {
 
 }  // namespace
 
-const std::vector<std::string>& known_integrators() {
-  // One name per integrator (engine/integrators/); the parser checks each one's keys.
-  static const std::vector<std::string> kNames = {"whitted", "ao", "direct", "path", "light", "bdpt", "ir", "ppm"};
-  return kNames;
-}
-
 void apply_overrides(Scene& scene, const SceneOverrides& o) {
   // Work on copies so a rejected override leaves the scene untouched.
   FilmSettings film = scene.film;
   RenderSettings rs = scene.render;
-  if (o.integrator && !contains(known_integrators(), *o.integrator))
+  if (o.integrator && !contains_name(known_integrators(), *o.integrator))
     flag_fail("--integrator", "unknown integrator '" + *o.integrator +
-                                  "' (known: " + join(known_integrators()) + ")");
-  if (o.integrator) rs.integrator.type = *o.integrator;
+                                  "' (known: " + join_names(known_integrators()) + ")");
   if (o.max_depth && *o.max_depth < 0)
     flag_fail("--max-depth", "must be at least 0, got " + std::to_string(*o.max_depth));
   if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
-  if (rs.integrator.type == "direct") rs.integrator.max_depth = 1;  // one bounce by definition
+  if (o.integrator) set_integrator(rs.integrator, *o.integrator);
+  apply_fixed_max_depth(rs.integrator);  // direct lighting: one bounce by definition
   check_resolution(o.width, "width");
   check_resolution(o.height, "height");
   if (o.width) film.width = *o.width;
   if (o.height) film.height = *o.height;
-  if (o.filter && !contains(kFilterTypes, *o.filter))
-    flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join(kFilterTypes) + ")");
+  if (o.filter && !contains_name(kFilterTypes, *o.filter))
+    flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join_names(kFilterTypes) + ")");
   if (o.filter && *o.filter != "" && filter_type(*o.filter) != film.filter.type) {
     film.filter.type = filter_type(*o.filter);
     film.filter.radius = default_filter_radius(film.filter.type);
   }
-  if (o.sampler && !contains(kSamplers, *o.sampler))
-    flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join(kSamplers) + ")");
+  if (o.sampler && !contains_name(kSamplers, *o.sampler))
+    flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join_names(kSamplers) + ")");
   if (o.sampler) rs.sampler = *o.sampler;
   if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
     flag_fail("--noise-target",
               "must be a finite number >= 0, got " + format_number(*o.noise_target));
   if (o.noise_target) rs.noise_target = *o.noise_target;
   if (o.seed) rs.seed = *o.seed;
-  if (o.frame) rs.frame = *o.frame;
   override_passes(rs, o);
   scene.film = film;
   scene.render = rs;

@@ -9,26 +9,15 @@
 #include <cstdio>
 #include <cstring>
 
-#include "engine/integrators/bdpt.h"
+#include "tests/support/bdpt_strategies.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/fixtures.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
 namespace {
-
-Scene cornell(const std::string& integrator, int res, uint64_t spp_per_pass, uint32_t passes,
-              uint64_t seed, int max_depth = 64) {
-  SceneOverrides ov;
-  ov.integrator = integrator;
-  ov.width = ov.height = res;
-  ov.spp = spp_per_pass * passes;
-  ov.passes = passes;
-  ov.seed = seed;
-  ov.max_depth = max_depth;
-  return load_scene(test::source_dir() + "/scenes/cornell-box/scene.json", ov);
-}
 
 // A room lit only indirectly by a point light above a diffuse shade, with a glass sphere and a
 // mirror plate: delta light and delta BSDF vertices everywhere. The shade hides the sphere from
@@ -134,10 +123,10 @@ void expect_agree(const test::ImageStats& a, const test::ImageStats& b, const ch
 // the block means times render time, lower is better (equal-time relMSE ratio).
 TEST(Bdpt, AgreesWithPathOnCornellBox) {
   auto t0 = std::chrono::steady_clock::now();
-  test::ImageStats bdpt = test::render_stats(cornell("bdpt", 32, 160, 32, 11), 32, 4);
+  test::ImageStats bdpt = test::render_stats(test::cornell_box({"bdpt", 32, 160, 32, 11}), 32, 4);
   double t_bdpt = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
-  test::ImageStats path = test::render_stats(cornell("path", 32, 256, 32, 12), 32, 4);
+  test::ImageStats path = test::render_stats(test::cornell_box({"path", 32, 256, 32, 12}), 32, 4);
   double t_path = seconds_since(t0);
   expect_agree(bdpt, path, "bdpt (160 spp/pass) vs path (256 spp/pass), cornell 32x32, 4x4 blocks");
   double e_bdpt = block_rel_mse(bdpt) * t_bdpt, e_path = block_rel_mse(path) * t_path;
@@ -184,10 +173,10 @@ TEST(Bdpt, AgreesWithPathUnderEnvironmentAndDirectionalLight) {
 TEST(Bdpt, StrategyImagesSumToTheImage) {
   for (const char* which : {"cornell", "glass room"}) {
     SCOPED_TRACE(which);
-    Scene s = std::string(which) == "cornell" ? cornell("bdpt", 16, 4, 4, 3)
+    Scene s = std::string(which) == "cornell" ? test::cornell_box({"bdpt", 16, 4, 4, 3})
                                               : glass_room("bdpt", 16, 4, 4, 3);
     Renderer r(s);
-    SampleBuffer buf = r.render_task(Rect{0, 0, 16, 16}, 1, true);
+    SampleBuffer buf = r.render(TaskKey{0, Rect{0, 0, 16, 16}, 1}, true);
     StrategyImages si = render_bdpt_strategies(s, 1, 3);
     ASSERT_EQ(si.images.size(), 1u + 3u + 4u + 5u);  // depths 0..3, (1, 1) left out
     double max_rel = 0, total = 0;
@@ -218,7 +207,7 @@ TEST(Bdpt, StrategyImagesSumToTheImage) {
 // this far less than once in a thousand runs).
 TEST(Bdpt, UnweightedStrategiesOfOneDepthAgree) {
   constexpr uint32_t kPasses = 64;
-  Scene s = cornell("bdpt", 16, 16, kPasses, 5);
+  Scene s = test::cornell_box({"bdpt", 16, 16, kPasses, 5});
   std::vector<std::vector<double>> means;  // per pass, per shown strategy: image mean (RGB sum)
   StrategyImages layout;
   for (uint32_t p = 0; p < kPasses; ++p) {
@@ -265,13 +254,13 @@ TEST(Bdpt, PassesAreBitIdentical) {
   for (const char* which : {"cornell", "cornell sobol", "glass room"}) {
     SCOPED_TRACE(which);
     Scene s = std::string(which) == "glass room" ? glass_room("bdpt", 24, 4, 4, 3)
-                                                 : cornell("bdpt", 24, 4, 4, 3);
+                                                 : test::cornell_box({"bdpt", 24, 4, 4, 3});
     if (std::string(which) == "cornell sobol") s.render.sampler = "sobol";
     Renderer r(s);
     Rect full{0, 0, 24, 24};
-    SampleBuffer a = r.render_task(full, 2, true);
-    SampleBuffer b = r.render_task(full, 2, false);
-    SampleBuffer c = r.render_task(full, 2, true);
+    SampleBuffer a = r.render(TaskKey{0, full, 2}, true);
+    SampleBuffer b = r.render(TaskKey{0, full, 2}, false);
+    SampleBuffer c = r.render(TaskKey{0, full, 2}, true);
     EXPECT_TRUE(same(a.sum, b.sum));
     EXPECT_TRUE(same(a.splat, b.splat));
     EXPECT_TRUE(same(a.sum, c.sum));

@@ -3,7 +3,7 @@
 
 #include <filesystem>
 
-#include "engine/film.h"
+#include "engine/buffer_file.h"
 #include "tests/support/exr.h"
 #include "tests/support/test_support.h"
 

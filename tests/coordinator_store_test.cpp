@@ -14,8 +14,9 @@
 #include "coordinator/frame_range.h"
 #include "coordinator/job_store.h"
 #include "coordinator/scheduler.h"
-#include "engine/film.h"
-#include "engine/progressive.h"
+#include "engine/buffer_file.h"
+#include "engine/buffer_merge.h"
+#include "engine/frame_accumulator.h"
 #include "tests/support/test_support.h"
 
 namespace rf {

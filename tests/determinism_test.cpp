@@ -8,21 +8,14 @@
 #include <random>
 
 #include "engine/local_render.h"
-#include "engine/progressive.h"
+#include "engine/frame_accumulator.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/fixtures.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
 namespace {
-
-Scene cornell(int res, uint64_t spp, uint32_t passes) {
-  SceneOverrides ov;
-  ov.width = ov.height = res;
-  ov.spp = spp;
-  ov.passes = passes;
-  return load_scene(test::source_dir() + "/scenes/cornell-box/scene.json", ov);
-}
 
 bool bits_equal(const std::vector<double>& a, const std::vector<double>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0;
@@ -37,15 +30,15 @@ void expect_close(const std::vector<double>& a, const std::vector<double>& b, co
 }
 
 TEST(Determinism, WholeFrameEqualsTilesBitForBit) {
-  Scene s = cornell(48, 8, 4);
+  Scene s = test::cornell_box({"", 48, 2, 4});
   Renderer r(s);
   Rect full{0, 0, 48, 48};
   for (uint32_t pass : {0u, 3u}) {
-    SampleBuffer whole = r.render_task(full, pass, /*parallel=*/true);
-    SampleBuffer serial = r.render_task(full, pass, /*parallel=*/false);
+    SampleBuffer whole = r.render(TaskKey{0, full, pass}, /*parallel=*/true);
+    SampleBuffer serial = r.render(TaskKey{0, full, pass}, /*parallel=*/false);
     EXPECT_TRUE(bits_equal(whole.sum, serial.sum)) << "threads changed pixels";
-    SampleBuffer assembled(r.header(PassSet::range(pass, pass + 1)), full, false);
-    for (const Rect& t : r.tiles(20)) assemble_tile(assembled, r.render_task(t, pass, false));
+    SampleBuffer assembled(r.header(0, PassSet::range(pass, pass + 1)), full, false);
+    for (const Rect& t : r.tiles(20)) assemble_tile(assembled, r.render(TaskKey{0, t, pass}, false));
     EXPECT_TRUE(bits_equal(whole.sum, assembled.sum));
     EXPECT_TRUE(bits_equal(whole.sum_sq, assembled.sum_sq));
     EXPECT_TRUE(bits_equal(whole.batch_sum, assembled.batch_sum));
@@ -54,13 +47,13 @@ TEST(Determinism, WholeFrameEqualsTilesBitForBit) {
 }
 
 TEST(Determinism, PassesInAnyOrderAndGroupingMergeToTheSameImage) {
-  Scene s = cornell(32, 8, 8);
+  Scene s = test::cornell_box({"", 32, 1, 8});
   Renderer r(s);
   Rect full{0, 0, 32, 32};
   std::vector<SampleBuffer> passes;
-  for (uint32_t p = 0; p < 8; ++p) passes.push_back(r.render_task(full, p, false));
+  for (uint32_t p = 0; p < 8; ++p) passes.push_back(r.render(TaskKey{0, full, p}, false));
 
-  SampleBuffer in_order(r.header(PassSet{}), full, false);
+  SampleBuffer in_order(r.header(0, PassSet{}), full, false);
   for (auto& b : passes) merge_into(in_order, b);
 
   // Shuffled order, grouped into pairs first, merged pair-wise.
@@ -83,15 +76,15 @@ TEST(Determinism, PassesInAnyOrderAndGroupingMergeToTheSameImage) {
 }
 
 TEST(Determinism, ProgressiveMergerIgnoresArrivalOrder) {
-  Scene s = cornell(40, 6, 6);
+  Scene s = test::cornell_box({"", 40, 1, 6});
   Renderer r(s);
   std::vector<Rect> tiles = r.tiles(16);
   std::vector<SampleBuffer> tasks;
   for (uint32_t p = 0; p < 6; ++p)
-    for (const Rect& t : tiles) tasks.push_back(r.render_task(t, p, false));
+    for (const Rect& t : tiles) tasks.push_back(r.render(TaskKey{0, t, p}, false));
 
   auto run = [&](std::vector<SampleBuffer> order) {
-    FrameAccumulator acc(r.header(PassSet{}), tiles, false, ProgressiveOptions{0, 6, 0});
+    FrameAccumulator acc(r.header(0, PassSet{}), tiles, false, ProgressiveOptions{0, 6, 0});
     for (auto& t : order) acc.add(std::move(t));
     EXPECT_TRUE(acc.done());
     return acc.frame();
@@ -108,13 +101,13 @@ TEST(Determinism, ProgressiveMergerIgnoresArrivalOrder) {
 }
 
 TEST(Determinism, LocalRenderEqualsTaskMerge) {
-  Scene s = cornell(32, 4, 4);
+  Scene s = test::cornell_box({"", 32, 1, 4});
   Renderer r(s);
   LocalRenderOptions opt;
   opt.tile_size = 16;
   LocalRenderResult res = render_local(r, opt);
-  SampleBuffer manual(r.header(PassSet{}), Rect{0, 0, 32, 32}, false);
-  for (uint32_t p = 0; p < 4; ++p) merge_into(manual, r.render_task({0, 0, 32, 32}, p, true));
+  SampleBuffer manual(r.header(0, PassSet{}), Rect{0, 0, 32, 32}, false);
+  for (uint32_t p = 0; p < 4; ++p) merge_into(manual, r.render(TaskKey{0, {0, 0, 32, 32}, p}, true));
   EXPECT_TRUE(bits_equal(res.frame.sum, manual.sum));
   EXPECT_EQ(res.passes_merged, 4u);
 }
@@ -122,7 +115,7 @@ TEST(Determinism, LocalRenderEqualsTaskMerge) {
 TEST(Determinism, NoiseTargetStopsOnACompletedPrefix) {
   // A target between the relMSE after 4 and after 16 passes: the render stops at some k, and
   // its image is exactly the first k passes, whatever the tiling.
-  Scene s = cornell(32, 32, 16);
+  Scene s = test::cornell_box({"", 32, 2, 16});
   Renderer r(s);
   LocalRenderOptions probe;
   probe.pass_count = 8;
@@ -145,13 +138,13 @@ TEST(Determinism, NoiseTargetStopsOnACompletedPrefix) {
 }
 
 TEST(Determinism, SeedsAndPassesChangeTheImage) {
-  Scene s1 = cornell(16, 4, 2);
+  Scene s1 = test::cornell_box({"", 16, 2, 2});
   Scene s2 = s1;
   s2.render.seed += 1;
   Renderer r1(s1), r2(s2);
-  SampleBuffer a = r1.render_task({0, 0, 16, 16}, 0, false);
-  SampleBuffer b = r2.render_task({0, 0, 16, 16}, 0, false);
-  SampleBuffer c = r1.render_task({0, 0, 16, 16}, 1, false);
+  SampleBuffer a = r1.render(TaskKey{0, {0, 0, 16, 16}, 0}, false);
+  SampleBuffer b = r2.render(TaskKey{0, {0, 0, 16, 16}, 0}, false);
+  SampleBuffer c = r1.render(TaskKey{0, {0, 0, 16, 16}, 1}, false);
   EXPECT_FALSE(bits_equal(a.sum, b.sum)) << "seeds must give different streams";
   EXPECT_FALSE(bits_equal(a.sum, c.sum)) << "passes must be independent";
 }

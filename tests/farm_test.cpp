@@ -22,7 +22,7 @@
 #include <thread>
 
 #include "engine/digest.h"
-#include "engine/film.h"
+#include "engine/buffer_file.h"
 #include "tests/support/exr.h"
 #include "tests/support/process.h"
 #include "tests/support/test_support.h"

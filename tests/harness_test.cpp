@@ -10,6 +10,7 @@
 
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/fixtures.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"
 
@@ -299,20 +300,9 @@ TEST(HarnessSynthetic, FalseAlarmRateIsTheLevel) {
 // also leaves 12 pixels wholly inside the light: constant in every pass, so the zero-variance
 // branch is exercised on a real render.
 
-Scene cornell(uint64_t seed, int max_depth) {
-  SceneOverrides ov;
-  ov.width = 64;
-  ov.height = 64;
-  ov.spp = 64 * 32;
-  ov.passes = 32;
-  ov.seed = seed;
-  ov.max_depth = max_depth;
-  return load_scene(source_dir() + "/scenes/cornell-box/scene.json", ov);
-}
-
 class HarnessCornell : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() { reference_ = new ImageStats(render_stats(cornell(1, 64), 32, 1)); }
+  static void SetUpTestSuite() { reference_ = new ImageStats(render_stats(cornell_box({"", 64, 64, 32, 1, 64}), 32, 1)); }
   static void TearDownTestSuite() {
     delete reference_;
     reference_ = nullptr;
@@ -322,7 +312,7 @@ class HarnessCornell : public ::testing::Test {
 ImageStats* HarnessCornell::reference_ = nullptr;
 
 TEST_F(HarnessCornell, TwoSeedsAgree) {
-  Agreement r = compare(*reference_, render_stats(cornell(2, 64), 32, 1));
+  Agreement r = compare(*reference_, render_stats(cornell_box({"", 64, 64, 32, 2, 64}), 32, 1));
   std::printf("two seeds: %s\n", r.message.c_str());
   EXPECT_TRUE(r.passed) << r.message;
   EXPECT_GT(r.zero_variance_cells, 0u) << "pixels wholly inside the light should be constant";
@@ -333,7 +323,7 @@ TEST_F(HarnessCornell, TwoSeedsAgree) {
 // outliers (24 allowed).
 // Both the outlier count and the mean check must catch it on their own.
 TEST_F(HarnessCornell, AlbedoTimes098Fails) {
-  Scene s = cornell(3, 64);
+  Scene s = cornell_box({"", 64, 64, 32, 3, 64});
   for (Material& m : s.materials) m.reflectance.value = m.reflectance.value * 0.98f;
   Agreement r = compare(*reference_, render_stats(s, 32, 1));
   std::printf("albedo x0.98: %s\n", r.message.c_str());
@@ -347,7 +337,7 @@ TEST_F(HarnessCornell, AlbedoTimes098Fails) {
 // not a test of anything. At depth 4 vs 3 the fourth bounce carries 3.7% of R (measured: 2962
 // outlier cells of 12252, 24 allowed; means 3.7% R, 2.9% G, 1.4% B apart).
 TEST(HarnessCornellDepth, OneBounceFewerFails) {  // no reference render needed
-  Agreement r = compare(render_stats(cornell(4, 4), 32, 1), render_stats(cornell(5, 3), 32, 1));
+  Agreement r = compare(render_stats(cornell_box({"", 64, 64, 32, 4, 4}), 32, 1), render_stats(cornell_box({"", 64, 64, 32, 5, 3}), 32, 1));
   std::printf("depth 4 vs 3: %s\n", r.message.c_str());
   EXPECT_FALSE(r.passed) << r.message;
   EXPECT_GT(r.outliers, r.allowed_outliers) << r.message;

@@ -8,27 +8,17 @@
 
 #include "engine/camera.h"
 #include "engine/filter.h"
-#include "engine/integrator.h"
+#include "engine/integrators/common.h"
 #include "engine/local_render.h"
+#include "engine/buffer_merge.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/fixtures.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
 namespace {
-
-Scene cornell(const std::string& integrator, int res, uint64_t spp_per_pass, uint32_t passes,
-              uint64_t seed, int max_depth = 64) {
-  SceneOverrides ov;
-  ov.integrator = integrator;
-  ov.width = ov.height = res;
-  ov.spp = spp_per_pass * passes;
-  ov.passes = passes;
-  ov.seed = seed;
-  ov.max_depth = max_depth;
-  return load_scene(test::source_dir() + "/scenes/cornell-box/scene.json", ov);
-}
 
 Scene scene_from_json(const std::string& text, const std::string& tag) {
   std::string dir = test::make_temp_dir(tag);
@@ -45,8 +35,8 @@ void expect_agree(const test::ImageStats& a, const test::ImageStats& b, const ch
 TEST(DirectIntegrator, EqualsPathWithMaxDepthOne) {
   // 256 spp per pass: pixels on the light's edge (radiance 17 or 0) dominate the image mean's
   // noise; this many samples bring its standard error under the harness's 0.3% warning level.
-  test::ImageStats direct = test::render_stats(cornell("direct", 32, 256, 32, 1), 32, 1);
-  test::ImageStats path = test::render_stats(cornell("path", 32, 256, 32, 2, 1), 32, 1);
+  test::ImageStats direct = test::render_stats(test::cornell_box({"direct", 32, 256, 32, 1}), 32, 1);
+  test::ImageStats path = test::render_stats(test::cornell_box({"path", 32, 256, 32, 2, 1}), 32, 1);
   expect_agree(direct, path, "direct vs path (max depth 1)");
 }
 
@@ -99,9 +89,9 @@ TEST(DirectIntegrator, StrategiesAgreeAndMisIsNeverTheWorst) {
     Scene s = scene_from_json(plates_scene(names[k], bsdf_samples[k], 32 * 64),
                               std::string("plates-") + names[k]);
     Renderer r(s);
-    SampleBuffer acc(r.header(PassSet{}), Rect{0, 0, 40, 30}, false);
+    SampleBuffer acc(r.header(0, PassSet{}), Rect{0, 0, 40, 30}, false);
     for (uint32_t p = 0; p < 32; ++p) {
-      SampleBuffer one = r.render_task(Rect{0, 0, 40, 30}, p, true);
+      SampleBuffer one = r.render(TaskKey{0, Rect{0, 0, 40, 30}, p}, true);
       stats[k].add_pass(one);
       if (k == 2) mis_blocks.add_pass(one);
       merge_into(acc, one);
@@ -179,7 +169,7 @@ TEST(WhittedIntegrator, EqualsRestrictedPathTracer) {
   Scene s = scene_from_json(kWhittedScene, "whitted");
   test::ImageStats whitted = test::render_stats(s, 32, 1);
   Renderer r(s);
-  RenderContext ctx = r.context();
+  const RenderContext& ctx = r.context();
   PerspectiveCamera camera(s.camera, 32, 32);
   test::ImageStats reference(32, 32, 1);
   const uint64_t spp = s.render.spp_per_pass();
@@ -203,13 +193,14 @@ TEST(WhittedIntegrator, EqualsRestrictedPathTracer) {
 // Ambient occlusion at a floor point, straight below the camera ray's origin.
 double ao_at(const Scene& s, Vec3 floor_point, int n, double* variance) {
   Renderer r(s);
-  RenderContext ctx = r.context();
+  const RenderContext& ctx = r.context();
+  const AoIntegrator& ao = s.render.integrator.as<AoIntegrator>();
   Sampler sampler;
   TraceCounters counters;
   double sum = 0, sum_sq = 0;
   for (int k = 0; k < n; ++k) {
     sampler.start_camera_sample(3, 0, 0, 0, 0, uint64_t(k));
-    double v = ao_radiance(ctx, Ray{floor_point + Vec3(0, 1, 0) * 0.5f, {0, -1, 0}, kInf}, sampler, counters).y;
+    double v = ao.radiance(ctx, Ray{floor_point + Vec3(0, 1, 0) * 0.5f, {0, -1, 0}, kInf}, sampler, counters).y;
     sum += v, sum_sq += v * v;
   }
   double mean = sum / n;
@@ -249,8 +240,8 @@ TEST(AmbientOcclusion, MatchesClosedForms) {
 }
 
 TEST(LightTracing, AgreesWithPathOnCornellBox) {
-  test::ImageStats light = test::render_stats(cornell("light", 32, 8, 32, 5), 32, 4);
-  test::ImageStats path = test::render_stats(cornell("path", 32, 8, 32, 6), 32, 4);
+  test::ImageStats light = test::render_stats(test::cornell_box({"light", 32, 8, 32, 5}), 32, 4);
+  test::ImageStats path = test::render_stats(test::cornell_box({"path", 32, 8, 32, 6}), 32, 4);
   expect_agree(light, path, "light vs path (4x4 blocks)");
 }
 
@@ -259,19 +250,19 @@ TEST(LightTracing, AgreesWithPathOnCornellBox) {
 TEST(IntegratorDeterminism, PassesAreReproducibleAndTileIndependent) {
   for (const char* name : {"whitted", "ao", "direct", "light"}) {
     SCOPED_TRACE(name);
-    Scene s = cornell(name, 24, 4, 4, 3);
+    Scene s = test::cornell_box({name, 24, 4, 4, 3});
     Renderer r(s);
     Rect full{0, 0, 24, 24};
-    SampleBuffer a = r.render_task(full, 2, true);
-    SampleBuffer b = r.render_task(full, 2, false);
+    SampleBuffer a = r.render(TaskKey{0, full, 2}, true);
+    SampleBuffer b = r.render(TaskKey{0, full, 2}, false);
     auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
       return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(double)) == 0;
     };
     EXPECT_TRUE(same(a.sum, b.sum));
     EXPECT_TRUE(same(a.splat, b.splat));
     if (!r.splats()) {
-      SampleBuffer tiled(r.header(PassSet::range(2, 3)), full, false);
-      for (const Rect& t : r.tiles(10)) assemble_tile(tiled, r.render_task(t, 2, false));
+      SampleBuffer tiled(r.header(0, PassSet::range(2, 3)), full, false);
+      for (const Rect& t : r.tiles(10)) assemble_tile(tiled, r.render(TaskKey{0, t, 2}, false));
       EXPECT_TRUE(same(a.sum, tiled.sum));
     } else {
       EXPECT_EQ(r.tiles(10).size(), 1u) << "splatting integrators render whole frames";

@@ -2,6 +2,7 @@
 // tracer on the Cornell box, the bias of ir without compensation, ppm's convergence, the
 // determinism contract, and the scene-format keys. Every statistical test uses fixed seeds.
 #include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -10,8 +11,10 @@
 #include <cstdio>
 #include <cstring>
 
+#include "engine/buffer_merge.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/fixtures.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"
 
@@ -23,15 +26,7 @@ namespace {
 // the image mean; passes stay independent (scrambled per pass), so batch means remain valid.
 Scene cornell(const std::string& integrator, int res, uint64_t spp_per_pass, uint32_t passes,
               uint64_t seed, int max_depth = 64) {
-  SceneOverrides ov;
-  ov.integrator = integrator;
-  ov.width = ov.height = res;
-  ov.spp = spp_per_pass * passes;
-  ov.passes = passes;
-  ov.seed = seed;
-  ov.max_depth = max_depth;
-  ov.sampler = "sobol";
-  return load_scene(test::source_dir() + "/scenes/cornell-box/scene.json", ov);
+  return test::cornell_box({integrator, res, spp_per_pass, passes, seed, max_depth, "sobol"});
 }
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
@@ -59,9 +54,7 @@ const test::ImageStats& cornell_path_32() {
 // VPL set (~2% per pass), hence 56 passes for a standard error under 0.3%.
 Scene cornell_ir(bool compensation, float clamp_distance, uint64_t spp_per_pass, uint32_t passes) {
   Scene s = cornell("ir", 32, spp_per_pass, passes, 1);
-  s.render.integrator.ir_vpl_paths = 256;
-  s.render.integrator.ir_clamp_distance = clamp_distance;
-  s.render.integrator.ir_compensation = compensation;
+  s.render.integrator.method = IrIntegrator{{}, 256, clamp_distance, compensation};
   return s;
 }
 
@@ -102,7 +95,7 @@ std::vector<std::vector<double>> pass_images(const Scene& s, uint32_t passes) {
   const int w = s.film.width, h = s.film.height;
   std::vector<std::vector<double>> out;
   for (uint32_t p = 0; p < passes; ++p) {
-    SampleBuffer b = r.render_task(Rect{0, 0, w, h}, p, true);
+    SampleBuffer b = r.render(TaskKey{0, Rect{0, 0, w, h}, p}, true);
     std::vector<double> img(size_t(w) * size_t(h) * 3);
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
@@ -150,7 +143,7 @@ double rmse(const std::vector<double>& a, const std::vector<double>& b, double c
 
 Scene cornell_ppm(int res, uint64_t spp_per_pass, uint32_t passes, int photons, uint64_t seed) {
   Scene s = cornell("ppm", res, spp_per_pass, passes, seed);
-  s.render.integrator.ppm_photons = photons;
+  s.render.integrator.as<PpmIntegrator>().photons = photons;
   return s;
 }
 
@@ -205,27 +198,53 @@ TEST(IrPpmDeterminism, PassesAreReproducibleAndTileIndependent) {
   for (const char* name : {"ir", "ppm"}) {
     SCOPED_TRACE(name);
     Scene s = cornell(name, 24, 2, 4, 3);
-    s.render.integrator.ir_vpl_paths = 64;
-    s.render.integrator.ppm_photons = 4000;
+    if (s.render.integrator.type() == "ir") s.render.integrator.as<IrIntegrator>().vpl_paths = 64;
+    if (s.render.integrator.type() == "ppm") s.render.integrator.as<PpmIntegrator>().photons = 4000;
     const Rect full{0, 0, 24, 24};
     Renderer r(s);
-    SampleBuffer a = r.render_task(full, 2, true);
-    SampleBuffer b = r.render_task(full, 2, false);
+    SampleBuffer a = r.render(TaskKey{0, full, 2}, true);
+    SampleBuffer b = r.render(TaskKey{0, full, 2}, false);
     EXPECT_TRUE(same_bits(a.sum, b.sum));
     EXPECT_TRUE(same_bits(a.sum_sq, b.sum_sq));
-    SampleBuffer tiled(r.header(PassSet::range(2, 3)), full, false);
-    for (const Rect& t : r.tiles(10)) assemble_tile(tiled, r.render_task(t, 2, false));
+    SampleBuffer tiled(r.header(0, PassSet::range(2, 3)), full, false);
+    for (const Rect& t : r.tiles(10)) assemble_tile(tiled, r.render(TaskKey{0, t, 2}, false));
     EXPECT_TRUE(same_bits(a.sum, tiled.sum));
     // A fresh renderer rebuilds the pass's VPLs / photons, here on one thread.
     Renderer r2(s);
     tbb::task_arena one(1);
-    SampleBuffer c = one.execute([&] { return r2.render_task(Rect{10, 0, 10, 24}, 2, false); });
-    SampleBuffer d = r.render_task(Rect{10, 0, 10, 24}, 2, true);
+    SampleBuffer c = one.execute([&] { return r2.render(TaskKey{0, Rect{10, 0, 10, 24}, 2}, false); });
+    SampleBuffer d = r.render(TaskKey{0, Rect{10, 0, 10, 24}, 2}, true);
     EXPECT_TRUE(same_bits(c.sum, d.sum));
     // And another pass differs (its own light paths and, for ppm, its own radius).
-    SampleBuffer other = r.render_task(full, 3, true);
+    SampleBuffer other = r.render(TaskKey{0, full, 3}, true);
     EXPECT_FALSE(same_bits(a.sum, other.sum));
     EXPECT_GT(a.rays, 0u);
+  }
+}
+
+// A pass's VPLs or photons are built once, whichever of the pass's tiles asks first, also when
+// its tiles render at the same time: the rays of a pass's tiles add up to the same total rendered
+// in parallel as one after another (a second build would add its light paths' rays again).
+TEST(IrPpmDeterminism, PassStateIsBuiltOncePerPass) {
+  for (const char* name : {"ir", "ppm"}) {
+    SCOPED_TRACE(name);
+    Scene s = cornell(name, 24, 1, 4, 3);
+    if (s.render.integrator.type() == "ir") s.render.integrator.as<IrIntegrator>().vpl_paths = 2048;
+    if (s.render.integrator.type() == "ppm") s.render.integrator.as<PpmIntegrator>().photons = 20000;
+    auto pass_rays = [&](bool parallel_tiles) {
+      Renderer r(s);
+      std::vector<Rect> tiles = r.tiles(4);
+      std::vector<uint64_t> rays(tiles.size());
+      auto one = [&](size_t i) { rays[i] = r.render(TaskKey{0, tiles[i], 1}, false).rays; };
+      if (parallel_tiles)
+        tbb::parallel_for(size_t(0), tiles.size(), one);
+      else
+        for (size_t i = 0; i < tiles.size(); ++i) one(i);
+      uint64_t total = 0;
+      for (uint64_t n : rays) total += n;
+      return total;
+    };
+    EXPECT_EQ(pass_rays(true), pass_rays(false));
   }
 }
 
@@ -249,19 +268,19 @@ TEST(IrPpmSettings, KeysParseAndChangeTheSettingsText) {
   };
   Scene ir = scene(R"({"type": "ir", "vpl_paths": 77, "clamp_distance": 0.25,
                        "compensation": false, "max_depth": 7})");
-  EXPECT_EQ(ir.render.integrator.ir_vpl_paths, 77);
-  EXPECT_FLOAT_EQ(ir.render.integrator.ir_clamp_distance, 0.25f);
-  EXPECT_FALSE(ir.render.integrator.ir_compensation);
+  EXPECT_EQ(ir.render.integrator.as<IrIntegrator>().vpl_paths, 77);
+  EXPECT_FLOAT_EQ(ir.render.integrator.as<IrIntegrator>().clamp_distance, 0.25f);
+  EXPECT_FALSE(ir.render.integrator.as<IrIntegrator>().compensation);
   EXPECT_EQ(ir.render.integrator.max_depth, 7);
   Scene ppm = scene(R"({"type": "ppm", "photons": 1234, "radius": 0.1, "alpha": 0.5})");
-  EXPECT_EQ(ppm.render.integrator.ppm_photons, 1234);
-  EXPECT_FLOAT_EQ(ppm.render.integrator.ppm_radius, 0.1f);
-  EXPECT_FLOAT_EQ(ppm.render.integrator.ppm_alpha, 0.5f);
+  EXPECT_EQ(ppm.render.integrator.as<PpmIntegrator>().photons, 1234);
+  EXPECT_FLOAT_EQ(ppm.render.integrator.as<PpmIntegrator>().radius, 0.1f);
+  EXPECT_FLOAT_EQ(ppm.render.integrator.as<PpmIntegrator>().alpha, 0.5f);
   Scene ppm2 = ppm;
-  ppm2.render.integrator.ppm_alpha = 0.6f;
+  ppm2.render.integrator.as<PpmIntegrator>().alpha = 0.6f;
   EXPECT_NE(settings_text(ppm), settings_text(ppm2));
   Scene ir2 = ir;
-  ir2.render.integrator.ir_compensation = true;
+  ir2.render.integrator.as<IrIntegrator>().compensation = true;
   EXPECT_NE(settings_text(ir), settings_text(ir2));
   EXPECT_THROW(scene(R"({"type": "ppm", "alpha": 1.0})"), SceneError);
   EXPECT_THROW(scene(R"({"type": "ppm", "vpl_paths": 3})"), SceneError);

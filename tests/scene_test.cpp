@@ -69,7 +69,7 @@ TEST(CornellBox, LoadsWithTheSettingsOfTheReference) {
   EXPECT_EQ(s.film.height, 256);
   EXPECT_EQ(s.film.filter.type, FilterType::Box);
   EXPECT_FLOAT_EQ(s.film.filter.radius, 0.5f);
-  EXPECT_EQ(s.render.integrator.type, "path");
+  EXPECT_EQ(s.render.integrator.type(), "path");
   EXPECT_EQ(s.render.integrator.max_depth, 64);
   EXPECT_EQ(s.render.spp, 256u);
   EXPECT_EQ(s.render.passes, 16u);
@@ -404,7 +404,7 @@ TEST(Settings, DefaultsAndPasses) {
   json j = minimal_scene();
   j.erase("render");
   Scene s = load_json(j);
-  EXPECT_EQ(s.render.integrator.type, "path");
+  EXPECT_EQ(s.render.integrator.type(), "path");
   EXPECT_EQ(s.render.spp, 64u);
   EXPECT_EQ(s.render.passes, 16u);
   EXPECT_EQ(s.film.filter.type, FilterType::Box);
@@ -499,7 +499,6 @@ TEST(Overrides, Applied) {
   o.width = 64;
   o.height = 32;
   o.max_depth = 3;
-  o.frame = 12;
   o.noise_target = 0.5;
   o.filter = "box";
   o.integrator = "path";
@@ -510,7 +509,6 @@ TEST(Overrides, Applied) {
   EXPECT_EQ(s.film.width, 64);
   EXPECT_EQ(s.film.height, 32);
   EXPECT_EQ(s.render.integrator.max_depth, 3);
-  EXPECT_EQ(s.render.frame, 12u);
   EXPECT_DOUBLE_EQ(s.render.noise_target, 0.5);
   SceneOverrides keep;
   keep.spp = 512;  // 16 divides 512: the scene's passes stay

@@ -19,6 +19,7 @@
 #include "coordinator/blob_store.h"
 #include "engine/build_info.h"
 #include "engine/digest.h"
+#include "engine/buffer_file.h"
 #include "engine/render.h"
 #include "engine/scene.h"
 #include "proto/chunking.h"
@@ -209,8 +210,8 @@ Renderer& Worker::prepare(const pb::Task& task) {
     files += f.path() + "\t" + f.sha256() + "\n";
     bundle.push_back({f.path(), f.sha256()});
   }
-  // Not keyed by frame: a frame only selects the seed stream (Renderer::set_frame), so a sequence
-  // of one scene file renders on one BVH.
+  // Not keyed by frame: a frame only selects the seed stream (it is part of the task), so a
+  // sequence of one scene file renders on one BVH.
   std::string key =
       sha256_hex(task.scene_path() + "\n" + files + task.overrides().SerializeAsString());
   for (auto it = scenes_.begin(); it != scenes_.end(); ++it)
@@ -220,7 +221,6 @@ Renderer& Worker::prepare(const pb::Task& task) {
         scenes_.erase(it);
         scenes_.push_front(std::move(c));
       }
-      scenes_.front().renderer->set_frame(task.frame());
       return *scenes_.front().renderer;
     }
   for (const BundleEntry& e : bundle) {
@@ -244,7 +244,6 @@ Renderer& Worker::prepare(const pb::Task& task) {
     throw TaskFailure(e.what());
   }
   SceneOverrides ov = to_scene_overrides(task.overrides());
-  ov.frame = task.frame();
   CachedScene c;
   c.key = key;
   try {
@@ -330,7 +329,7 @@ void Worker::run_task(const pb::Task& task) {
   bool finished = false;
   std::thread render([&] {
     try {
-      result = renderer->render_task(rect, task.pass(), true);
+      result = renderer->render(TaskKey{task.frame(), rect, task.pass()}, true);
     } catch (const std::exception& e) {
       render_error = e.what();
     }

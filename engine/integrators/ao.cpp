@@ -1,21 +1,16 @@
-// Ambient occlusion (`ao`).
-//
-// Estimator: at the first surface a camera ray hits, AO(x) = (1/pi) * integral over the
-// hemisphere about the shading normal (turned towards the camera) of V(x, w) cos(theta) dw, where
-// V = 1 unless the ray x + t w hits something with t < max_distance. With cosine-weighted sampling
-// each occlusion ray contributes exactly V (variance V(1-V)); with uniform hemisphere sampling it
-// contributes 2 V cos(theta), unbiased but noisier. The pixel value is AO in all three channels.
-// Parameters: max_distance (infinity by default), sampling ("cosine" or "uniform"), samples (rays
-// per camera sample).
-// Strengths: cheap, noise-friendly shape cue, needs no lights or materials.
-// Cannot do: it is not light transport: no lights, no materials, no interreflection; a closed
-// room is black without a max distance. A camera ray that misses everything gives 0.
-#include "engine/integrator.h"
+// The `ao` integrator: see ao.h.
+#include "engine/integrators/ao.h"
+
+#include <cstdio>
+
+#include "engine/integrators/drivers.h"
+#include "engine/json_reader.h"
 
 namespace rf {
 
-RGB ao_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters) {
-  const IntegratorSettings& s = ctx.scene.render.integrator;
+RGB AoIntegrator::radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
+                          TraceCounters& counters) const {
+  const AoIntegrator& s = *this;
   SurfaceHit hit;
   ++counters.rays;
   if (!ctx.accel.intersect(ray, hit)) return RGB(0.0f);
@@ -25,11 +20,11 @@ RGB ao_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounte
   Vec3 ns = dot(hit.ns, ng) < 0 ? -hit.ns : hit.ns;
   Frame frame = Frame::from_normal(ns);
   double sum = 0;
-  for (int k = 0; k < s.ao_samples; ++k) {
+  for (int k = 0; k < s.samples; ++k) {
     Vec2 u = sampler.get_2d();
     Vec3 local;
     float weight;
-    if (s.ao_cosine) {
+    if (s.cosine) {
       local = sample_cosine_hemisphere(u);
       weight = 1.0f;
     } else {
@@ -41,9 +36,38 @@ RGB ao_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounte
     if (dot(w, ng) <= 0) continue;  // below the geometric surface: occluded by the surface itself
     Ray r = ctx.accel.spawn(hit, w);
     ++counters.rays;
-    if (!ctx.accel.occluded(r.o, r.d, s.ao_max_distance)) sum += weight;
+    if (!ctx.accel.occluded(r.o, r.d, s.max_distance)) sum += weight;
   }
-  return RGB(float(sum / s.ao_samples));
+  return RGB(float(sum / s.samples));
+}
+
+void AoIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
+  if (const Json* v = r.find(j, "max_distance")) {
+    max_distance = r.number(*v, p + ".max_distance");
+    if (!(max_distance > 0)) r.fail(p + ".max_distance", "must be > 0, got " + v->dump());
+  }
+  if (const Json* v = r.find(j, "sampling")) {
+    std::string s = r.string(*v, p + ".sampling");
+    if (s != "cosine" && s != "uniform")
+      r.fail(p + ".sampling", "expected \"cosine\" or \"uniform\", got '" + s + "'");
+    cosine = s == "cosine";
+  }
+  if (const Json* v = r.find(j, "samples")) samples = int(r.integer(*v, p + ".samples", 1, 1 << 16));
+}
+
+std::string AoIntegrator::settings_text() const {
+  char buf[128];
+  std::snprintf(buf, sizeof buf, ";ao=%g:%s:%d", double(max_distance),
+                cosine ? "cosine" : "uniform", samples);
+  return buf;
+}
+
+SampleBuffer AoIntegrator::render(const RenderContext& ctx, const TaskKey& task,
+                                  bool parallel) const {
+  return render_camera_paths<false>(ctx, task, parallel,
+                                    [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
+                                      return radiance(ctx, ray, sampler, counters);
+                                    });
 }
 
 }  // namespace rf

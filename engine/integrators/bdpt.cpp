@@ -1,65 +1,10 @@
-// Bidirectional path tracing with multiple importance sampling (`bdpt`).
-//
-// Estimator (Veach 1997, ch. 10; Veach & Guibas 1995; pbrt-v3 section 16.3): each camera sample
-// traces a camera subpath z_0 (the lens) ... z_{t-1} and a light subpath y_0 (on a light) ...
-// y_{s-1}, then joins every prefix pair into a full path of s + t vertices:
-//   s = 0        the camera subpath itself hit an emitter (area light, or escaped into the
-//                environment);
-//   s = 1        a light point is sampled afresh from z_{t-1} by LightSet::sample (next-event
-//                estimation, the only way to reach directional lights and the environment);
-//   t = 1        y_{s-1} is joined to a lens point (PerspectiveCamera::connect) and the result
-//                is a splat at the raster point it reaches, weighted by the pixel filter and
-//                carrying W_e's pixel-count factor (as light tracing);
-//   s, t >= 2    a shadow ray joins y_{s-1} and z_{t-1}.
-// Every strategy with s + t - 2 <= max_depth (pbrt-v4's depth, DESIGN.md) contributes, except
-// (s, t) = (1, 1): a light seen directly is the (0, 2) strategy alone. The contributions of one
-// path length are combined with the power heuristic (beta = 2) over every strategy that could
-// have produced the path, computed by pbrt-v3's MISWeight: each vertex stores the area densities
-// pdf_fwd (how its own subpath sampled it) and pdf_rev (how the other direction would), the
-// connection vertices' pdf_rev are recomputed per strategy, and the weight is
-// 1 / (1 + sum over other strategies of (p_other / p_this)^2), the ratios accumulated one vertex
-// at a time. Delta BSDF vertices (mirror, glass, a smooth plastic coat's sampled lobe) have pdfs
-// 0: strategies that would connect at them are skipped in the sum and never evaluated. Delta
-// lights (point, spot, directional) cannot be hit: s = 0 does not exist for them.
-// Lights at infinity (environment, directional) cannot start light subpaths here
-// (LightSet::sample_emission refuses them), so their paths have only the s = 0 (environment
-// only) and s = 1 strategies; the MIS sums treat s >= 2 as impossible for such paths, so the
-// weights of the strategies that exist still sum to 1 (for the environment this is exactly the
-// path tracer's light/BSDF MIS).
-// The light subpath belongs to its camera sample: its random numbers come from the same Sampler
-// after the camera subpath's (then the connections' own: light selection and point for s = 1,
-// lens point for t = 1), so a pass renders the same anywhere. Shading normals are corrected in
-// the light subpath's BSDFs (Veach 1997, 5.3) as in light tracing.
-// Russian roulette (after rr_min_depth bounces, on throughput relative to the subpath's start;
-// camera subpaths also undo refraction's radiance scaling, as path) ends subpaths early; the MIS
-// weights use the sampling densities without the survival probabilities, which keeps every
-// strategy unbiased (the weights still sum to 1 over the strategies of each path) at a small
-// cost in variance.
-// Memory: subpaths live in two per-thread vertex arrays that grow to the longest subpath the
-// thread has seen (at most max_depth + 2 camera and max_depth + 1 light vertices) and are reused:
-// no allocation per path once a thread has traced its longest one, and no cap on max_depth.
-// Parameters: max_depth D, rr_min_depth. Per-strategy images (weighted and unweighted, Veach's
-// figures): render_bdpt_strategies() in bdpt.h.
-// Strengths: caustics seen directly or on diffuse surfaces (light -> specular -> diffuse ->
-// camera, via t = 1 and s >= 2), light arriving through small openings or from hidden lights
-// (light subpaths find the lit regions, connections do the rest), everything the path tracer
-// does well it does as well (its strategies are among BDPT's).
-// Cannot do: paths whose only non-delta vertex pair is missing, e.g. a caustic from a point light
-// seen through a mirror (light -> specular -> diffuse -> specular -> camera: no strategy can
-// connect), and reflected caustics of small lights remain noisy (that needs photon mapping or
-// vertex merging). Infinite lights get only the path tracer's two strategies. A camera sample
-// costs about two to three path-tracer samples (two subpaths plus O(s t) shadow rays): on the
-// Cornell box (directly lit, the path tracer's home ground) BDPT reaches about half the path
-// tracer's relMSE per sample but takes ~2.5x longer, so at equal time path wins by ~2x; in a
-// room lit indirectly by a point light with glass and a mirror BDPT wins ~25-50x at equal time
-// (tests/bdpt_test.cpp prints both).
+// The `bdpt` integrator: see bdpt.h.
 #include "engine/integrators/bdpt.h"
 
 #include <vector>
 
-#include "engine/filter.h"
-#include "engine/integrator.h"
-#include "engine/render.h"
+#include "engine/integrators/drivers.h"
+#include "engine/integrators/light_path.h"
 
 namespace rf {
 
@@ -84,36 +29,8 @@ struct Vertex {
   float pdf_fwd = 0, pdf_rev = 0;  // area densities (solid angle towards an infinite light)
 };
 
-// The adjoint BSDF with shading normals (Veach 1997, eq. 5.19), as light.cpp.
-float shading_correction(Vec3 wo, Vec3 wi, Vec3 ns, Vec3 ng) {
-  float den = std::fabs(dot(wo, ng)) * std::fabs(dot(wi, ns));
-  return den > 0 ? std::fabs(dot(wo, ns)) * std::fabs(dot(wi, ng)) / den : 0.0f;
-}
-
-// As light.cpp's splat(): W_e's pixel-count factor, then the filter weight per covered pixel.
-void splat(SplatTarget& t, Vec2 raster, RGB value) {
-  if (!is_finite(value) || is_black(value)) return;
-  const FilterSettings& f = *t.filter;
-  value *= float(t.width) * float(t.height);
-  int x0 = std::max(0, int(std::floor(raster.x - f.radius - 0.5f)));
-  int x1 = std::min(t.width - 1, int(std::floor(raster.x + f.radius - 0.5f)) + 1);
-  int y0 = std::max(0, int(std::floor(raster.y - f.radius - 0.5f)));
-  int y1 = std::min(t.height - 1, int(std::floor(raster.y + f.radius - 0.5f)) + 1);
-  for (int y = y0; y <= y1; ++y)
-    for (int x = x0; x <= x1; ++x) {
-      Vec2 d{raster.x - (float(x) + 0.5f), raster.y - (float(y) + 0.5f)};
-      if (f.type == FilterType::Box &&
-          (d.x < -f.radius || d.x >= f.radius || d.y < -f.radius || d.y >= f.radius))
-        continue;
-      float w = filter_weight(f, d);
-      if (w == 0) continue;
-      t.out->push_back({uint32_t(y) * uint32_t(t.width) + uint32_t(x), value * w});
-    }
-}
-
 struct Tracer {
   const RenderContext& ctx;
-  const PerspectiveCamera& camera;
   Sampler& sampler;
   TraceCounters& counters;
 
@@ -164,7 +81,7 @@ struct Tracer {
     float p;
     if (v.kind == VertexKind::Camera) {
       float pdf_pos;
-      camera.pdf_ray(wn, pdf_pos, p);
+      ctx.camera.pdf_ray(wn, pdf_pos, p);
     } else {
       p = v.bsdf.pdf(direction(v, *prev), wn, mode);
     }
@@ -190,73 +107,67 @@ struct Tracer {
     return r;
   }
 
-  // Extends path[0..n) (path[n-1] set, ray leaving it with direction density pdf_fwd) by
-  // scattering until max_vertices, a miss, an absorption or Russian roulette; returns the
-  // vertex count. The camera subpath records an escape into the environment as a light vertex.
-  size_t walk(std::vector<Vertex>& path, Ray ray, RGB beta, float pdf_fwd, TransportMode mode,
-              int64_t max_vertices) {
-    const IntegratorSettings& is = ctx.scene.render.integrator;
-    const float beta_start = max_component(beta);
-    float eta_scale = 1, cone_width = 0;
-    size_t n = 1;
-    while (int64_t(n) < max_vertices) {
+  // Records a subpath as trace_subpath (light_path.h) follows it: each surface vertex with its
+  // area densities, pdf_fwd as this direction sampled it and pdf_rev as the other would; the
+  // camera subpath records an escape into the environment as a light vertex.
+  struct Recorder {
+    const Tracer& tracer;
+    std::vector<Vertex>& path;
+    TransportMode mode;
+    float pdf_fwd;  // solid-angle density of the ray leaving path[n - 1]
+    size_t n = 1;   // vertices recorded; path[0] is the lens or light endpoint
+
+    Vertex& next() {
       if (path.size() == n) path.emplace_back();  // only while a thread's longest path grows
-      Vertex& prev = path[n - 1];
       Vertex& v = path[n];
       v = Vertex{};
-      ++counters.rays;
-      if (!ctx.accel.intersect(ray, v.hit)) {
-        if (mode == TransportMode::Radiance && ctx.lights.has_environment()) {
-          v.kind = VertexKind::Light;
-          v.infinite = true;
-          v.light = uint32_t(ctx.lights.environment_index());
-          v.dir = ray.d;
-          v.beta = beta;
-          v.pdf_fwd = pdf_fwd;
-          ++n;
-        }
-        break;
-      }
-      if (mode == TransportMode::Radiance) cone_width += ctx.pixel_spread * v.hit.t;
-      v.bsdf = bsdf_at(ctx, v.hit, cone_width);
+      return v;
+    }
+    void vertex(const PathVertex& pv) {
+      Vertex& v = next();
+      v.hit = pv.hit;
+      v.bsdf = pv.bsdf;
       v.hit.ns = v.bsdf.shading_normal();
       v.on_surface = true;
-      v.wo = -ray.d;
-      v.beta = beta;
-      v.pdf_fwd = to_area(prev, pdf_fwd, v);
-      if (ctx.scene.meshes[v.hit.mesh].emission)
-        v.light = ctx.lights.area_light_index(v.hit.mesh, v.hit.prim);
+      v.wo = pv.wo;
+      v.beta = pv.beta;
+      v.pdf_fwd = to_area(path[n - 1], pdf_fwd, v);
+      if (tracer.ctx.scene.meshes[v.hit.mesh].emission)
+        v.light = tracer.ctx.lights.area_light_index(v.hit.mesh, v.hit.prim);
       ++n;
-      if (int64_t(n) >= max_vertices) break;
-
-      float uc = sampler.get_1d();
-      Vec2 u = sampler.get_2d();
-      float u_rr = sampler.get_1d();
-      BsdfSample bs;
-      if (!v.bsdf.sample(v.wo, uc, u, mode, bs)) break;
+    }
+    void scattered(const PathVertex&, const BsdfSample& bs) {
+      Vertex& v = path[n - 1];
       float pdf_rev = v.bsdf.pdf(
           bs.wi, v.wo,
           mode == TransportMode::Radiance ? TransportMode::Importance : TransportMode::Radiance);
-      beta *= bs.f * (std::fabs(dot(bs.wi, v.hit.ns)) / bs.pdf_solid_angle);
-      if (mode == TransportMode::Importance)
-        beta *= shading_correction(v.wo, bs.wi, v.hit.ns, v.hit.ng);
-      else if (bs.is_transmission)
-        eta_scale *= sqr(bs.eta);
       pdf_fwd = bs.pdf_solid_angle;
       if (bs.is_delta) {
         v.delta = true;
         pdf_fwd = pdf_rev = 0;
       }
-      prev.pdf_rev = to_area(v, pdf_rev, prev);
-      if (is_black(beta) || !is_finite(beta)) break;
-      ray = ctx.accel.spawn(v.hit, bs.wi);
-      if (int64_t(n - 1) >= is.rr_min_depth) {  // n - 1 bounces so far
-        float survive = std::min(1.0f, max_component(beta * eta_scale) / beta_start);
-        if (u_rr >= survive) break;
-        beta = beta / survive;
-      }
+      path[n - 2].pdf_rev = to_area(v, pdf_rev, path[n - 2]);
     }
-    return n;
+    void escaped(Vec3 dir, RGB beta) {
+      if (mode != TransportMode::Radiance || !tracer.ctx.lights.has_environment()) return;
+      Vertex& v = next();
+      v.kind = VertexKind::Light;
+      v.infinite = true;
+      v.light = uint32_t(tracer.ctx.lights.environment_index());
+      v.dir = dir;
+      v.beta = beta;
+      v.pdf_fwd = pdf_fwd;
+      ++n;
+    }
+  };
+
+  // Extends path[0] (set; the ray leaves it with solid-angle density pdf_fwd) to at most
+  // max_vertices vertices; returns the vertex count.
+  template <TransportMode Mode>
+  size_t walk(std::vector<Vertex>& path, Ray ray, RGB beta, float pdf_fwd, int64_t max_vertices) {
+    Recorder rec{*this, path, Mode, pdf_fwd};
+    trace_subpath<Mode>(ctx, sampler, ray, beta, int(max_vertices - 1), rec, counters);
+    return rec.n;
   }
 
   // pbrt-v3's MISWeight with the power heuristic; `sampled` replaces light[0] (s = 1) or
@@ -349,7 +260,7 @@ struct Tracer {
       const Vertex& qs = light[s - 1];
       Vec2 u_lens = sampler.get_2d();
       CameraConnection cc;
-      if (!connectible(qs) || !camera.connect(qs.hit.p, u_lens, cc)) return RGB(0.0f);
+      if (!connectible(qs) || !ctx.camera.connect(qs.hit.p, u_lens, cc)) return RGB(0.0f);
       sampled.kind = VertexKind::Camera;
       sampled.hit.p = cc.p_lens;
       sampled.beta = RGB(cc.importance / cc.pdf_solid_angle);
@@ -403,16 +314,12 @@ struct Tracer {
 
 thread_local std::vector<Vertex> t_camera_path, t_light_path;
 
-struct NoRecorder {
-  void camera(size_t, size_t, RGB, RGB) {}
-  void splat(size_t, size_t, Vec2, RGB, RGB) {}
-};
+}  // namespace
 
-template <class Recorder>
-RGB bdpt_trace(const RenderContext& ctx, const PerspectiveCamera& camera, Ray ray, Sampler& sampler,
-               SplatTarget& splats, TraceCounters& counters, Recorder& rec) {
+RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, SplatTarget& splats,
+                       TraceCounters& counters, BdptStrategyRecorder* rec) {
   const int64_t max_depth = ctx.scene.render.integrator.max_depth;
-  Tracer tr{ctx, camera, sampler, counters};
+  Tracer tr{ctx, sampler, counters};
   std::vector<Vertex>& cam = t_camera_path;
   std::vector<Vertex>& light = t_light_path;
   if (cam.empty()) cam.emplace_back();
@@ -424,16 +331,14 @@ RGB bdpt_trace(const RenderContext& ctx, const PerspectiveCamera& camera, Ray ra
   cam[0].hit.p = ray.o;
   cam[0].beta = RGB(1.0f);
   float pdf_pos, pdf_dir;
-  camera.pdf_ray(ray.d, pdf_pos, pdf_dir);
+  ctx.camera.pdf_ray(ray.d, pdf_pos, pdf_dir);
   cam[0].pdf_fwd = pdf_pos;
-  size_t n_cam = tr.walk(cam, ray, RGB(1.0f), pdf_dir, TransportMode::Radiance, max_depth + 2);
+  size_t n_cam = tr.walk<TransportMode::Radiance>(cam, ray, RGB(1.0f), pdf_dir, max_depth + 2);
 
   // Light subpath: a point on a light, then up to max_depth surface vertices.
   size_t n_light = 0;
-  float u_select = sampler.get_1d();
-  Vec2 u_pos = sampler.get_2d(), u_dir = sampler.get_2d();
   EmissionSample es;
-  if (max_depth >= 0 && ctx.lights.sample_emission(u_select, u_pos, u_dir, es)) {
+  if (sample_light_path_start(ctx, sampler, es)) {
     Vertex& y0 = light[0];
     y0 = Vertex{};
     y0.kind = VertexKind::Light;
@@ -445,8 +350,8 @@ RGB bdpt_trace(const RenderContext& ctx, const PerspectiveCamera& camera, Ray ra
     y0.hit.ng = y0.hit.ns = es.n;
     y0.beta = es.radiance;
     y0.pdf_fwd = es.pdf_pos;
-    Ray r = es.is_area ? ctx.accel.spawn(y0.hit, es.dir) : Ray{es.p, es.dir, kInf};
-    n_light = tr.walk(light, r, es.beta, es.pdf_dir, TransportMode::Importance, max_depth + 1);
+    n_light = tr.walk<TransportMode::Importance>(light, light_path_ray(ctx, es), es.beta,
+                                                 es.pdf_dir, max_depth + 1);
   }
 
   // s = 1 samples its light afresh, so it runs even when no light subpath could start (the
@@ -462,128 +367,25 @@ RGB bdpt_trace(const RenderContext& ctx, const PerspectiveCamera& camera, Ray ra
       RGB c = tr.connect(light, cam, s, t, raster, w);
       if (is_black(c)) continue;
       if (t == 1) {
-        splat(splats, raster, c * w);
-        rec.splat(s, t, raster, c * w, c);
+        splat_to_film(splats, raster, c * w);
+        if (rec) rec->splat(int(s), int(t), raster, c * w, c);
       } else {
         pixel += c * w;
-        rec.camera(s, t, c * w, c);
+        if (rec) rec->camera(int(s), int(t), c * w, c);
       }
     }
   return pixel;
 }
 
-// Collects one pass's strategy images (render_bdpt_strategies).
-struct ImageRecorder {
-  StrategyImages& out;
-  const FilterSettings& filter;
-  std::vector<int> index;  // strategy slot by depth-major (s, t) key, -1 when not shown
-  // Per camera sample: its t >= 2 records, committed once its total is known to be finite.
-  struct Pending {
-    int slot;
-    RGB weighted, unweighted;
-  };
-  std::vector<Pending> pending;
-  std::vector<Splat> scratch;
-
-  int slot(size_t s, size_t t) const {
-    int64_t d = int64_t(s + t) - 2;
-    if (d > out.max_shown_depth) return -1;
-    return index[size_t(d) * size_t(out.max_shown_depth + 3) + s];
-  }
-  void camera(size_t s, size_t t, RGB weighted, RGB unweighted) {
-    pending.push_back({slot(s, t), weighted, unweighted});
-  }
-  void splat(size_t s, size_t t, Vec2 raster, RGB weighted, RGB unweighted) {
-    int k = slot(s, t);
-    add_splat(raster, weighted, k >= 0 ? out.images[size_t(k)].weighted : out.rest);
-    if (k >= 0) add_splat(raster, unweighted, out.images[size_t(k)].unweighted);
-  }
-  void add_splat(Vec2 raster, RGB value, std::vector<double>& img) {
-    scratch.clear();
-    SplatTarget target{&scratch, out.width, out.height, &filter};
-    rf::splat(target, raster, value);
-    for (const Splat& sp : scratch)
-      for (int c = 0; c < 3; ++c) img[3 * size_t(sp.pixel) + size_t(c)] += double(sp.value[c]);
-  }
-};
-
-}  // namespace
-
-RGB bdpt_sample(const RenderContext& ctx, const PerspectiveCamera& camera, Ray ray,
-                Sampler& sampler, SplatTarget& splats, TraceCounters& counters) {
-  NoRecorder none;
-  return bdpt_trace(ctx, camera, ray, sampler, splats, counters, none);
-}
-
-StrategyImages render_bdpt_strategies(const Scene& scene, uint32_t pass, int max_shown_depth) {
-  Renderer renderer(scene);
-  RenderContext ctx = renderer.context();
-  const int w = scene.film.width, h = scene.film.height;
-  const size_t pixels = size_t(w) * size_t(h);
-  const RenderSettings& rs = scene.render;
-  PerspectiveCamera camera(scene.camera, w, h);
-
-  StrategyImages out;
-  out.width = w;
-  out.height = h;
-  out.max_shown_depth = std::max(0, max_shown_depth);
-  out.rest.assign(3 * pixels, 0.0);
-  ImageRecorder rec{out, scene.film.filter, {}, {}, {}};
-  const size_t stride = size_t(out.max_shown_depth + 3);
-  rec.index.assign(size_t(out.max_shown_depth + 1) * stride, -1);
-  for (int d = 0; d <= out.max_shown_depth; ++d)
-    for (int s = 0; s <= d + 1; ++s) {
-      if (s == 1 && d == 0) continue;
-      rec.index[size_t(d) * stride + size_t(s)] = int(out.images.size());
-      out.images.push_back({s, d + 2 - s, std::vector<double>(3 * pixels, 0.0),
-                            std::vector<double>(3 * pixels, 0.0)});
-    }
-  // Camera strategies are summed per pixel first and divided by the pixel's sample count at the
-  // end; splats are divided by the light path count (camera samples of the frame).
-  const uint64_t spp = rs.spp_per_pass();
-  std::vector<double> rest_camera(3 * pixels, 0.0);
-  std::vector<std::vector<double>> cam_w(out.images.size(), std::vector<double>(3 * pixels, 0.0));
-  std::vector<std::vector<double>> cam_u = cam_w;
-
-  TraceCounters counters;
-  Sampler sampler(kind_from_name(rs.sampler));
-  std::vector<Splat> ignored;
-  SplatTarget target{&ignored, w, h, &scene.film.filter};
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x)
-      for (uint64_t k = 0; k < spp; ++k) {
-        sampler.start_camera_sample(rs.seed, rs.frame, pass, x, y, k);
-        FilterSample fs = sample_filter(scene.film.filter, sampler.get_2d());
-        Vec2 u_lens = sampler.get_2d();
-        Ray ray = camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
-                                      u_lens);
-        rec.pending.clear();
-        RGB l = bdpt_trace(ctx, camera, ray, sampler, target, counters, rec);
-        ignored.clear();
-        if (!is_finite(l * fs.weight)) continue;  // SampleBuffer drops the whole sample
-        size_t p = 3 * (size_t(y) * size_t(w) + size_t(x));
-        for (const ImageRecorder::Pending& r : rec.pending)
-          for (int c = 0; c < 3; ++c) {
-            double wv = double(r.weighted[c] * fs.weight), uv = double(r.unweighted[c] * fs.weight);
-            if (r.slot < 0) {
-              rest_camera[p + size_t(c)] += wv;
-            } else {
-              cam_w[size_t(r.slot)][p + size_t(c)] += wv;
-              cam_u[size_t(r.slot)][p + size_t(c)] += uv;
-            }
-          }
-      }
-  const double inv_spp = spp > 0 ? 1.0 / double(spp) : 0.0;
-  const double inv_paths = spp > 0 ? 1.0 / double(spp * pixels) : 0.0;
-  for (size_t i = 0; i < 3 * pixels; ++i) {
-    out.rest[i] = out.rest[i] * inv_paths + rest_camera[i] * inv_spp;
-    for (size_t k = 0; k < out.images.size(); ++k) {
-      StrategyImage& img = out.images[k];
-      img.weighted[i] = img.weighted[i] * inv_paths + cam_w[k][i] * inv_spp;
-      img.unweighted[i] = img.unweighted[i] * inv_paths + cam_u[k][i] * inv_spp;
-    }
-  }
-  return out;
+// One pass: camera samples as for the path tracer, each with its own light subpath, so the
+// splat plane is normalised by the camera sample count (render_camera_paths with splats).
+SampleBuffer BdptIntegrator::render(const RenderContext& ctx, const TaskKey& task,
+                                    bool parallel) const {
+  return render_camera_paths<true>(
+      ctx, task, parallel,
+      [&](Ray ray, Sampler& sampler, SplatTarget& splats, TraceCounters& counters) {
+        return bdpt_camera_sample(ctx, ray, sampler, splats, counters);
+      });
 }
 
 }  // namespace rf

@@ -1,21 +1,8 @@
-// Pieces every integrator shares: dispatch names, material resolution at a hit, shadow tests.
-#include <stdexcept>
-
-#include "engine/integrator.h"
+// Pieces every integrator shares (common.h): material resolution at a hit, shadow tests,
+// next-event estimation.
+#include "engine/integrators/common.h"
 
 namespace rf {
-
-IntegratorKind integrator_kind(const std::string& name) {
-  if (name == "whitted") return IntegratorKind::Whitted;
-  if (name == "ao") return IntegratorKind::AmbientOcclusion;
-  if (name == "direct") return IntegratorKind::Direct;
-  if (name == "path") return IntegratorKind::Path;
-  if (name == "light") return IntegratorKind::LightTracing;
-  if (name == "bdpt") return IntegratorKind::Bdpt;
-  if (name == "ir") return IntegratorKind::InstantRadiosity;
-  if (name == "ppm") return IntegratorKind::PhotonMapping;
-  throw std::invalid_argument("unknown integrator '" + name + "'");
-}
 
 namespace {
 
@@ -67,6 +54,16 @@ RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf
   float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
   float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
   return f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
+}
+
+void require_finite_emitters(const Scene& scene, const char* integrator) {
+  bool directional = false;
+  for (const Light& l : scene.lights) directional |= l.type == LightType::Directional;
+  if (scene.environment || directional)
+    throw SceneError(scene.path + ": integrator '" + integrator +
+                     "' cannot start light paths on " +
+                     std::string(scene.environment ? "an environment" : "a directional light") +
+                     " (no finite emission position); use path or bdpt for this scene");
 }
 
 }  // namespace rf

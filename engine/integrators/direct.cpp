@@ -1,18 +1,10 @@
-// Direct illumination (`direct`).
-//
-// Estimator: emitted radiance seen by the camera plus light that reaches the first surface
-// straight from an emitter (exactly one scattering event, so it equals `path` with max depth 1).
-// Strategy "light": N light samples (light chosen by power); "bsdf": M BSDF samples, emitters and
-// the environment found along them; "mis": both, combined by the multi-sample MIS heuristic
-// w_l = (N p_l)^b / ((N p_l)^b + (M p_f)^b), b = 2 (power) or 1 (balance) (Veach 1997, 9.2).
-// Delta lights are reached by light sampling only and delta BSDFs by BSDF sampling only, both
-// with weight 1, whatever the strategy, so the three strategies estimate the same image.
-// Parameters: strategy, heuristic, light_samples N, bsdf_samples M.
-// Strengths: the textbook test bed for importance sampling: light sampling wins for small lights
-// on rough surfaces, BSDF sampling for big lights on glossy surfaces, MIS is never much worse than
-// the better one.
-// Cannot do: any indirect light.
-#include "engine/integrator.h"
+// The `direct` integrator: see direct.h.
+#include "engine/integrators/direct.h"
+
+#include <cstdio>
+
+#include "engine/integrators/drivers.h"
+#include "engine/json_reader.h"
 
 namespace rf {
 
@@ -23,14 +15,13 @@ float mis_weight(float n_a, float pdf_a, float n_b, float pdf_b, bool power) {
   if (std::isinf(a)) return 1.0f;
   return a + b > 0 ? a / (a + b) : 0.0f;
 }
-}  // namespace
 
-RGB direct_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCounters& counters) {
-  const IntegratorSettings& s = ctx.scene.render.integrator;
-  using Strategy = IntegratorSettings::Strategy;
+RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray, Sampler& sampler,
+                    TraceCounters& counters) {
+  using Strategy = DirectIntegrator::Strategy;
   // Sample counts of each strategy (0 when unused), as the MIS weights need them.
-  float n_light = s.direct_strategy == Strategy::Bsdf ? 0.0f : float(s.light_samples);
-  float n_bsdf = s.direct_strategy == Strategy::Light ? 0.0f : float(s.bsdf_samples);
+  float n_light = s.strategy == Strategy::Bsdf ? 0.0f : float(s.light_samples);
+  float n_bsdf = s.strategy == Strategy::Light ? 0.0f : float(s.bsdf_samples);
   SurfaceHit hit;
   ++counters.rays;
   if (!ctx.accel.intersect(ray, hit)) return ctx.lights.environment_radiance(ray.d);
@@ -92,6 +83,44 @@ RGB direct_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCo
     radiance += weight * le * w;
   }
   return radiance;
+}
+
+}  // namespace
+
+void DirectIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
+  if (const Json* v = r.find(j, "strategy")) {
+    std::string s = r.string(*v, p + ".strategy");
+    if (s == "light") strategy = Strategy::Light;
+    else if (s == "bsdf") strategy = Strategy::Bsdf;
+    else if (s == "mis") strategy = Strategy::Mis;
+    else r.fail(p + ".strategy", "expected \"light\", \"bsdf\" or \"mis\", got '" + s + "'");
+  }
+  if (const Json* v = r.find(j, "heuristic")) {
+    std::string s = r.string(*v, p + ".heuristic");
+    if (s != "power" && s != "balance")
+      r.fail(p + ".heuristic", "expected \"power\" or \"balance\", got '" + s + "'");
+    power_heuristic = s == "power";
+  }
+  if (const Json* v = r.find(j, "light_samples"))
+    light_samples = int(r.integer(*v, p + ".light_samples", 0, 1 << 16));
+  if (const Json* v = r.find(j, "bsdf_samples"))
+    bsdf_samples = int(r.integer(*v, p + ".bsdf_samples", 0, 1 << 16));
+  if (light_samples + bsdf_samples == 0) r.fail(p, "light_samples and bsdf_samples cannot both be 0");
+}
+
+std::string DirectIntegrator::settings_text() const {
+  char buf[128];
+  std::snprintf(buf, sizeof buf, ";direct=%d:%s:%d:%d", int(strategy),
+                power_heuristic ? "power" : "balance", light_samples, bsdf_samples);
+  return buf;
+}
+
+SampleBuffer DirectIntegrator::render(const RenderContext& ctx, const TaskKey& task,
+                                      bool parallel) const {
+  return render_camera_paths<false>(ctx, task, parallel,
+                                    [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
+                                      return direct_radiance(*this, ctx, ray, sampler, counters);
+                                    });
 }
 
 }  // namespace rf

@@ -1,44 +1,16 @@
-// Instant radiosity with a clamped geometry term and its compensation (`ir`).
-//
-// Estimator (Keller 1997; Kollig & Keller 2004, "Illumination in the presence of weak
-// singularities"). Per pass, N light paths (light by power, importance-mode BSDFs, shading
-// normals corrected as in light.cpp) leave a virtual point light (VPL) at every non-delta surface
-// vertex y: its BSDF, the direction the light arrived from, its throughput / N and its depth k
-// (scattering events on the light path up to and including y). The camera path follows delta
-// BSDFs to a non-delta vertex x; there
-//   L(x) = Le(x) + direct(x) [next-event estimation, MIS with the BSDF sample, as path.cpp]
-//        + sum_j f_x f_yj Phi_j V min(G, b)     G = |w.ns_x| |w.ng_y| / |x - y|^2
-//        + compensation.
-// The VPLs estimate the indirect light with G clamped at b = 1 / d_c^2, which removes the bright
-// splotches near VPLs (the weak singularity). The clamped part, the integral of f_x (G - b)^+ V
-// Ls(y), is recovered by the BSDF sample of x: it is traced to y, and y's non-delta terms (its
-// direct light, its VPL gather, its own continuation) are weighted by (1 - b / G(x, y))^+, which
-// is 0 for most samples, so the continuation usually ends there. Light that y scatters by a delta
-// lobe, and anything seen through delta vertices, is not covered by the VPLs and is followed with
-// full weight. Hence the estimator is unbiased and converges to path's image at the same max
-// depth: a VPL of depth k gathered at a camera vertex with d scattering events before it makes a
-// path of d + 1 + k events, and it is used only when that is at most max_depth (Russian roulette
-// as path.cpp on the continuation).
-// Compensation off: the (G - b)^+ part is dropped, i.e. the clamped light is lost. The image is
-// then biased: darker, in concave corners and wherever surfaces see each other from closer than
-// d_c. Measured on the Cornell box (box 2 wide, tests/ir_ppm_test.cpp): image means 0.6% / 0.5% /
-// 0.3% (R, G, B) darker at the default d_c (0.17), 5.3% / 4.0% / 2.3% at d_c = 1.
-// Parameters: max_depth, rr_min_depth, vpl_paths (N, light paths per pass; default 256),
-// clamp_distance (d_c; 0 picks 0.1 x the scene's bounding radius), compensation (default true).
-// Per-pass state: the VPL list of pass p, a pure function of (scene, settings, p): light path i
-// is keyed by (seed, frame, p, i) and paths are traced in fixed chunks concatenated in order. It
-// is shared read-only by the tiles of the pass; each pass is an independent estimate.
-// Strengths: smooth, low-noise indirect light in diffuse scenes from few light paths; the cost per
-// pixel is independent of the light's size or visibility from the camera.
-// Limits: each camera vertex casts one shadow ray per VPL (cost O(VPLs) per pixel); VPL noise is
-// correlated across the image within a pass (low-frequency blotches, not pixel noise); glossy
-// receivers are poorly served by VPLs and rely on the compensation path; environment and
-// directional lights cannot start light paths and such scenes are refused.
-#include <algorithm>
+// The `ir` integrator: see ir.h.
+#include "engine/integrators/ir.h"
 
-#include "engine/integrators/light_subpaths.h"
+#include <algorithm>
+#include <cstdio>
+
+#include "engine/integrators/drivers.h"
+#include "engine/integrators/light_path.h"
+#include "engine/json_reader.h"
 
 namespace rf {
+
+namespace {
 
 struct Vpl {
   Bsdf bsdf;       // at the VPL's surface point (textures resolved)
@@ -53,33 +25,41 @@ struct VplSet {
   float clamp_g = kInf;  // b: the bound on G
 };
 
-std::shared_ptr<const VplSet> build_vpls(const RenderContext& ctx, uint32_t pass,
-                                         TraceCounters& counters) {
-  light_subpaths::require_finite_lights(ctx, "ir");
-  const IntegratorSettings& s = ctx.scene.render.integrator;
+// Deposits a VPL at every non-delta vertex of a light path.
+struct VplDeposit {
+  std::vector<Vpl>& out;
+  float inv_paths;
+  void vertex(const PathVertex& v) {
+    if (v.bsdf.is_delta()) return;
+    float cos_g = std::fabs(dot(v.wo, v.hit.ng));
+    if (cos_g == 0) return;
+    float corr = std::fabs(dot(v.wo, v.bsdf.shading_normal())) / cos_g;
+    out.push_back(Vpl{v.bsdf, v.hit, v.wo, v.beta * (corr * inv_paths), v.depth});
+  }
+  void scattered(const PathVertex&, const BsdfSample&) {}
+  void escaped(Vec3, RGB) {}
+};
+
+// The VPLs of one pass: vpl_paths light paths keyed by (seed, frame, pass, path index).
+std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderContext& ctx,
+                                         uint32_t frame, uint32_t pass, TraceCounters& counters) {
   auto set = std::make_shared<VplSet>();
-  float dc = s.ir_clamp_distance > 0 ? s.ir_clamp_distance : 0.1f * ctx.lights.scene_radius();
+  float dc = s.clamp_distance > 0 ? s.clamp_distance : 0.1f * ctx.lights.scene_radius();
   set->clamp_g = 1.0f / (dc * dc);
-  const uint64_t paths = uint64_t(std::max(1, s.ir_vpl_paths));
+  const uint64_t paths = uint64_t(std::max(1, s.vpl_paths));
   const float inv_paths = 1.0f / float(paths);
   // A VPL of depth k serves paths of at least k + 1 scattering events.
-  const int max_vpl_depth = s.max_depth - 1;
+  const int max_vpl_depth = ctx.scene.render.integrator.max_depth - 1;
   auto trace_one = [&](Sampler& sampler, std::vector<Vpl>& out, TraceCounters& c) {
-    light_subpaths::trace(
-        ctx, sampler, max_vpl_depth,
-        [&](const light_subpaths::Vertex& v) {
-          float cos_g = std::fabs(dot(v.wo, v.hit.ng));
-          if (cos_g == 0) return;
-          float corr = std::fabs(dot(v.wo, v.bsdf.shading_normal())) / cos_g;
-          out.push_back(Vpl{v.bsdf, v.hit, v.wo, v.beta * (corr * inv_paths), v.depth});
-        },
-        c);
+    EmissionSample es;
+    if (!sample_light_path_start(ctx, sampler, es)) return;
+    VplDeposit deposit{out, inv_paths};
+    trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
+                                             max_vpl_depth, deposit, c);
   };
-  set->vpls = light_subpaths::trace_pass<Vpl>(ctx, pass, paths, trace_one, counters);
+  set->vpls = trace_light_paths<Vpl>(ctx, frame, pass, paths, trace_one, counters);
   return set;
 }
-
-namespace {
 
 // The VPLs' clamped contribution at a non-delta camera vertex with `depth` scattering events
 // before it: sum over VPLs of depth k <= max_depth - depth - 1 of f_x f_y Phi V min(G, b).
@@ -107,15 +87,12 @@ RGB gather_vpls(const RenderContext& ctx, const VplSet& set, const SurfaceHit& h
   return sum;
 }
 
-
-}  // namespace
-
 // The camera path: `residual` is the weight of the current vertex's non-delta terms (direct
 // light, VPL gather, non-delta continuation): 1 after the camera or a delta scattering,
 // (1 - b / G)^+ after a non-delta BSDF sample (0 without compensation). Emission found by a
 // non-delta BSDF sample belongs to the previous vertex's direct light (MIS), not to the residual.
-RGB ir_radiance(const RenderContext& ctx, const VplSet& set, Ray ray, Sampler& sampler,
-                TraceCounters& counters) {
+RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& set, Ray ray,
+                Sampler& sampler, TraceCounters& counters) {
   const IntegratorSettings& s = ctx.scene.render.integrator;
   RGB radiance(0.0f), beta(1.0f);
   float eta_scale = 1, prev_bsdf_pdf = 0, cone_width = 0;
@@ -145,7 +122,7 @@ RGB ir_radiance(const RenderContext& ctx, const VplSet& set, Ray ray, Sampler& s
       Vec3 d = hit.p - prev_p;
       float d2 = dot(d, d);
       float g = d2 > 0 ? std::fabs(dot(ray.d, prev_ns)) * std::fabs(dot(ray.d, hit.ng)) / d2 : 0;
-      residual = s.ir_compensation && g > set.clamp_g ? 1 - set.clamp_g / g : 0;
+      residual = ir.compensation && g > set.clamp_g ? 1 - set.clamp_g / g : 0;
     }
 
     Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
@@ -182,6 +159,40 @@ RGB ir_radiance(const RenderContext& ctx, const VplSet& set, Ray ray, Sampler& s
     }
   }
   return radiance;
+}
+
+}  // namespace
+
+void IrIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
+  if (const Json* v = r.find(j, "vpl_paths")) vpl_paths = int(r.integer(*v, p + ".vpl_paths", 1, 1 << 24));
+  if (const Json* v = r.find(j, "clamp_distance")) {
+    clamp_distance = r.number(*v, p + ".clamp_distance");
+    if (clamp_distance < 0)
+      r.fail(p + ".clamp_distance", "must be >= 0 (0: automatic), got " + v->dump());
+  }
+  if (const Json* v = r.find(j, "compensation")) compensation = r.boolean(*v, p + ".compensation");
+}
+
+std::string IrIntegrator::settings_text() const {
+  char buf[128];
+  std::snprintf(buf, sizeof buf, ";ir=%d:%.9g:%s", vpl_paths, double(clamp_distance),
+                compensation ? "comp" : "nocomp");
+  return buf;
+}
+
+void IrIntegrator::check(const Scene& scene) const { require_finite_emitters(scene, kName); }
+
+SampleBuffer IrIntegrator::render(const RenderContext& ctx, const TaskKey& task,
+                                  bool parallel) const {
+  TraceCounters built;
+  std::shared_ptr<const VplSet> vpls = ctx.pass_cache.get<VplSet>(
+      task.frame, task.pass, [&] { return build_vpls(*this, ctx, task.frame, task.pass, built); });
+  SampleBuffer buf = render_camera_paths<false>(
+      ctx, task, parallel, [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
+        return ir_radiance(*this, ctx, *vpls, ray, sampler, counters);
+      });
+  buf.rays += built.rays;  // the task that built the pass's VPLs counts their rays
+  return buf;
 }
 
 }  // namespace rf

@@ -1,45 +1,18 @@
-// Progressive photon mapping, probabilistic form (`ppm`; Knaus & Zwicker 2011).
-//
-// Estimator. Pass i (i = pass + 1) is an independent photon-mapping image with its own photons
-// and its own radius r_i, which depends only on i:
-//   r_i^2 = r_1^2 prod_{k=1}^{i-1} (k + alpha) / (k + 1)     (KZ 2011, eq. 15; ~ i^(alpha - 1)),
-// so the image, the average of passes, is consistent: the kernel's bias falls with r_i^2 and the
-// variance of pass i grows only as 1 / r_i^2 ~ i^(1 - alpha), so the average's error -> 0.
-// Per pass, M photon paths leave the lights (light by power, importance-mode BSDFs, shading
-// normals corrected as in light.cpp, Russian roulette) and store a photon (position, incoming
-// direction, throughput / M, depth k = scattering events including its own vertex) at every
-// non-delta surface hit except the first (k >= 2): direct light is not taken from photons.
-// The camera path follows delta BSDFs to the first non-delta vertex x (d scattering events before
-// it) and there estimates
-//   L(x) = Le(x) + direct(x) [next-event estimation, MIS with the BSDF sample, as path.cpp]
-//        + sum over photons within r_i with k + d <= max_depth of
-//          f_x(wo, wi_j) Phi_j |wi_j.ns| / |wi_j.ng| / (pi r_i^2)      (constant kernel).
-// A photon of depth k stands for a path of k + d scattering events (the photon's vertex is x), so
-// the max-depth rule is path's. The BSDF sample of x is traced only to find emission for MIS, and,
-// when x's BSDF sampled a delta lobe (a plastic's smooth coat), to continue the camera path,
-// which then gathers again at its next non-delta vertex.
-// Bias (consistent, not unbiased): the density estimate blurs indirect light over r_i (corners
-// and contact shadows are filled in, edges of indirect light softened, light on a thin wall's one
-// side can reach the other side's points within r_i where the BSDF allows). The bias of pass i is
-// O(r_i^2); it vanishes as passes grow, but any finite number of passes keeps some.
-// Parameters: max_depth, rr_min_depth, photons (M per pass; default 100000), radius (r_1; 0 picks
-// 0.02 x the scene's bounding radius, LightSet::scene_radius()), alpha (default 2/3, in (0, 1)).
-// Per-pass state: the photons of pass p in a hash grid of cell 2 r_p (photon_grid.h), a pure
-// function of (scene, settings, p): photon path i is keyed by (seed, frame, p, i) and paths are
-// traced in fixed chunks concatenated in order. Shared read-only by the pass's tiles.
-// Strengths: caustics (light -> specular -> diffuse -> camera) and caustics seen through
-// specular surfaces (specular -> diffuse -> specular), which neither path nor light tracing
-// nor BDPT samples well.
-// Limits: biased for any finite pass count; memory per pass grows with M; environment and
-// directional lights cannot emit photons and such scenes are refused; glossy receivers blur.
-#include <algorithm>
+// The `ppm` integrator: see ppm.h.
+#include "engine/integrators/ppm.h"
 
-#include "engine/integrators/light_subpaths.h"
+#include <algorithm>
+#include <cstdio>
+
+#include "engine/integrators/drivers.h"
+#include "engine/integrators/light_path.h"
 #include "engine/integrators/photon_grid.h"
+#include "engine/json_reader.h"
 
 namespace rf {
 
 namespace {
+
 struct Photon {
   Vec3 p;
   Vec3 wi;    // unit, towards where the photon came from
@@ -53,38 +26,49 @@ double radius_scale(uint32_t i, double alpha) {
   for (uint32_t k = 1; k < i; ++k) r2 *= (double(k) + alpha) / (double(k) + 1);
   return std::sqrt(r2);
 }
-}  // namespace
 
 struct PhotonMap {
   PointHashGrid<Photon> grid;
   float inv_area = 0;  // 1 / (pi r^2)
 };
 
-std::shared_ptr<const PhotonMap> build_photon_map(const RenderContext& ctx, uint32_t pass,
+// Stores a photon at every non-delta vertex after the first (direct light is not taken from
+// photons).
+struct PhotonDeposit {
+  std::vector<Photon>& out;
+  float inv_paths;
+  void vertex(const PathVertex& v) {
+    if (!v.bsdf.is_delta() && v.depth >= 2)
+      out.push_back(Photon{v.hit.p, v.wo, v.beta * inv_paths, v.depth});
+  }
+  void scattered(const PathVertex&, const BsdfSample&) {}
+  void escaped(Vec3, RGB) {}
+};
+
+// The photons of one pass: `photons` paths keyed by (seed, frame, pass, path index), in a grid of
+// the pass's radius.
+std::shared_ptr<const PhotonMap> build_photon_map(const PpmIntegrator& s, const RenderContext& ctx,
+                                                  uint32_t frame, uint32_t pass,
                                                   TraceCounters& counters) {
-  light_subpaths::require_finite_lights(ctx, "ppm");
-  const IntegratorSettings& s = ctx.scene.render.integrator;
-  const uint64_t paths = uint64_t(std::max(1, s.ppm_photons));
+  const uint64_t paths = uint64_t(std::max(1, s.photons));
   const float inv_paths = 1.0f / float(paths);
+  const int max_depth = ctx.scene.render.integrator.max_depth;
   auto trace_one = [&](Sampler& sampler, std::vector<Photon>& out, TraceCounters& c) {
-    light_subpaths::trace(
-        ctx, sampler, s.max_depth,
-        [&](const light_subpaths::Vertex& v) {
-          if (v.depth >= 2) out.push_back(Photon{v.hit.p, v.wo, v.beta * inv_paths, v.depth});
-        },
-        c);
+    EmissionSample es;
+    if (!sample_light_path_start(ctx, sampler, es)) return;
+    PhotonDeposit deposit{out, inv_paths};
+    trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
+                                             max_depth, deposit, c);
   };
   std::vector<Photon> photons =
-      light_subpaths::trace_pass<Photon>(ctx, pass, paths, trace_one, counters);
-  float r1 = s.ppm_radius > 0 ? s.ppm_radius : 0.02f * ctx.lights.scene_radius();
-  float r = float(double(r1) * radius_scale(pass + 1, double(s.ppm_alpha)));
+      trace_light_paths<Photon>(ctx, frame, pass, paths, trace_one, counters);
+  float r1 = s.radius > 0 ? s.radius : 0.02f * ctx.lights.scene_radius();
+  float r = float(double(r1) * radius_scale(pass + 1, double(s.alpha)));
   auto map = std::make_shared<PhotonMap>();
   map->grid.build(std::move(photons), r);
   map->inv_area = 1.0f / (kPi * r * r);
   return map;
 }
-
-namespace {
 
 // Density estimate of the photons' scattered radiance at a non-delta vertex with `depth`
 // scattering events before it.
@@ -102,9 +86,6 @@ RGB gather_photons(const RenderContext& ctx, const PhotonMap& map, const Surface
   });
   return sum * map.inv_area;
 }
-
-
-}  // namespace
 
 RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sampler& sampler,
                  TraceCounters& counters) {
@@ -160,6 +141,42 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
     }
   }
   return radiance;
+}
+
+}  // namespace
+
+void PpmIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
+  if (const Json* v = r.find(j, "photons")) photons = int(r.integer(*v, p + ".photons", 1, 1 << 28));
+  if (const Json* v = r.find(j, "radius")) {
+    radius = r.number(*v, p + ".radius");
+    if (radius < 0) r.fail(p + ".radius", "must be >= 0 (0: automatic), got " + v->dump());
+  }
+  if (const Json* v = r.find(j, "alpha")) {
+    alpha = r.number(*v, p + ".alpha");
+    if (!(alpha > 0 && alpha < 1)) r.fail(p + ".alpha", "must lie in (0, 1), got " + v->dump());
+  }
+}
+
+std::string PpmIntegrator::settings_text() const {
+  char buf[128];
+  std::snprintf(buf, sizeof buf, ";ppm=%d:%.9g:%.9g", photons, double(radius), double(alpha));
+  return buf;
+}
+
+void PpmIntegrator::check(const Scene& scene) const { require_finite_emitters(scene, kName); }
+
+SampleBuffer PpmIntegrator::render(const RenderContext& ctx, const TaskKey& task,
+                                   bool parallel) const {
+  TraceCounters built;
+  std::shared_ptr<const PhotonMap> photons = ctx.pass_cache.get<PhotonMap>(
+      task.frame, task.pass,
+      [&] { return build_photon_map(*this, ctx, task.frame, task.pass, built); });
+  SampleBuffer buf = render_camera_paths<false>(
+      ctx, task, parallel, [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
+        return ppm_radiance(ctx, *photons, ray, sampler, counters);
+      });
+  buf.rays += built.rays;  // the task that built the pass's photon map counts its rays
+  return buf;
 }
 
 }  // namespace rf

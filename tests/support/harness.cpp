@@ -233,7 +233,7 @@ ImageStats render_stats(const Scene& scene, uint32_t passes, int block) {
   ImageStats stats(scene.film.width, scene.film.height, block);
   Rect frame{0, 0, scene.film.width, scene.film.height};
   for (uint32_t pass = 0; pass < passes; ++pass) {
-    stats.add_pass(renderer.render_task(frame, pass, /*parallel=*/true));
+    stats.add_pass(renderer.render(TaskKey{0, frame, pass}, /*parallel=*/true));
   }
   return stats;
 }

@@ -24,7 +24,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/film.h"
+#include "engine/sample_buffer.h"
 #include "engine/scene.h"
 
 namespace rf::test {

@@ -1,4 +1,4 @@
-#include "engine/progressive.h"
+#include "engine/frame_accumulator.h"
 
 #include <algorithm>
 

@@ -1,17 +1,21 @@
 // Sample buffers (DESIGN.md "Sample buffers and variance"): what a task returns for its rect and
-// passes, the on-disk partial-result format, and the frame accumulator, all one type. Merging is
-// the one implementation shared by the local renderer, the coordinator and `rayfarm merge`.
+// pass, and what a frame accumulates. Per pixel: sample count, sums and squared sums of radiance
+// (camera plane), each pass's estimate summed and squared (batch-means plane); per frame, the
+// splat plane of light-path contributions and its light-path count. Merging is in
+// buffer_merge.h, the .rfb encoding in buffer_file.h.
 #pragma once
 
 #include <cstdint>
-#include <stdexcept>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include "engine/math.h"
+#include "engine/pass_set.h"
 
 namespace rf {
+
+struct FilterSettings;
+struct Splat;
 
 struct Rect {
   int x0 = 0, y0 = 0, w = 0, h = 0;
@@ -23,21 +27,13 @@ struct Rect {
   }
   bool operator==(const Rect&) const = default;
 };
+std::string to_string(const Rect& r);  // "WxH at (X,Y)"
 
-// A set of pass indices as sorted, disjoint, non-adjacent half-open ranges [begin, end).
-struct PassSet {
-  std::vector<std::pair<uint32_t, uint32_t>> ranges;
-
-  static PassSet range(uint32_t begin, uint32_t end);  // [begin, end)
-  uint32_t count() const;
-  bool empty() const { return ranges.empty(); }
-  bool overlaps(const PassSet& o) const;
-  void add(const PassSet& o);                          // precondition: !overlaps(o)
-  bool is_prefix() const;                              // exactly [0, n)
-  std::string to_string() const;                       // "0-3,8-11" (inclusive ends)
-  static PassSet parse(const std::string& s);          // inverse of to_string; throws
-  bool operator==(const PassSet&) const = default;
-};
+// pbrt-v4's relative squared error, the noise figure's convention everywhere (relMSE of a render,
+// `rayfarm compare`): a squared error (or variance) over reference^2 + 0.01.
+inline double relative_error(double squared_error, double reference) {
+  return squared_error / (reference * reference + 0.01);
+}
 
 // What identifies the image a buffer belongs to. Buffers merge only when every field but
 // `passes`, `build_id`, `isa` and `core_seconds` is equal.
@@ -54,14 +50,6 @@ struct BufferHeader {
   std::string isa;            // Embree's ISA / CPU kind that made it
   double core_seconds = 0;    // summed over all merged buffers
   bool operator==(const BufferHeader&) const = default;
-};
-
-struct MergeError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
-struct BufferFileError : std::runtime_error {
-  using std::runtime_error::runtime_error;
 };
 
 struct SampleBuffer {
@@ -115,6 +103,8 @@ struct SampleBuffer {
   }
   // Adds a splat at frame pixel (x, y) (the caller applies the filter weight).
   void add_splat(int x, int y, RGB weighted_radiance);
+  // Adds a list of splats (splat_to_film's output) in its order.
+  void add_splats(const std::vector<Splat>& splats);
 
   // On a buffer holding exactly one pass: sets the batch plane to that pass's pixel estimate
   // (camera mean plus splats / light paths) and its square.
@@ -124,34 +114,32 @@ struct SampleBuffer {
   RGB estimate(int x, int y) const;
   // Variance of the mean at (x, y) from batch means across passes (needs >= 2 passes; else 0).
   RGB variance_of_mean(int x, int y) const;
-  // relMSE = mean over pixels and RGB of Var / (mean^2 + 0.01) (pbrt-v4's convention), with the
-  // batch-means variance of the mean. 0 when fewer than 2 passes.
+  // relMSE = mean over pixels and RGB of Var / (mean^2 + 0.01) (pbrt-v4's convention,
+  // relative_error), with the batch-means variance of the mean. 0 when fewer than 2 passes.
   double rel_mse() const;
   // Mean over the rect's pixels per channel of estimate().
   RGB mean_estimate() const;
   uint64_t total_samples() const;  // sum of count over the rect
+  // Every plane has the size the rect and the splat flag call for.
+  bool planes_match_rect() const;
 };
 
-// Why two headers cannot be merged, or "" when they can (everything but passes, build id, ISA
-// and core-seconds equal; pass sets disjoint).
-std::string merge_incompatibility(const BufferHeader& a, const BufferHeader& b);
-
-// dst += src: same rect, compatible headers, disjoint passes. Throws MergeError saying which
-// field differs or which passes overlap. Associative and commutative up to summation order.
-void merge_into(SampleBuffer& dst, const SampleBuffer& src);
-
-// Copies a tile's buffer into a larger buffer of the same pass set (assembling one pass of a
-// frame from its tiles). Throws MergeError if the tile is outside dst.rect or headers differ.
-void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile);
-
-// The partial-result file (.rfb): magic, version, header, planes, checksum. Written atomically
-// (temporary file, fsync, rename); reading verifies the checksum and every size, and throws
-// BufferFileError naming the file and what is wrong.
-void write_buffer_file(const std::string& path, const SampleBuffer& buf);
-SampleBuffer read_buffer_file(const std::string& path);
-
-// The same encoding in memory (for the wire and for checkpoints).
-std::string encode_buffer(const SampleBuffer& buf);
-SampleBuffer decode_buffer(const std::string& bytes, const std::string& what_for_errors);
+// Splats (DESIGN.md "Pixels, filters and splats"): light-path contributions that reach the
+// camera, recorded per chunk of paths and added to the splat plane in chunk order, so the sums do
+// not depend on which thread traced which chunk.
+struct Splat {
+  uint32_t pixel;  // y * width + x
+  RGB value;       // already weighted by the filter and the pixel count
+};
+struct SplatTarget {
+  std::vector<Splat>* out;
+  int width, height;
+  const FilterSettings* filter;
+};
+// Records a contribution arriving at `raster` whose camera importance W_e is normalised over the
+// whole film: times the pixel count (a pixel's importance), weighted by the pixel filter, for
+// every pixel within the filter's radius (the box half-open, so a point on a pixel border lands
+// in one pixel). Non-finite and black contributions are dropped.
+void splat_to_film(SplatTarget& target, Vec2 raster, RGB value);
 
 }  // namespace rf

@@ -10,7 +10,7 @@
 #include <optional>
 #include <vector>
 
-#include "engine/film.h"
+#include "engine/buffer_merge.h"
 
 namespace rf {
 

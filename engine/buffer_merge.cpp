@@ -1,0 +1,146 @@
+#include "engine/buffer_merge.h"
+
+#include <spdlog/spdlog.h>
+
+#include <set>
+#include <string_view>
+
+namespace rf {
+
+namespace {
+
+// Which identity field (everything that changes pixels) differs, or "".
+std::string identity_difference(const BufferHeader& a, const BufferHeader& b) {
+  auto str = [](const char* field, const std::string& x, const std::string& y) {
+    return std::string(field) + " differs: \"" + x + "\" vs \"" + y + "\"";
+  };
+  auto num = [](const char* field, auto x, auto y) {
+    return std::string(field) + " differs: " + std::to_string(x) + " vs " + std::to_string(y);
+  };
+  if (a.scene_digest != b.scene_digest) return str("scene_digest", a.scene_digest, b.scene_digest);
+  if (a.seed != b.seed) return num("seed", a.seed, b.seed);
+  if (a.frame != b.frame) return num("frame", a.frame, b.frame);
+  if (a.integrator != b.integrator) return str("integrator", a.integrator, b.integrator);
+  if (a.settings != b.settings) return str("settings", a.settings, b.settings);
+  if (a.width != b.width) return num("width", a.width, b.width);
+  if (a.height != b.height) return num("height", a.height, b.height);
+  return "";
+}
+
+std::set<std::string> split_ids(const std::string& id) {
+  std::set<std::string> ids;
+  if (id.rfind("mixed:", 0) != 0) {
+    if (!id.empty()) ids.insert(id);
+    return ids;
+  }
+  for (size_t pos = 6; pos <= id.size();) {
+    size_t comma = std::min(id.find(',', pos), id.size());
+    if (comma > pos) ids.insert(id.substr(pos, comma - pos));
+    pos = comma + 1;
+  }
+  return ids;
+}
+
+// Build ids (and ISAs) combine as sets: one id when all agree, else "mixed:" + the sorted distinct
+// ids joined by ','. Set union makes this exactly associative and commutative; an empty id (a
+// fresh accumulator) adds nothing. Warns once each time a new id joins, since pixels from
+// different builds or CPU kinds agree statistically, not bitwise (DESIGN.md).
+std::string combine_ids(const std::string& dst, const std::string& src, const char* what) {
+  std::set<std::string> a = split_ids(dst), all = a;
+  for (const std::string& s : split_ids(src)) all.insert(s);
+  if (all.empty()) return "";
+  if (all.size() == 1) return *all.begin();
+  std::string out = "mixed:";
+  for (const std::string& s : all) out += (out.size() > 6 ? "," : "") + s;
+  if (all != a && !a.empty()) {
+    spdlog::warn(
+        "merging sample buffers made by different {} (\"{}\" and \"{}\"): the result agrees "
+        "statistically, not bitwise, with a render made by one",
+        what, dst, src);
+  }
+  return out;
+}
+
+void add_plane(std::vector<double>& dst, const std::vector<double>& src) {
+  for (size_t i = 0; i < dst.size(); ++i) dst[i] += src[i];
+}
+
+void combine_provenance(BufferHeader& dst, const BufferHeader& src) {
+  dst.build_id = combine_ids(dst.build_id, src.build_id, "builds");
+  dst.isa = combine_ids(dst.isa, src.isa, "CPU kinds");
+  dst.core_seconds += src.core_seconds;
+}
+
+}  // namespace
+
+std::string merge_incompatibility(const BufferHeader& a, const BufferHeader& b) {
+  if (std::string why = identity_difference(a, b); !why.empty()) return why;
+  if (a.passes.overlaps(b.passes)) {
+    return "pass sets overlap: \"" + a.passes.to_string() + "\" and \"" + b.passes.to_string() +
+           "\" share passes " + intersection(a.passes, b.passes).to_string();
+  }
+  return "";
+}
+
+void merge_into(SampleBuffer& dst, const SampleBuffer& src) {
+  auto fail = [](const std::string& why) {
+    return MergeError("cannot merge sample buffers: " + why);
+  };
+  if (std::string why = merge_incompatibility(dst.header, src.header); !why.empty())
+    throw fail(why);
+  if (dst.rect != src.rect) {
+    throw fail("rect differs: " + to_string(dst.rect) + " vs " + to_string(src.rect));
+  }
+  if (dst.splat.empty() != src.splat.empty()) {
+    throw fail("one buffer has a splat plane and the other has none");
+  }
+  if (!dst.planes_match_rect() || !src.planes_match_rect()) {
+    throw fail("plane sizes do not match the rect " + to_string(dst.rect));
+  }
+  for (size_t i = 0; i < dst.count.size(); ++i) dst.count[i] += src.count[i];
+  add_plane(dst.sum, src.sum);
+  add_plane(dst.sum_sq, src.sum_sq);
+  add_plane(dst.batch_sum, src.batch_sum);
+  add_plane(dst.batch_sum_sq, src.batch_sum_sq);
+  add_plane(dst.splat, src.splat);
+  dst.light_paths += src.light_paths;
+  dst.nonfinite_samples += src.nonfinite_samples;
+  dst.rays += src.rays;
+  combine_provenance(dst.header, src.header);
+  dst.header.passes.add(src.header.passes);
+}
+
+// Copies rows without arithmetic, so an assembled pass is bit-identical to a whole-frame render.
+// Assembling the same tile twice overwrites its pixels but counts its rays and time twice.
+void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile) {
+  auto fail = [](const std::string& why) { return MergeError("cannot assemble tile: " + why); };
+  if (std::string why = identity_difference(dst.header, tile.header); !why.empty()) throw fail(why);
+  if (dst.header.passes != tile.header.passes) {
+    throw fail("passes differ: \"" + dst.header.passes.to_string() + "\" vs \"" +
+               tile.header.passes.to_string() + "\"");
+  }
+  if (!dst.splat.empty() || !tile.splat.empty()) {
+    throw fail("splatting buffers cover the whole frame; merge them instead");
+  }
+  if (tile.rect.w < 0 || tile.rect.h < 0 || !dst.rect.contains(tile.rect)) {
+    throw fail("tile " + to_string(tile.rect) + " is not inside " + to_string(dst.rect));
+  }
+  if (!dst.planes_match_rect() || !tile.planes_match_rect()) {
+    throw fail("plane sizes do not match the rect");
+  }
+  size_t w = size_t(tile.rect.w);
+  for (int y = tile.rect.y0; y < tile.rect.y1(); ++y) {
+    size_t s = tile.pixel_index(tile.rect.x0, y), d = dst.pixel_index(tile.rect.x0, y);
+    std::copy_n(tile.count.begin() + s, w, dst.count.begin() + d);
+    std::copy_n(tile.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
+    std::copy_n(tile.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
+    std::copy_n(tile.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
+    std::copy_n(tile.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
+  }
+  dst.rays += tile.rays;
+  dst.nonfinite_samples += tile.nonfinite_samples;
+  combine_provenance(dst.header, tile.header);
+}
+
+
+}  // namespace rf

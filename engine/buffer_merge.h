@@ -1,0 +1,29 @@
+// Merging sample buffers (DESIGN.md "Sample buffers and variance"): the one implementation shared
+// by the local renderer, the coordinator and `rayfarm merge`. Buffers of one image (same scene,
+// seed, frame, integrator, settings, resolution) with disjoint passes add up plane by plane.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+
+#include "engine/sample_buffer.h"
+
+namespace rf {
+
+struct MergeError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Why two headers cannot be merged, or "" when they can (everything but passes, build id, ISA
+// and core-seconds equal; pass sets disjoint).
+std::string merge_incompatibility(const BufferHeader& a, const BufferHeader& b);
+
+// dst += src: same rect, compatible headers, disjoint passes. Throws MergeError saying which
+// field differs or which passes overlap. Associative and commutative up to summation order.
+void merge_into(SampleBuffer& dst, const SampleBuffer& src);
+
+// Copies a tile's buffer into a larger buffer of the same pass set (assembling one pass of a
+// frame from its tiles). Throws MergeError if the tile is outside dst.rect or headers differ.
+void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile);
+
+}  // namespace rf

@@ -1,0 +1,86 @@
+// What every integrator sees and shares: the scene with its acceleration structure, lights,
+// textures and camera (read-only, shared by all threads), per-pass state, per-thread counters, and
+// the few pieces several estimators use (the BSDF at a hit, shadow tests, next-event estimation).
+#pragma once
+
+#include <tbb/collaborative_call_once.h>
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+
+#include "engine/accel.h"
+#include "engine/bsdf.h"
+#include "engine/camera.h"
+#include "engine/lights.h"
+#include "engine/sampler.h"
+#include "engine/scene.h"
+#include "engine/texture.h"
+
+namespace rf {
+
+// Per-pass state of integrators that precompute something for a whole pass (instant radiosity's
+// virtual point lights, photon mapping's photons): a pure function of (scene, settings, frame,
+// pass), built once by the first task of a pass that needs it and shared read-only by the pass's
+// tiles. Tasks of the same pass that arrive meanwhile wait for that build and lend it their
+// threads (tbb::collaborative_call_once), so a pass's state is built exactly once. The few passes
+// in flight are kept (a local render works on a window of passes, a worker on one task at a time).
+class PassCache {
+ public:
+  template <class T, class Build>
+  std::shared_ptr<const T> get(uint32_t frame, uint32_t pass, Build&& build) const {
+    std::shared_ptr<Entry> entry = entry_for((uint64_t(frame) << 32) | pass);
+    tbb::collaborative_call_once(entry->once, [&] { entry->state = build(); });
+    return std::static_pointer_cast<const T>(entry->state);
+  }
+
+ private:
+  struct Entry {
+    tbb::collaborative_once_flag once;
+    std::shared_ptr<const void> state;
+  };
+  std::shared_ptr<Entry> entry_for(uint64_t key) const {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto [it, inserted] = entries_.try_emplace(key);
+    if (inserted) {
+      it->second = std::make_shared<Entry>();
+      while (entries_.size() > kKeep)  // the oldest pass that is not this one
+        entries_.erase(entries_.begin() == it ? std::next(entries_.begin()) : entries_.begin());
+    }
+    return it->second;
+  }
+
+  static constexpr size_t kKeep = 8;
+  mutable std::mutex mu_;
+  mutable std::map<uint64_t, std::shared_ptr<Entry>> entries_;
+};
+
+struct RenderContext {
+  const Scene& scene;
+  const Accel& accel;
+  const LightSet& lights;
+  const TextureEvaluator& textures;
+  const PerspectiveCamera& camera;
+  const PassCache& pass_cache;
+  float pixel_spread = 0;  // angle one pixel subtends at the camera (for texture footprints)
+};
+
+// Per-thread counters an integrator updates; summed into the task's buffer.
+struct TraceCounters {
+  uint64_t rays = 0;
+};
+
+// The BSDF at a hit, its textures resolved with a ray-cone footprint of the given width.
+Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
+// Whether a light sample is visible from a hit (a ray to infinity for infinite lights).
+bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);
+// Next-event estimation at a non-delta vertex: one light sample, weighted by the power heuristic
+// against BSDF sampling (1 for delta lights); f * Le * |cos| * w / pdf, or 0 when occluded.
+RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
+                     float u_light, Vec2 u_point, TraceCounters& counters);
+// Light tracing, instant radiosity and photon mapping start every path on a light with a finite
+// position: throws SceneError for a scene with an environment or a directional light.
+void require_finite_emitters(const Scene& scene, const char* integrator);
+
+}  // namespace rf

@@ -1,0 +1,181 @@
+// The two render drivers: the loops that turn an integrator's estimator into one task's sample
+// buffer (DESIGN.md "Work units", "Pixels, filters and splats").
+//
+//   render_camera_paths  camera samples of every pixel of the task's rect; the estimator returns
+//                        the radiance of one camera ray (and, for BDPT, splats light-path
+//                        connections: then the rect is the whole frame);
+//   render_light_paths   light paths of the whole frame, each splatting where it reaches the film.
+//
+// Both are bit-identical whatever the thread count: pixels are filled by one thread each, and
+// splats are recorded per fixed chunk of work and added in chunk order (for_chunks_in_order).
+// Every random number comes from a Sampler started for (seed, frame, pass, pixel, sample) or
+// (seed, frame, pass, light path): the determinism contract.
+#pragma once
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+#include <time.h>
+
+#include <algorithm>
+#include <atomic>
+#include <vector>
+
+#include "engine/filter.h"
+#include "engine/integrators/common.h"
+#include "engine/sample_buffer.h"
+#include "engine/work_units.h"
+
+namespace rf {
+
+// Camera sample `index` of pixel (x, y): starts the sampler for it, draws the filter offset
+// (filter importance sampling: the sample stays in its pixel) and the lens point, and returns
+// the camera ray; `filter_weight` is the sample's weight.
+inline Ray start_camera_sample(const RenderContext& ctx, Sampler& sampler, const TaskKey& task,
+                               int x, int y, uint64_t index, float& filter_weight) {
+  sampler.start_camera_sample(ctx.scene.render.seed, task.frame, task.pass, x, y, index);
+  FilterSample fs = sample_filter(ctx.scene.film.filter, sampler.get_2d());
+  Vec2 u_lens = sampler.get_2d();
+  filter_weight = fs.weight;
+  return ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
+                                 u_lens);
+}
+
+// Runs produce(chunk, out) for every chunk in [0, chunks), in parallel waves when `parallel`,
+// and consume(out) on each chunk's output in chunk order: whatever the thread count, consume sees
+// the same sequence. A wave holds a few chunks per thread, so memory stays bounded.
+template <class T, class Produce, class Consume>
+void for_chunks_in_order(uint64_t chunks, bool parallel, Produce&& produce, Consume&& consume) {
+  const uint64_t wave = parallel ? uint64_t(8 * tbb::this_task_arena::max_concurrency()) : 1;
+  std::vector<T> outs(size_t(std::min(wave, chunks)));
+  for (uint64_t first = 0; first < chunks; first += outs.size()) {
+    const size_t n = size_t(std::min<uint64_t>(outs.size(), chunks - first));
+    if (parallel)
+      tbb::parallel_for(size_t(0), n, [&](size_t k) { produce(first + k, outs[k]); });
+    else
+      for (size_t k = 0; k < n; ++k) produce(first + k, outs[k]);
+    for (size_t k = 0; k < n; ++k) consume(outs[k]);
+  }
+}
+
+namespace driver_detail {
+
+inline double thread_cpu_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+// What a task's threads add up: rays, CPU time, non-finite camera samples.
+struct Tally {
+  std::atomic<uint64_t> rays{0}, cpu_ns{0}, nonfinite{0};
+  void add(const TraceCounters& c, double cpu_start, uint64_t nonfinite_samples = 0) {
+    rays += c.rays;
+    nonfinite += nonfinite_samples;
+    cpu_ns += uint64_t((thread_cpu_seconds() - cpu_start) * 1e9);
+  }
+  // Writes the totals into the task's one-pass buffer and sets its batch plane.
+  void finish(SampleBuffer& buf) const {
+    buf.rays += rays;
+    buf.nonfinite_samples += nonfinite;
+    buf.header.core_seconds = double(cpu_ns.load()) * 1e-9;
+    buf.finish_pass();
+  }
+};
+
+}  // namespace driver_detail
+
+// One pass of camera paths over task.rect: spp_per_pass samples per pixel, each
+// estimate(ray, sampler, counters) -> RGB radiance along the camera ray. With kSplats the rect
+// must be the whole frame and the estimator is estimate(ray, sampler, splats, counters): rows are
+// traced in chunks whose splat lists are added in chunk order, and the buffer's light-path count
+// is its camera sample count (every camera sample carries one light subpath).
+template <bool kSplats, class Estimate>
+SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, bool parallel,
+                                 Estimate&& estimate) {
+  const Rect rect = task.rect;
+  SampleBuffer buf(frame_header(ctx.scene, task.frame, PassSet::range(task.pass, task.pass + 1)),
+                   rect, kSplats);
+  const uint64_t spp = ctx.scene.render.spp_per_pass();
+  const Sampler::Kind kind = kind_from_name(ctx.scene.render.sampler);
+  const int w = ctx.scene.film.width, h = ctx.scene.film.height;
+  driver_detail::Tally tally;
+
+  // Rows are disjoint: no two threads share a pixel.
+  auto render_rows = [&](int y_begin, int y_end, std::vector<Splat>* splats) {
+    double t0 = driver_detail::thread_cpu_seconds();
+    TraceCounters counters;
+    uint64_t nonfinite = 0;
+    Sampler sampler(kind);
+    SplatTarget target{splats, w, h, &ctx.scene.film.filter};
+    for (int y = y_begin; y < y_end; ++y)
+      for (int x = rect.x0; x < rect.x1(); ++x)
+        for (uint64_t s = 0; s < spp; ++s) {
+          float filter_weight;
+          Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
+          RGB l;
+          if constexpr (kSplats)
+            l = estimate(ray, sampler, target, counters);
+          else
+            l = estimate(ray, sampler, counters);
+          buf.add_sample(x, y, l * filter_weight, nonfinite);
+        }
+    tally.add(counters, t0, nonfinite);
+  };
+
+  if constexpr (kSplats) {
+    constexpr int kRowsPerChunk = 4;
+    const uint64_t chunks = uint64_t((rect.h + kRowsPerChunk - 1) / kRowsPerChunk);
+    for_chunks_in_order<std::vector<Splat>>(
+        chunks, parallel,
+        [&](uint64_t chunk, std::vector<Splat>& out) {
+          out.clear();
+          int y0 = rect.y0 + int(chunk) * kRowsPerChunk;
+          render_rows(y0, std::min(rect.y1(), y0 + kRowsPerChunk), &out);
+        },
+        [&](const std::vector<Splat>& out) { buf.add_splats(out); });
+    buf.light_paths = spp * uint64_t(rect.area());
+  } else if (parallel) {
+    tbb::parallel_for(tbb::blocked_range<int>(rect.y0, rect.y1(), 1), [&](const auto& r) {
+      for (int y = r.begin(); y < r.end(); ++y) render_rows(y, y + 1, nullptr);
+    });
+  } else {
+    render_rows(rect.y0, rect.y1(), nullptr);
+  }
+  tally.finish(buf);
+  return buf;
+}
+
+// One pass of light paths over the whole frame: `paths` paths, path i traced by
+// trace(sampler, splats, counters) with the sampler started for (seed, frame, pass, i) (light
+// paths always use the independent sampler, sampler.h), in fixed chunks of paths whose splats are
+// added in chunk order.
+template <class Trace>
+SampleBuffer render_light_paths(const RenderContext& ctx, const TaskKey& task, bool parallel,
+                                uint64_t paths, Trace&& trace) {
+  const int w = ctx.scene.film.width, h = ctx.scene.film.height;
+  SampleBuffer buf(frame_header(ctx.scene, task.frame, PassSet::range(task.pass, task.pass + 1)),
+                   Rect{0, 0, w, h}, true);
+  constexpr uint64_t kChunk = 4096;
+  driver_detail::Tally tally;
+  for_chunks_in_order<std::vector<Splat>>(
+      (paths + kChunk - 1) / kChunk, parallel,
+      [&](uint64_t chunk, std::vector<Splat>& out) {
+        double t0 = driver_detail::thread_cpu_seconds();
+        out.clear();
+        TraceCounters counters;
+        Sampler sampler(Sampler::Kind::Independent);
+        SplatTarget target{&out, w, h, &ctx.scene.film.filter};
+        for (uint64_t i = chunk * kChunk; i < std::min(paths, (chunk + 1) * kChunk); ++i) {
+          sampler.start_light_path(ctx.scene.render.seed, task.frame, task.pass, i);
+          trace(sampler, target, counters);
+        }
+        tally.add(counters, t0);
+      },
+      [&](const std::vector<Splat>& out) { buf.add_splats(out); });
+  buf.light_paths = paths;
+  tally.finish(buf);
+  return buf;
+}
+
+}  // namespace rf

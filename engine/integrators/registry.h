@@ -1,0 +1,57 @@
+// The closed list of integrators (docs/adding-an-integrator.md). Each is a struct in its own
+// NAME.h / NAME.cpp pair (module.h says what it holds); adding one is a new pair and one line in
+// the variant below. Everything that depends on which integrator a scene uses dispatches here, on
+// the variant: names, scene keys, settings text, checks, splatting and rendering.
+#pragma once
+
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "engine/integrators/ao.h"
+#include "engine/integrators/bdpt.h"
+#include "engine/integrators/direct.h"
+#include "engine/integrators/ir.h"
+#include "engine/integrators/light.h"
+#include "engine/integrators/path.h"
+#include "engine/integrators/ppm.h"
+#include "engine/integrators/whitted.h"
+
+namespace rf {
+
+// In the order `known_integrators()` lists them.
+using Integrator = std::variant<WhittedIntegrator, AoIntegrator, DirectIntegrator, PathIntegrator,
+                                LightIntegrator, BdptIntegrator, IrIntegrator, PpmIntegrator>;
+
+// The names accepted for "integrator.type" and --integrator.
+const std::vector<std::string>& known_integrators();
+// The integrator of that name with its default parameters; throws std::invalid_argument naming
+// the known ones for any other name.
+Integrator make_integrator(const std::string& name);
+std::string integrator_name(const Integrator& integrator);
+// Splatting integrators render whole-frame tasks and fill the splat plane (DESIGN.md).
+bool integrator_splats(const Integrator& integrator);
+
+struct IntegratorSettings;  // scene.h
+
+// Reads render.integrator (`j`, at JSON path `path`): its type, then the keys that integrator
+// accepts (its kKeys; any other key is an error): max_depth and rr_min_depth, then its own.
+void parse_integrator(const JsonReader& r, const Json& j, const std::string& path,
+                      IntegratorSettings& out);
+// --integrator NAME: switches to that integrator with its default parameters (keeps them when it
+// already is that one). Throws std::invalid_argument for an unknown name.
+void set_integrator(IntegratorSettings& settings, const std::string& name);
+// Imposes the max depth an integrator fixes (direct lighting: 1).
+void apply_fixed_max_depth(IntegratorSettings& settings);
+
+// Canonical text of the settings that change pixels, beside the scene digest in every buffer
+// header: common settings, then the integrator's own (its settings_text()). Older .rfb files
+// merge only while this text is unchanged.
+std::string settings_text(const Scene& scene);
+// Throws SceneError when the scene's integrator cannot render it (its check(); the coordinator
+// runs it at submit, the Renderer at construction).
+void check_renderable(const Scene& scene);
+// Renders one task with the scene's integrator (ctx.scene): one dispatch per task.
+SampleBuffer render_task(const RenderContext& ctx, const TaskKey& task, bool parallel);
+
+}  // namespace rf

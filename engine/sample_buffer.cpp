@@ -1,0 +1,170 @@
+#include "engine/sample_buffer.h"
+
+#include <algorithm>
+#include <array>
+#include <cassert>
+#include <stdexcept>
+
+#include "engine/filter.h"
+#include "engine/scene.h"
+
+namespace rf {
+
+std::string to_string(const Rect& r) {
+  return std::to_string(r.w) + "x" + std::to_string(r.h) + " at (" + std::to_string(r.x0) + "," +
+         std::to_string(r.y0) + ")";
+}
+
+namespace {
+
+size_t frame_channels(const BufferHeader& h) { return 3 * size_t(h.width) * size_t(h.height); }
+
+using RGBd = std::array<double, 3>;
+
+// Camera mean sum / count plus splat / light paths, in double.
+RGBd estimate_at(const SampleBuffer& b, int x, int y) {
+  size_t i = b.pixel_index(x, y);
+  RGBd e{};
+  uint64_t n = b.count[i];
+  for (int c = 0; c < 3; ++c) e[c] = n ? b.sum[3 * i + c] / double(n) : 0.0;
+  if (!b.splat.empty() && b.light_paths > 0) {
+    size_t f = size_t(y) * size_t(b.header.width) + size_t(x);
+    for (int c = 0; c < 3; ++c) e[c] += b.splat[3 * f + c] / double(b.light_paths);
+  }
+  return e;
+}
+
+// Batch means over n passes: m = S/n, s^2 = (Q - n m^2) / (n - 1) clamped at 0, Var(mean) = s^2/n.
+RGBd variance_at(const SampleBuffer& b, int x, int y) {
+  RGBd v{};
+  double n = double(b.header.passes.count());
+  if (n < 2) return v;
+  size_t i = b.pixel_index(x, y);
+  for (int c = 0; c < 3; ++c) {
+    double m = b.batch_sum[3 * i + c] / n;
+    double s2 = (b.batch_sum_sq[3 * i + c] - n * m * m) / (n - 1);
+    v[c] = std::max(0.0, s2) / n;
+  }
+  return v;
+}
+
+RGB to_rgb(const RGBd& v) { return RGB(float(v[0]), float(v[1]), float(v[2])); }
+
+}  // namespace
+
+SampleBuffer::SampleBuffer(BufferHeader h, Rect r, bool with_splats)
+    : header(std::move(h)), rect(r) {
+  if (r.w < 0 || r.h < 0 || !Rect{0, 0, header.width, header.height}.contains(r)) {
+    throw std::invalid_argument("sample buffer rect " + to_string(r) + " is not inside the " +
+                                std::to_string(header.width) + "x" + std::to_string(header.height) +
+                                " frame");
+  }
+  size_t a = size_t(r.area());
+  count.assign(a, 0);
+  sum.assign(3 * a, 0.0);
+  sum_sq.assign(3 * a, 0.0);
+  batch_sum.assign(3 * a, 0.0);
+  batch_sum_sq.assign(3 * a, 0.0);
+  if (with_splats) splat.assign(frame_channels(header), 0.0);
+}
+
+// A filter footprint may reach past the frame border: those pixels are not stored. A non-finite
+// splat is counted (once per call) and dropped.
+void SampleBuffer::add_splat(int x, int y, RGB weighted_radiance) {
+  assert(!splat.empty() && "add_splat on a buffer without a splat plane");
+  if (!is_finite(weighted_radiance)) {
+    ++nonfinite_samples;
+    return;
+  }
+  if (splat.empty() || x < 0 || y < 0 || x >= header.width || y >= header.height) return;
+  size_t f = size_t(y) * size_t(header.width) + size_t(x);
+  for (int c = 0; c < 3; ++c) splat[3 * f + c] += double(weighted_radiance[c]);
+}
+
+void SampleBuffer::add_splats(const std::vector<Splat>& splats) {
+  const uint32_t w = uint32_t(header.width);
+  for (const Splat& s : splats) add_splat(int(s.pixel % w), int(s.pixel / w), s.value);
+}
+
+void splat_to_film(SplatTarget& t, Vec2 raster, RGB value) {
+  if (!is_finite(value) || is_black(value)) return;
+  const FilterSettings& f = *t.filter;
+  value *= float(t.width) * float(t.height);
+  int x0 = std::max(0, int(std::floor(raster.x - f.radius - 0.5f)));
+  int x1 = std::min(t.width - 1, int(std::floor(raster.x + f.radius - 0.5f)) + 1);
+  int y0 = std::max(0, int(std::floor(raster.y - f.radius - 0.5f)));
+  int y1 = std::min(t.height - 1, int(std::floor(raster.y + f.radius - 0.5f)) + 1);
+  for (int y = y0; y <= y1; ++y)
+    for (int x = x0; x <= x1; ++x) {
+      Vec2 d{raster.x - (float(x) + 0.5f), raster.y - (float(y) + 0.5f)};
+      if (f.type == FilterType::Box &&
+          (d.x < -f.radius || d.x >= f.radius || d.y < -f.radius || d.y >= f.radius))
+        continue;
+      float w = filter_weight(f, d);
+      if (w == 0) continue;
+      t.out->push_back({uint32_t(y) * uint32_t(t.width) + uint32_t(x), value * w});
+    }
+}
+
+void SampleBuffer::finish_pass() {
+  if (header.passes.count() != 1) {
+    throw std::logic_error("finish_pass needs a buffer of exactly one pass, this one holds \"" +
+                           header.passes.to_string() + "\"");
+  }
+  for (int y = rect.y0; y < rect.y1(); ++y) {
+    for (int x = rect.x0; x < rect.x1(); ++x) {
+      size_t i = pixel_index(x, y);
+      RGBd e = estimate_at(*this, x, y);
+      for (int c = 0; c < 3; ++c) {
+        batch_sum[3 * i + c] = e[c];
+        batch_sum_sq[3 * i + c] = e[c] * e[c];
+      }
+    }
+  }
+}
+
+RGB SampleBuffer::estimate(int x, int y) const { return to_rgb(estimate_at(*this, x, y)); }
+
+RGB SampleBuffer::variance_of_mean(int x, int y) const { return to_rgb(variance_at(*this, x, y)); }
+
+double SampleBuffer::rel_mse() const {
+  if (rect.area() == 0) return 0.0;
+  double total = 0.0;
+  for (int y = rect.y0; y < rect.y1(); ++y) {
+    for (int x = rect.x0; x < rect.x1(); ++x) {
+      RGBd m = estimate_at(*this, x, y), v = variance_at(*this, x, y);
+      for (int c = 0; c < 3; ++c) total += relative_error(v[c], m[c]);
+    }
+  }
+  return total / (3.0 * double(rect.area()));
+}
+
+RGB SampleBuffer::mean_estimate() const {
+  if (rect.area() == 0) return RGB(0.0f);
+  RGBd total{};
+  for (int y = rect.y0; y < rect.y1(); ++y) {
+    for (int x = rect.x0; x < rect.x1(); ++x) {
+      RGBd e = estimate_at(*this, x, y);
+      for (int c = 0; c < 3; ++c) total[c] += e[c];
+    }
+  }
+  for (double& t : total) t /= double(rect.area());
+  return to_rgb(total);
+}
+
+uint64_t SampleBuffer::total_samples() const {
+  uint64_t n = 0;
+  for (uint64_t c : count) n += c;
+  return n;
+}
+
+
+bool SampleBuffer::planes_match_rect() const {
+  if (rect.w < 0 || rect.h < 0) return false;
+  size_t a = size_t(rect.area());
+  return count.size() == a && sum.size() == 3 * a && sum_sq.size() == 3 * a &&
+         batch_sum.size() == 3 * a && batch_sum_sq.size() == 3 * a &&
+         (splat.empty() || splat.size() == frame_channels(header));
+}
+
+}  // namespace rf
