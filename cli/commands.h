@@ -1,0 +1,53 @@
+// The rayfarm command line: main.cpp builds the app and runs the one command given; each command
+// group registers its subcommands from its own file:
+//   local.cpp     render, merge, compare, bench  (one machine, no server)
+//   services.cpp  coordinator, worker            (the farm's long-running processes)
+//   client.cpp    submit, status, watch, fetch, cancel, health  (talking to a coordinator)
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <functional>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "engine/scene.h"
+
+namespace rf::cli {
+
+// Thrown for bad command-line values that CLI11 cannot check by itself (exit status 2).
+struct UsageError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// A registered subcommand and what runs it; run() returns the process exit status.
+struct Command {
+  CLI::App* app;
+  std::function<int()> run;
+  bool long_running = false;  // a service: its log lines carry timestamps
+};
+
+// Options several groups bind: render threads, the coordinator address.
+struct SharedOptions {
+  int threads = 0;  // 0: all cores
+  std::string coordinator;
+};
+
+// The scene overrides `render` and `submit` share (--spp, --passes, --integrator, ...).
+struct OverrideArgs {
+  std::string res, integrator, filter, sampler;
+  std::optional<uint64_t> spp, seed;
+  std::optional<uint32_t> passes;
+  std::optional<int> max_depth;
+  std::optional<double> noise_target;
+};
+void add_override_options(CLI::App& cmd, OverrideArgs& args);
+SceneOverrides overrides_of(const OverrideArgs& args);  // throws UsageError
+
+void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out);
+void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out);
+void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out);
+
+}  // namespace rf::cli

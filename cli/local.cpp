@@ -1,0 +1,254 @@
+// The local commands: render, merge, compare, bench (DESIGN.md "Local single-node runs").
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+
+#include "bench/bench.h"
+#include "cli/commands.h"
+#include "engine/buffer_file.h"
+#include "engine/buffer_merge.h"
+#include "engine/image_io.h"
+#include "engine/local_render.h"
+#include "engine/progress.h"
+#include "engine/render.h"
+#include <spdlog/spdlog.h>
+
+namespace rf::cli {
+
+namespace {
+
+std::pair<uint32_t, uint32_t> parse_pass_range(const std::string& s, uint32_t passes) {
+  unsigned a = 0, b = 0;
+  char dash = 0, extra = 0;
+  int n = std::sscanf(s.c_str(), "%u%c%u%c", &a, &dash, &b, &extra);
+  if (n == 1)
+    b = a;
+  else if (n != 3 || dash != '-')
+    throw UsageError("--pass-range: expected FIRST-LAST (inclusive, e.g. 0-7), got '" + s + "'");
+  if (a > b)
+    throw UsageError("--pass-range: first pass " + std::to_string(a) + " is after last " +
+                     std::to_string(b));
+  if (b >= passes)
+    throw UsageError("--pass-range: pass " + std::to_string(b) + " does not exist (the job has " +
+                     std::to_string(passes) + " passes, 0-" + std::to_string(passes - 1) + ")");
+  return {a, b + 1};
+}
+
+std::string human(double v) {
+  char buf[32];
+  if (v >= 1e9)
+    std::snprintf(buf, sizeof buf, "%.2f G", v / 1e9);
+  else if (v >= 1e6)
+    std::snprintf(buf, sizeof buf, "%.2f M", v / 1e6);
+  else if (v >= 1e3)
+    std::snprintf(buf, sizeof buf, "%.2f k", v / 1e3);
+  else
+    std::snprintf(buf, sizeof buf, "%.0f ", v);
+  return buf;
+}
+
+// Progress on stderr: a bar redrawn in place on a terminal, plain lines every 5 s otherwise.
+class ProgressPrinter {
+ public:
+  explicit ProgressPrinter(bool quiet) : quiet_(quiet), tty_(::isatty(2)) {}
+  void operator()(const LocalProgress& p) {
+    if (quiet_ || p.tasks_total == 0) return;
+    double frac = double(p.tasks_done) / double(p.tasks_total);
+    if (tty_) {
+      int width = 30, filled = int(frac * width);
+      std::string bar(size_t(filled), '#');
+      bar.append(size_t(width - filled), '.');
+      std::fprintf(stderr, "\r[%s] %5.1f%%  passes %u/%u  relMSE %.3g  %.1f s   ", bar.c_str(),
+                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+      if (p.tasks_done == p.tasks_total) std::fprintf(stderr, "\n");
+    } else if (p.seconds - last_line_ >= 5.0 || p.tasks_done == p.tasks_total) {
+      if (p.tasks_done == p.tasks_total && done_printed_) return;
+      done_printed_ = p.tasks_done == p.tasks_total;
+      last_line_ = p.seconds;
+      std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s\n",
+                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+    }
+  }
+
+ private:
+  bool quiet_, tty_;
+  double last_line_ = -1e9;
+  bool done_printed_ = false;
+};
+
+std::string png_path_for(const std::string& exr) {
+  std::filesystem::path p(exr);
+  p.replace_extension(".png");
+  return p.string();
+}
+
+void warn_nonfinite(const SampleBuffer& b) {
+  if (b.nonfinite_samples)
+    spdlog::warn("{} NaN/Inf samples were dropped (counted as zero radiance)", b.nonfinite_samples);
+}
+
+void print_summary(const SampleBuffer& frame, double seconds, uint64_t rays) {
+  double spp = samples_per_pixel(frame);
+  double samples = spp * double(frame.rect.area());
+  std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n",
+              spp, seconds, human(samples / seconds).c_str(),
+              human(double(rays) / seconds).c_str(), frame.rel_mse(), frame.header.passes.count());
+}
+
+struct RenderArgs {
+  std::string scene, output, partial, pass_range;
+  OverrideArgs overrides;
+  std::optional<uint32_t> frame;
+  double time_budget = 0;
+  int tile = 32;
+  float exposure = 0;
+  bool quiet = false;
+};
+
+int cmd_render(const RenderArgs& a) {
+  SceneOverrides ov = overrides_of(a.overrides);
+  if (a.output.empty() && a.partial.empty())
+    throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
+  if (!a.partial.empty() && a.pass_range.empty())
+    throw UsageError("--partial needs --pass-range FIRST-LAST");
+
+  Scene scene = load_scene(a.scene, ov);
+  LocalRenderOptions opt;
+  opt.tile_size = a.tile;
+  opt.frame = a.frame.value_or(0);
+  if (!a.pass_range.empty()) {
+    auto [p0, p1] = parse_pass_range(a.pass_range, scene.render.passes);
+    opt.first_pass = p0;
+    opt.pass_count = p1 - p0;
+    if (scene.render.noise_target > 0 && !a.partial.empty())
+      spdlog::warn("--noise-target is ignored for a partial render: the merge decides");
+  }
+  if (a.partial.empty()) opt.noise_target = scene.render.noise_target;
+  opt.time_budget_s = a.time_budget;
+  ProgressPrinter printer(a.quiet);
+  opt.progress = [&](const LocalProgress& p) { printer(p); };
+
+  Renderer renderer(scene);
+  LocalRenderResult res = render_local(renderer, opt);
+  warn_nonfinite(res.frame);
+  if (!a.partial.empty()) {
+    write_buffer_file(a.partial, res.frame);
+    std::fprintf(stderr, "wrote %s (passes %s)\n", a.partial.c_str(),
+                 res.frame.header.passes.to_string().c_str());
+  }
+  if (!a.output.empty()) {
+    write_exr(a.output, res.frame);
+    write_png(png_path_for(a.output), res.frame, a.exposure);
+    std::fprintf(stderr, "wrote %s and %s\n", a.output.c_str(), png_path_for(a.output).c_str());
+  }
+  if (res.stopped_on_target)
+    std::fprintf(stderr, "noise target %.4g reached after %u of %u passes\n",
+                 scene.render.noise_target, res.passes_merged, scene.render.passes);
+  if (res.stopped_on_time)
+    std::fprintf(stderr, "time budget %.1f s reached after %u of %u passes\n", a.time_budget,
+                 res.passes_merged, scene.render.passes);
+  print_summary(res.frame, res.seconds, res.rays);
+  return 0;
+}
+
+int cmd_merge(const std::vector<std::string>& inputs, const std::string& output, float exposure) {
+  if (inputs.empty()) throw UsageError("merge: no input files");
+  SampleBuffer acc = read_buffer_file(inputs[0]);
+  for (size_t i = 1; i < inputs.size(); ++i) {
+    SampleBuffer b = read_buffer_file(inputs[i]);
+    try {
+      merge_into(acc, b);
+    } catch (const MergeError& e) {
+      throw MergeError(inputs[i] + ": cannot merge into " + inputs[0] + " ...: " + e.what());
+    }
+  }
+  warn_nonfinite(acc);
+  std::string ext = std::filesystem::path(output).extension().string();
+  if (ext == ".rfb") {
+    write_buffer_file(output, acc);
+  } else {
+    write_exr(output, acc);
+    write_png(png_path_for(output), acc, exposure);
+  }
+  std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
+               acc.header.passes.to_string().c_str(), samples_per_pixel(acc), acc.rel_mse(),
+               output.c_str());
+  return 0;
+}
+
+// Error of an image against a reference: RMSE, relMSE and mean absolute error (image_error).
+// `window` (x0,y0,x1,y1, pixels, half-open; empty = the whole image) restricts the comparison to
+// a region, e.g. the caustic that one integrator finds and another does not.
+int cmd_compare(const std::string& image, const std::string& reference,
+                const std::vector<int>& window) {
+  RgbImage a = read_rgb(image), b = read_rgb(reference);
+  PixelWindow win{0, 0, a.width, a.height};
+  if (!window.empty()) {
+    if (window.size() != 4)
+      throw UsageError("compare: --window must be X0,Y0,X1,Y1, got " +
+                       std::to_string(window.size()) + " numbers");
+    win = PixelWindow{window[0], window[1], window[2], window[3]};
+  }
+  ImageError e;
+  try {
+    e = image_error(a, b, win);
+  } catch (const std::invalid_argument& err) {
+    throw UsageError("compare: " + image + " against " + reference + ": " + err.what());
+  }
+  std::printf("rmse %.6g relmse %.6g mae %.6g\n", e.rmse, e.rel_mse, e.mae);
+  return 0;
+}
+
+}  // namespace
+
+void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
+  auto ra = std::make_shared<RenderArgs>();
+  auto* render = app.add_subcommand("render", "render a scene locally to EXR + PNG");
+  render->add_option("scene", ra->scene, "scene file (JSON)")->required();
+  render->add_option("-o,--output", ra->output, "output EXR (a PNG preview is written beside it)");
+  add_override_options(*render, ra->overrides);
+  render->add_option("--frame", ra->frame, "frame number (selects the seed stream)");
+  render->add_option("--threads", shared.threads, "worker threads (default: all cores)");
+  render->add_option(
+      "--time-budget", ra->time_budget,
+      "stop after this many seconds, on a completed prefix of passes (not reproducible)");
+  render->add_option("--pass-range", ra->pass_range, "render only passes FIRST-LAST (inclusive)");
+  render->add_option("--partial", ra->partial, "write the sample buffer (.rfb) of the pass range");
+  render->add_option("--tile-size", ra->tile, "tile size in pixels")->check(CLI::PositiveNumber);
+  render->add_option("--exposure", ra->exposure, "PNG exposure in stops");
+  render->add_flag("-q,--quiet", ra->quiet, "no progress output");
+  out.push_back({render, [ra] { return cmd_render(*ra); }});
+
+  struct MergeArgs {
+    std::vector<std::string> inputs;
+    std::string output;
+    float exposure = 0;
+  };
+  auto ma = std::make_shared<MergeArgs>();
+  auto* merge = app.add_subcommand("merge", "merge partial sample buffers (.rfb) into an image");
+  merge->add_option("inputs", ma->inputs, "partial results")->required();
+  merge->add_option("-o,--output", ma->output, "output .exr (plus .png) or .rfb")->required();
+  merge->add_option("--exposure", ma->exposure, "PNG exposure in stops");
+  out.push_back({merge, [ma] { return cmd_merge(ma->inputs, ma->output, ma->exposure); }});
+
+  struct CompareArgs {
+    std::string image, reference;
+    std::vector<int> window;
+  };
+  auto ca = std::make_shared<CompareArgs>();
+  auto* compare = app.add_subcommand("compare", "error of an image against a reference image");
+  compare->add_option("image", ca->image, "the image (EXR)")->required();
+  compare->add_option("reference", ca->reference, "the reference (EXR, same size)")->required();
+  compare->add_option("--window", ca->window, "compare only pixels X0,Y0,X1,Y1 (half-open)")
+      ->delimiter(',');
+  out.push_back({compare, [ca] { return cmd_compare(ca->image, ca->reference, ca->window); }});
+
+  auto bo = std::make_shared<BenchOptions>();
+  auto* bench = app.add_subcommand("bench", "throughput of the path tracer vs a bare Embree loop");
+  add_bench_options(*bench, *bo);
+  bench->add_option("--threads", shared.threads, "worker threads (default: all cores)");
+  out.push_back({bench, [bo] { return run_bench(*bo); }});
+}
+
+}  // namespace rf::cli
