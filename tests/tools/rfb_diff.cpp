@@ -130,7 +130,7 @@ void compare_buffers(const std::string& path_a, const std::string& path_b, Compa
   compare_field("light_paths", a.light_paths, b.light_paths, cmp);
   compare_field("nonfinite_samples", a.nonfinite_samples, b.nonfinite_samples, cmp);
   if (a.rays != b.rays)
-    std::printf("note: rays differ (%llu vs %llu; a diagnostic counter, not compared)\n",
+    std::printf("note: rays differ (%llu vs %llu), a diagnostic counter, not compared\n",
                 (unsigned long long)a.rays, (unsigned long long)b.rays);
 
   Layout px{a.rect.x0, a.rect.y0, std::max(a.rect.w, 1), {"count"}};
