@@ -10,8 +10,9 @@
 # renders. Both binaries read the current tree's scenes: this checks the code, not the scenes.
 #
 # BASE_COMMIT defaults to tests/golden/BASE. That file names the last commit whose images are
-# the reference; a commit that changes images on purpose (a bug fix, a better estimator) bumps
-# it to itself and says why (tests/golden/README.md). A refactor never touches it.
+# the reference. A refactor never touches it; only a deliberate image change (a bug fix, a
+# better estimator) moves it to the commit that made the change, saying why
+# (tests/golden/README.md, "Bumping BASE").
 #
 # Environment: RAYFARM_GOLDEN_CACHE (base builds, default ~/.cache/rayfarm-golden),
 # RAYFARM_BUILD_DIR (the current tree's build), RAYFARM_GOLDEN_KEEP=1 (keep the renders even
