@@ -1,5 +1,5 @@
 // The rayfarm command line: render, merge, compare, bench, and the farm (coordinator, worker,
-// submit, status, watch, fetch, cancel, health; cli/farm.h).
+// submit, status, watch, fetch, cancel, health; client/commands.h).
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
@@ -15,7 +15,7 @@
 #include <string>
 
 #include "bench/bench.h"
-#include "cli/farm.h"
+#include "client/commands.h"
 #include "coordinator/service.h"
 #include "engine/film.h"
 #include "engine/image_io.h"

@@ -15,16 +15,16 @@
 #include <map>
 #include <mutex>
 
-#include "coordinator/blob_store.h"
 #include "coordinator/checkpoint.h"
-#include "coordinator/frame_range.h"
 #include "coordinator/job_store.h"
 #include "coordinator/scheduler.h"
 #include "engine/digest.h"
 #include "engine/progressive.h"
 #include "engine/render.h"
-#include "proto/chunking.h"
-#include "proto/convert.h"
+#include "farm/blob_store.h"
+#include "farm/chunking.h"
+#include "farm/convert.h"
+#include "farm/frame_range.h"
 #include "proto/rayfarm.grpc.pb.h"
 
 namespace rf {
@@ -43,12 +43,14 @@ Status error(StatusCode code, const std::string& message) { return Status(code, 
 
 Status chunk_status(ChunkAssembler::Status s, const std::string& what, const std::string& why) {
   switch (s) {
-    case ChunkAssembler::Status::Ok: return Status::OK;
+    case ChunkAssembler::Status::Ok:
+      return Status::OK;
     case ChunkAssembler::Status::InvalidArgument:
       return error(StatusCode::INVALID_ARGUMENT, what + ": " + why);
     case ChunkAssembler::Status::ResourceExhausted:
       return error(StatusCode::RESOURCE_EXHAUSTED, what + ": " + why);
-    case ChunkAssembler::Status::DataLoss: return error(StatusCode::DATA_LOSS, what + ": " + why);
+    case ChunkAssembler::Status::DataLoss:
+      return error(StatusCode::DATA_LOSS, what + ": " + why);
   }
   return error(StatusCode::INTERNAL, what);
 }
@@ -72,9 +74,9 @@ struct RequestError {
 // One frame of a job: its merge state, durable checkpoint and progress figures.
 struct FrameRecord {
   uint32_t number = 0;
-  std::string scene_path;  // in the bundle
-  BufferHeader base;       // what every task buffer of this frame must match
-  std::mutex m;            // serializes merges and checkpoints of this frame
+  std::string scene_path;                 // in the bundle
+  BufferHeader base;                      // what every task buffer of this frame must match
+  std::mutex m;                           // serializes merges and checkpoints of this frame
   std::unique_ptr<FrameAccumulator> acc;  // created on the first result; dropped when done
   std::unique_ptr<FrameCheckpoint> checkpoint;
   // Progress, readable under the coordinator's mutex.
@@ -131,13 +133,14 @@ class CoordinatorCore {
   double now() const {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   }
-  std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const pb::JobSpec& spec);
+  std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq,
+                                       const pb::JobSpec& spec);
   void restore(const StoredJob& stored);
   void resume_frame(JobRecord& job, FrameRecord& f);
-  void publish_frame(JobRecord& job, FrameRecord& f);  // under mu_
+  void publish_frame(JobRecord& job, FrameRecord& f);                        // under mu_
   void set_state(JobRecord& job, pb::JobState s, const std::string& error);  // under mu_
   void fill_status(const JobRecord& job, pb::JobStatus* out) const;          // under mu_
-  std::shared_ptr<JobRecord> find(const std::string& id) const;             // under mu_
+  std::shared_ptr<JobRecord> find(const std::string& id) const;              // under mu_
 
   CoordinatorOptions options_;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
@@ -171,7 +174,8 @@ std::shared_ptr<JobRecord> CoordinatorCore::build_job(const std::string& id, uin
   job->id = id;
   job->seq = seq;
   job->spec = spec;
-  if (spec.scene_path().empty()) throw RequestError{StatusCode::INVALID_ARGUMENT, "scene_path is empty"};
+  if (spec.scene_path().empty())
+    throw RequestError{StatusCode::INVALID_ARGUMENT, "scene_path is empty"};
   std::vector<BundleEntry> bundle;
   for (const pb::BundleFile& f : spec.files()) {
     try {
@@ -180,12 +184,13 @@ std::shared_ptr<JobRecord> CoordinatorCore::build_job(const std::string& id, uin
       throw RequestError{StatusCode::INVALID_ARGUMENT, std::string("files: ") + e.what()};
     }
     if (!is_sha256_hex(f.sha256()))
-      throw RequestError{StatusCode::INVALID_ARGUMENT,
-                         "files: '" + f.path() + "' has no valid SHA-256 (64 lower-case hex digits)"};
+      throw RequestError{
+          StatusCode::INVALID_ARGUMENT,
+          "files: '" + f.path() + "' has no valid SHA-256 (64 lower-case hex digits)"};
     if (!blobs_.has(f.sha256()))
-      throw RequestError{StatusCode::INVALID_ARGUMENT,
-                         "files: the content of '" + f.path() + "' (" + f.sha256() +
-                             ") was not uploaded"};
+      throw RequestError{
+          StatusCode::INVALID_ARGUMENT,
+          "files: the content of '" + f.path() + "' (" + f.sha256() + ") was not uploaded"};
     bundle.push_back({f.path(), f.sha256()});
   }
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
@@ -222,7 +227,8 @@ std::shared_ptr<JobRecord> CoordinatorCore::build_job(const std::string& id, uin
       throw RequestError{StatusCode::INVALID_ARGUMENT, e.what()};
     }
   };
-  if (frames.empty()) frames.push_back(scene_for(expand_frame_pattern(spec.scene_path(), 0)).render.frame);
+  if (frames.empty())
+    frames.push_back(scene_for(expand_frame_pattern(spec.scene_path(), 0)).render.frame);
   for (uint32_t number : frames) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
@@ -308,15 +314,15 @@ void CoordinatorCore::restore(const StoredJob& stored) {
   job->core_seconds = stored.core_seconds;
   std::vector<uint32_t> numbers;
   for (auto& f : job->frames) numbers.push_back(f->number);
-  scheduler_.add_job(job->id, numbers, uint32_t(job->tiles.size()), job->passes,
-                     spec.priority());
+  scheduler_.add_job(job->id, numbers, uint32_t(job->tiles.size()), job->passes, spec.priority());
   if (terminal(job->state)) {
     scheduler_.cancel_job(job->id);
   } else {
     // Failures before the restart still count toward failing a task (and skipping a worker).
     for (const JobStore::TaskFailure& e : store_.failures(job->id))
       scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id, e.message);
-    if (scheduler_.job_failed(job->id)) set_state(*job, pb::JOB_FAILED, scheduler_.job_error(job->id));
+    if (scheduler_.job_failed(job->id))
+      set_state(*job, pb::JOB_FAILED, scheduler_.job_error(job->id));
   }
   for (auto& f : job->frames) resume_frame(*job, *f);
   jobs_[job->id] = job;
@@ -328,7 +334,8 @@ Status CoordinatorCore::missing_blobs(const pb::MissingBlobsRequest& req,
                                       pb::MissingBlobsResponse* out) {
   for (const std::string& d : req.sha256()) {
     if (!is_sha256_hex(d))
-      return error(StatusCode::INVALID_ARGUMENT, "'" + d + "' is not a SHA-256 (64 lower-case hex)");
+      return error(StatusCode::INVALID_ARGUMENT,
+                   "'" + d + "' is not a SHA-256 (64 lower-case hex)");
     if (!blobs_.has(d)) out->add_sha256(d);
   }
   return Status::OK;
@@ -349,9 +356,9 @@ Status CoordinatorCore::submit(grpc::ServerReaderInterface<pb::SubmitRequest>* r
     std::string bytes = blob->take();
     bundle_bytes += bytes.size();
     if (bundle_bytes > options_.max_bundle_bytes)
-      return error(StatusCode::RESOURCE_EXHAUSTED,
-                   "bundle is over the limit of " + std::to_string(options_.max_bundle_bytes) +
-                       " bytes");
+      return error(
+          StatusCode::RESOURCE_EXHAUSTED,
+          "bundle is over the limit of " + std::to_string(options_.max_bundle_bytes) + " bytes");
     blobs_.put(bytes);
     blob.reset();
     return Status::OK;
@@ -463,7 +470,8 @@ void CoordinatorCore::set_state(JobRecord& job, pb::JobState s, const std::strin
   job.state = s;
   job.error = err;
   store_.set_state(job.id, int(s), err);
-  if (terminal(s)) spdlog::info("job {} {}{}", job.id, pb::JobState_Name(s), err.empty() ? "" : ": " + err);
+  if (terminal(s))
+    spdlog::info("job {} {}{}", job.id, pb::JobState_Name(s), err.empty() ? "" : ": " + err);
   ++version_;
   changed_.notify_all();
 }
@@ -531,8 +539,8 @@ Status CoordinatorCore::fetch(const pb::FetchRequest& req,
     if (!job) return error(StatusCode::NOT_FOUND, "no job '" + req.job_id() + "'");
     auto it = job->by_number.find(req.frame());
     if (it == job->by_number.end())
-      return error(StatusCode::NOT_FOUND, "job " + job->id + " has no frame " +
-                                              std::to_string(req.frame()));
+      return error(StatusCode::NOT_FOUND,
+                   "job " + job->id + " has no frame " + std::to_string(req.frame()));
     f = it->second;
     pb::JobStatus js;
     fill_status(*job, &js);
@@ -547,9 +555,9 @@ Status CoordinatorCore::fetch(const pb::FetchRequest& req,
     } else {
       std::string path = f->checkpoint->dir() + "/prefix.rfb";
       if (!fs::exists(path))
-        return error(StatusCode::FAILED_PRECONDITION,
-                     "frame " + std::to_string(f->number) + " of job " + job->id +
-                         " has no complete pass yet");
+        return error(StatusCode::FAILED_PRECONDITION, "frame " + std::to_string(f->number) +
+                                                          " of job " + job->id +
+                                                          " has no complete pass yet");
       bytes = read_file_bytes(path);
     }
   }
@@ -573,7 +581,8 @@ Status CoordinatorCore::register_worker(const pb::RegisterRequest& req, pb::Regi
   out->set_worker_id(id);
   out->set_lease_seconds(uint32_t(std::max(1.0, options_.lease_seconds)));
   out->set_keepalive_seconds(uint32_t(std::max(1.0, options_.lease_seconds / 3)));
-  spdlog::info("worker {} registered: {} cores, {}, {}", id, req.cores(), req.build_id(), req.isa());
+  spdlog::info("worker {} registered: {} cores, {}, {}", id, req.cores(), req.build_id(),
+               req.isa());
   return Status::OK;
 }
 
@@ -591,7 +600,7 @@ Status CoordinatorCore::lease(const pb::LeaseRequest& req, pb::LeaseResponse* ou
   if (f->first_lease_at < 0) f->first_lease_at = now();
   if (job->state == pb::JOB_QUEUED) set_state(*job, pb::JOB_RUNNING, "");
   pb::Task* t = out->mutable_task();
-  t->set_task_id(task_id_text(job->id, l->task.frame, l->task.pass, l->task.tile));
+  t->set_task_id(task_id_text(l->task));
   t->set_lease_id(l->lease_id);
   t->set_job_id(job->id);
   t->set_frame(l->task.frame);
@@ -616,7 +625,8 @@ Status CoordinatorCore::renew(const pb::RenewRequest& req, pb::RenewResponse* ou
       return Status::OK;
     case LeaseOutcome::NotFound:
       return error(StatusCode::NOT_FOUND, "no lease '" + req.lease_id() + "'");
-    case LeaseOutcome::Ended: break;
+    case LeaseOutcome::Ended:
+      break;
   }
   return error(StatusCode::FAILED_PRECONDITION,
                "lease " + req.lease_id() +
@@ -638,29 +648,17 @@ Status CoordinatorCore::fetch_blob(const pb::BlobRequest& req,
   return Status::OK;
 }
 
-namespace {
-
-bool parse_task_id(const std::string& s, TaskRef& ref) {
-  size_t a = s.find('/');
-  if (a == std::string::npos || a == 0) return false;
-  unsigned f = 0, p = 0, t = 0;
-  char extra = 0;
-  if (std::sscanf(s.c_str() + a + 1, "%u/%u/%u%c", &f, &p, &t, &extra) != 3) return false;
-  ref = TaskRef{s.substr(0, a), f, p, t};
-  return true;
-}
-
-}  // namespace
-
 Status CoordinatorCore::complete(grpc::ServerReaderInterface<pb::CompleteRequest>* reader,
                                  pb::CompleteResponse* out) {
   pb::CompleteRequest msg;
   if (!reader->Read(&msg) || !msg.has_header())
-    return error(StatusCode::INVALID_ARGUMENT, "the first message of CompleteTask must be the header");
+    return error(StatusCode::INVALID_ARGUMENT,
+                 "the first message of CompleteTask must be the header");
   const pb::CompleteHeader header = msg.header();
-  TaskRef ref;
-  if (!parse_task_id(header.task_id(), ref))
+  std::optional<TaskRef> parsed = parse_task_id(header.task_id());
+  if (!parsed)
     return error(StatusCode::INVALID_ARGUMENT, "task_id '" + header.task_id() + "' is malformed");
+  const TaskRef ref = *parsed;
   ChunkAssembler chunks(options_.max_buffer_bytes);
   while (reader->Read(&msg)) {
     if (!msg.has_chunk())
@@ -689,16 +687,14 @@ Status CoordinatorCore::complete(grpc::ServerReaderInterface<pb::CompleteRequest
   }
   const Rect& rect = job->tiles[ref.tile];
   if (!(buffer.rect == rect))
-    return error(StatusCode::INVALID_ARGUMENT, "task " + header.task_id() + ": buffer covers " +
-                                                   std::to_string(buffer.rect.w) + "x" +
-                                                   std::to_string(buffer.rect.h) + " at " +
-                                                   std::to_string(buffer.rect.x0) + "," +
-                                                   std::to_string(buffer.rect.y0) +
-                                                   ", not the task's tile");
+    return error(StatusCode::INVALID_ARGUMENT,
+                 "task " + header.task_id() + ": buffer covers " + std::to_string(buffer.rect.w) +
+                     "x" + std::to_string(buffer.rect.h) + " at " + std::to_string(buffer.rect.x0) +
+                     "," + std::to_string(buffer.rect.y0) + ", not the task's tile");
   if (!(buffer.header.passes == PassSet::range(ref.pass, ref.pass + 1)))
-    return error(StatusCode::INVALID_ARGUMENT, "task " + header.task_id() + ": buffer holds passes " +
-                                                   buffer.header.passes.to_string() +
-                                                   ", not pass " + std::to_string(ref.pass));
+    return error(StatusCode::INVALID_ARGUMENT,
+                 "task " + header.task_id() + ": buffer holds passes " +
+                     buffer.header.passes.to_string() + ", not pass " + std::to_string(ref.pass));
   if (std::string why = merge_incompatibility(f->base, buffer.header); !why.empty())
     return error(StatusCode::INVALID_ARGUMENT, "task " + header.task_id() + ": " + why);
 
@@ -755,19 +751,19 @@ Status CoordinatorCore::fail(const pb::FailRequest& req) {
       return error(StatusCode::NOT_FOUND, "no lease '" + req.lease_id() + "'");
     case LeaseOutcome::Ended:
       return error(StatusCode::FAILED_PRECONDITION, "lease " + req.lease_id() + " has ended");
-    case LeaseOutcome::Ok: break;
+    case LeaseOutcome::Ok:
+      break;
   }
   if (task && !req.handed_back()) {
     // Recorded under the id the scheduler counted it under (the lease's worker).
     store_.task_failed(task->job_id, task->frame, task->pass, task->tile,
                        scheduler_.lease_worker(req.lease_id()), req.message());
-    spdlog::warn("task {} failed on {}: {}",
-                 task_id_text(task->job_id, task->frame, task->pass, task->tile), req.worker_id(),
-                 req.message());
+    spdlog::warn("task {} failed on {}: {}", task_id_text(*task), req.worker_id(), req.message());
   }
   if (task && scheduler_.job_failed(task->job_id)) {
     auto job = find(task->job_id);
-    if (job && !terminal(job->state)) set_state(*job, pb::JOB_FAILED, scheduler_.job_error(job->id));
+    if (job && !terminal(job->state))
+      set_state(*job, pb::JOB_FAILED, scheduler_.job_error(job->id));
   }
   return Status::OK;
 }
@@ -858,7 +854,8 @@ struct CoordinatorServer::Impl {
   int port = 0;
 };
 
-CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o) : impl_(std::make_unique<Impl>()) {
+CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
+    : impl_(std::make_unique<Impl>()) {
   if (o.state_dir.empty()) throw std::runtime_error("coordinator: --state-dir is required");
   impl_->core = std::make_unique<CoordinatorCore>(o);
   impl_->jobs = std::make_unique<JobServiceImpl>(*impl_->core);

@@ -11,11 +11,11 @@
 #include <vector>
 
 #include "coordinator/checkpoint.h"
-#include "coordinator/frame_range.h"
 #include "coordinator/job_store.h"
 #include "coordinator/scheduler.h"
 #include "engine/film.h"
 #include "engine/progressive.h"
+#include "farm/frame_range.h"
 #include "tests/support/test_support.h"
 
 namespace rf {

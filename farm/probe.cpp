@@ -1,4 +1,4 @@
-#include "proto/probe.h"
+#include "farm/probe.h"
 
 #include <google/protobuf/io/coded_stream.h>
 #include <grpcpp/generic/generic_stub.h>
