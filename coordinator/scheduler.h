@@ -1,6 +1,6 @@
 // Task scheduling and leases (DESIGN.md "Work units", "Coordinator"), as plain logic with an
-// explicit clock so it is tested without servers or sleeps. The gRPC service and the SQLite
-// store drive it; it knows nothing of either.
+// explicit clock so it is tested without servers or sleeps. The coordinator's core (core.h)
+// drives it beside the SQLite store; it knows nothing of either, nor of gRPC.
 //
 // Order: jobs by priority (higher first), then submission; within a job, a window of at most
 // `window_frames` unfinished frames is open; within the window, passes in order (all tiles of
