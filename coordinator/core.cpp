@@ -67,10 +67,11 @@ FramePlan plan_frame(Scene scene, uint32_t frame, int tile_size) {
           scene.render.noise_target};
 }
 
+// The frame of a job without a frame range: the scene file's own.
 uint32_t scene_frame(const Scene& scene) { return scene.render.frame; }
 
-// The bundle of a spec, each file's path and digest checked and its content stored.
-std::vector<BundleEntry> checked_bundle(const JobSpec& spec, const BlobStore& blobs) {
+// Every file of the spec's bundle has a safe path and a digest whose content was uploaded.
+void check_bundle(const JobSpec& spec, const BlobStore& blobs) {
   for (const BundleEntry& f : spec.files) {
     try {
       check_bundle_path(f.path);
@@ -84,7 +85,6 @@ std::vector<BundleEntry> checked_bundle(const JobSpec& spec, const BlobStore& bl
       refuse(ErrorCode::InvalidArgument,
              "files: the content of '" + f.path + "' (" + f.sha256 + ") was not uploaded");
   }
-  return spec.files;
 }
 
 // The scenes of a job's bundle, each file parsed once with the job's overrides.
@@ -194,20 +194,19 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   job->seq = seq;
   job->spec = spec;
   if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
-  std::vector<BundleEntry> bundle = checked_bundle(spec, blobs_);
+  check_bundle(spec, blobs_);
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
   try {
-    blobs_.materialize(bundle, bundle_dir);
+    blobs_.materialize(spec.files, bundle_dir);
   } catch (const BlobError& e) {
     refuse(ErrorCode::InvalidArgument, e.what());
   }
-  add_frames(*job, bundle_dir, bundle);
+  add_frames(*job, bundle_dir);
   return job;
 }
 
 // Splits every frame of the job; all must agree on resolution and passes.
-void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir,
-                             const std::vector<BundleEntry>& bundle) {
+void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
   const JobSpec& spec = job.spec;
   std::vector<uint32_t> frames;
   if (!spec.frames.empty()) {
@@ -221,7 +220,7 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir,
   if (tile_size < 8 || tile_size > 4096)
     refuse(ErrorCode::InvalidArgument,
            "tile_size: " + std::to_string(tile_size) + " is outside 8..4096");
-  BundleScenes scene_for(bundle_dir, bundle, spec.overrides);
+  BundleScenes scene_for(bundle_dir, spec.files, spec.overrides);
   if (frames.empty())
     frames.push_back(scene_frame(scene_for(expand_frame_pattern(spec.scene_path, 0))));
   for (uint32_t number : frames) {

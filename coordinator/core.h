@@ -171,8 +171,7 @@ class Coordinator {
  private:
   double now() const { return options_.clock(); }
   std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec);
-  void add_frames(JobRecord& job, const std::string& bundle_dir,
-                  const std::vector<BundleEntry>& bundle);
+  void add_frames(JobRecord& job, const std::string& bundle_dir);
   void restore(const StoredJob& stored);
   void resume_frame(JobRecord& job, FrameRecord& f);
   SampleBuffer checked_buffer(const JobRecord& job, const FrameRecord& f,

@@ -61,6 +61,7 @@ Status handle(F&& f) {
   }
 }
 
+// A chunk stream's problem as the core's error code, so it reaches grpc_code like every other.
 void check_chunks(ChunkAssembler::Status s, const std::string& what, const ChunkAssembler& a) {
   switch (s) {
     case ChunkAssembler::Status::Ok:
