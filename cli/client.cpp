@@ -1,6 +1,6 @@
 // The farm's client commands: submit, status, watch, fetch, cancel, health (cli/farm.h runs them).
 #include "cli/commands.h"
-#include "cli/farm.h"
+#include "client/commands.h"
 
 namespace rf::cli {
 

@@ -6,7 +6,7 @@
 #include <memory>
 
 #include "cli/commands.h"
-#include "cli/farm.h"
+#include "client/commands.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"rayfarm: a distributed batch renderer"};

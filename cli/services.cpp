@@ -1,6 +1,6 @@
 // The farm's long-running processes: `rayfarm coordinator` and `rayfarm worker`.
 #include "cli/commands.h"
-#include "cli/farm.h"
+#include "client/commands.h"
 #include "coordinator/service.h"
 #include "worker/worker.h"
 

@@ -1,6 +1,6 @@
 // Task scheduling and leases (DESIGN.md "Work units", "Coordinator"), as plain logic with an
-// explicit clock so it is tested without servers or sleeps. The gRPC service and the SQLite
-// store drive it; it knows nothing of either.
+// explicit clock so it is tested without servers or sleeps. The coordinator's core (core.h)
+// drives it beside the SQLite store; it knows nothing of either, nor of gRPC.
 //
 // Order: jobs by priority (higher first), then submission; within a job, a window of at most
 // `window_frames` unfinished frames is open; within the window, passes in order (all tiles of
@@ -20,6 +20,8 @@
 #include <tuple>
 #include <vector>
 
+#include "farm/job.h"  // TaskRef
+
 namespace rf {
 
 struct SchedulerOptions {
@@ -27,15 +29,6 @@ struct SchedulerOptions {
   int max_failures = 3;
   uint32_t window_frames = 4;
   std::string lease_prefix = "L";  // lease ids are prefix + a counter: unique per coordinator run
-};
-
-struct TaskRef {
-  std::string job_id;
-  uint32_t frame = 0, pass = 0, tile = 0;
-  bool operator<(const TaskRef& o) const {
-    return std::tie(job_id, frame, pass, tile) < std::tie(o.job_id, o.frame, o.pass, o.tile);
-  }
-  bool operator==(const TaskRef&) const = default;
 };
 
 struct Lease {

@@ -1,10 +1,7 @@
-// The coordinator (DESIGN.md "Coordinator"): the job service for users and the worker service for
-// workers on one gRPC port, beside the standard health service and server reflection.
-//
-// State: jobs and task events in SQLite (job_store.h), per-frame results in atomic checkpoint
-// files (checkpoint.h), scene bundles in a content-addressed blob store (blob_store.h); the task
-// queue and leases in memory (scheduler.h), rebuilt from those on start. The frame merge is the
-// engine's FrameAccumulator: passes merged in order, the stop taken on the completed prefix.
+// The coordinator's server (DESIGN.md "Coordinator"): the job service for users and the worker
+// service for workers on one gRPC port, beside the standard health service and server
+// reflection. The job logic, its state and its recovery are the core's (core.h); this side
+// speaks gRPC, streams payloads in chunks and bounds their sizes.
 #pragma once
 
 #include <atomic>
@@ -23,17 +20,15 @@ struct CoordinatorOptions {
   uint64_t max_buffer_bytes = 4ull << 30;  // one task's sample buffer
 };
 
-class CoordinatorCore;
-
 class CoordinatorServer {
  public:
   // Opens (or creates) the state directory, restores jobs from it and starts serving. Throws
   // with a message naming the address or file on failure.
   explicit CoordinatorServer(const CoordinatorOptions& options);
   ~CoordinatorServer();
-  int port() const;          // the bound port (useful with --listen HOST:0)
-  void wait();               // until shutdown() is called
-  void shutdown();           // stops accepting, ends streams, waits for handlers
+  int port() const;  // the bound port (useful with --listen HOST:0)
+  void wait();       // until shutdown() is called
+  void shutdown();   // stops accepting, ends streams, waits for handlers
 
  private:
   struct Impl;

@@ -4,9 +4,9 @@
 
 #include <filesystem>
 
-#include "coordinator/blob_store.h"
 #include "engine/digest.h"
 #include "engine/scene.h"
+#include "farm/blob_store.h"
 #include "tests/support/test_support.h"
 
 namespace rf {

@@ -3,7 +3,7 @@
 
 #include <vector>
 
-#include "proto/chunking.h"
+#include "farm/chunking.h"
 
 namespace rf {
 namespace {

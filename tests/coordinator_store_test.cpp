@@ -11,12 +11,13 @@
 #include <vector>
 
 #include "coordinator/checkpoint.h"
-#include "coordinator/frame_range.h"
 #include "coordinator/job_store.h"
 #include "coordinator/scheduler.h"
 #include "engine/buffer_file.h"
 #include "engine/buffer_merge.h"
 #include "engine/frame_accumulator.h"
+#include "farm/frame_range.h"
+#include "tests/support/fixtures.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -25,52 +26,12 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::string_literals;
 
-BufferHeader make_header(PassSet passes, int width = 8, int height = 8) {
-  BufferHeader h;
-  h.scene_digest = std::string(64, 'c');
-  h.seed = 7;
-  h.frame = 3;
-  h.integrator = "path";
-  h.settings = "max_depth=5 spp=4 filter=box";
-  h.width = width;
-  h.height = height;
-  h.passes = std::move(passes);
-  h.build_id = "test-build";
-  h.isa = "x86_64-avx2";
-  h.core_seconds = 0.25;
-  return h;
-}
-
-// One finished pass over `rect`: 4 samples per pixel, uniform in [0, 2) per channel.
+// Synthetic buffers of an 8x8 frame (tests/support/fixtures.h).
+BufferHeader make_header(PassSet passes) { return test::test_header(std::move(passes), 8, 8); }
 SampleBuffer random_pass(uint32_t pass, Rect rect, uint64_t seed) {
-  SampleBuffer b(make_header(PassSet::range(pass, pass + 1)), rect, false);
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(0.0, 2.0);
-  for (int y = rect.y0; y < rect.y1(); ++y)
-    for (int x = rect.x0; x < rect.x1(); ++x)
-      for (int s = 0; s < 4; ++s) b.add_sample(x, y, RGB(float(u(rng)), float(u(rng)), float(u(rng))));
-  b.rays = 100 + pass;
-  b.finish_pass();
-  return b;
+  return test::random_pass(pass, rect, false, seed, 8, 8);
 }
-
-void expect_bit_identical(const SampleBuffer& a, const SampleBuffer& b) {
-  auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
-    return x.size() == y.size() &&
-           (x.empty() || std::memcmp(x.data(), y.data(), sizeof(double) * x.size()) == 0);
-  };
-  EXPECT_EQ(a.header, b.header);
-  EXPECT_EQ(a.rect, b.rect);
-  EXPECT_EQ(a.count, b.count);
-  EXPECT_TRUE(same(a.sum, b.sum));
-  EXPECT_TRUE(same(a.sum_sq, b.sum_sq));
-  EXPECT_TRUE(same(a.batch_sum, b.batch_sum));
-  EXPECT_TRUE(same(a.batch_sum_sq, b.batch_sum_sq));
-  EXPECT_TRUE(same(a.splat, b.splat));
-  EXPECT_EQ(a.light_paths, b.light_paths);
-  EXPECT_EQ(a.nonfinite_samples, b.nonfinite_samples);
-  EXPECT_EQ(a.rays, b.rays);
-}
+using test::expect_bit_identical;
 
 // ----------------------------------------------------------------------------------- JobStore
 

@@ -6,8 +6,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
-#include "proto/chunking.h"
-#include "proto/probe.h"
+#include "farm/chunking.h"
+#include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
 #include <signal.h>
 

@@ -1,7 +1,7 @@
 // Open Job Description frame ranges, as `submit --frames` takes them.
 #include <gtest/gtest.h>
 
-#include "coordinator/frame_range.h"
+#include "farm/frame_range.h"
 
 namespace rf {
 namespace {

@@ -16,14 +16,15 @@
 #include <set>
 #include <thread>
 
-#include "coordinator/blob_store.h"
 #include "engine/build_info.h"
 #include "engine/digest.h"
 #include "engine/buffer_file.h"
 #include "engine/render.h"
 #include "engine/scene.h"
-#include "proto/chunking.h"
-#include "proto/convert.h"
+#include "farm/blob_store.h"
+#include "farm/channel.h"
+#include "farm/chunking.h"
+#include "farm/convert.h"
 #include "proto/rayfarm.grpc.pb.h"
 
 namespace rf {
@@ -46,18 +47,9 @@ double cpu_seconds() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
-bool transient(const grpc::Status& s) {
-  return s.error_code() == grpc::StatusCode::UNAVAILABLE ||
-         s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
-}
-
-// Every RPC has a deadline, and waits for the channel to (re)connect within it instead of failing
-// at once while the coordinator restarts.
-void set_deadline(grpc::ClientContext& ctx, double seconds) {
-  ctx.set_deadline(std::chrono::system_clock::now() +
-                   std::chrono::milliseconds(int64_t(seconds * 1000)));
-  ctx.set_wait_for_ready(true);
-}
+// Every RPC waits for the channel to (re)connect within its deadline instead of failing at once
+// while the coordinator restarts.
+constexpr bool kWaitForReady = true;
 
 struct TaskFailure : std::runtime_error {
   using std::runtime_error::runtime_error;
@@ -94,7 +86,8 @@ class Worker {
     std::string suffix = "-" + std::to_string(::getpid());
     for (const auto& e : fs::directory_iterator(cache_dir_ + "/bundles", ec)) {
       std::string name = e.path().filename().string();
-      if (name.size() > suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0)
+      if (name.size() > suffix.size() &&
+          name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0)
         fs::remove_all(e.path(), ec);
     }
   }
@@ -120,7 +113,7 @@ class Worker {
     std::unique_ptr<Renderer> renderer;
   };
   std::deque<CachedScene> scenes_;  // most recently used first
-  std::set<std::string> verified_;   // blob digests checked against their content
+  std::set<std::string> verified_;  // blob digests checked against their content
   // The previous task's upload runs while the next task renders, hiding the round trip and the
   // coordinator's durable write. At most one upload is in flight.
   std::thread uploader_;
@@ -131,30 +124,21 @@ class Worker {
   static constexpr size_t kScenesKept = 2;
 };
 
+// Pings at most a third of the lease apart (the coordinator's keepalive_seconds), so a partition
+// is noticed within one lease.
 void Worker::connect(int keepalive_seconds) {
-  grpc::ChannelArguments args;
-  // Pings at most a third of the lease apart, so a partition is noticed within one lease.
-  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_seconds * 1000);
-  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, std::max(1, keepalive_seconds / 2) * 1000);
-  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-  // Reconnect attempts back off (jittered by gRPC) up to 2 s: a restarted coordinator is found
-  // again within about 2 s.
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
-  channel_ = grpc::CreateCustomChannel(o_.coordinator, grpc::InsecureChannelCredentials(), args);
+  channel_ = coordinator_channel(o_.coordinator, keepalive_seconds);
   stub_ = pb::WorkerService::NewStub(channel_);
 }
 
 bool Worker::backoff(int attempt) {
-  double cap = 15, base = 0.25 * std::pow(2.0, std::min(attempt, 10));
-  double d = std::min(cap, base) * std::uniform_real_distribution<double>(0.5, 1.0)(rng_);
-  return sleep_unless_stopped(d);
+  return sleep_unless_stopped(backoff_seconds(attempt, 0.25, 15, rng_));
 }
 
 bool Worker::sleep_unless_stopped(double seconds) {
   std::unique_lock lock(m_);
-  cv_.wait_for(lock, std::chrono::milliseconds(int64_t(seconds * 1000)), [&] { return stopping(); });
+  cv_.wait_for(lock, std::chrono::milliseconds(int64_t(seconds * 1000)),
+               [&] { return stopping(); });
   return !stopping();
 }
 
@@ -168,7 +152,7 @@ bool Worker::register_self() {
   req.set_isa(cpu_isa());
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
-    set_deadline(ctx, 10);
+    set_deadline(ctx, 10, kWaitForReady);
     pb::RegisterResponse resp;
     grpc::Status s = stub_->Register(&ctx, req, &resp);
     if (s.ok()) {
@@ -177,8 +161,8 @@ bool Worker::register_self() {
       keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
       return true;
     }
-    if (!transient(s)) throw std::runtime_error("register with " + o_.coordinator + ": " +
-                                                s.error_message());
+    if (!transient(s))
+      throw std::runtime_error("register with " + o_.coordinator + ": " + s.error_message());
     if (attempt == 0)
       spdlog::warn("coordinator {} unreachable ({}); retrying", o_.coordinator, s.error_message());
     if (!backoff(attempt)) return false;
@@ -187,7 +171,7 @@ bool Worker::register_self() {
 
 void Worker::fetch_blob(const std::string& sha256) {
   grpc::ClientContext ctx;
-  set_deadline(ctx, 600);
+  set_deadline(ctx, 600, kWaitForReady);
   pb::BlobRequest req;
   req.set_sha256(sha256);
   auto reader = stub_->FetchBlob(&ctx, req);
@@ -236,8 +220,8 @@ Renderer& Worker::prepare(const pb::Task& task) {
     verified_.insert(e.sha256);
   }
   // One directory per bundle and process: workers sharing a cache never write the same files.
-  std::string dir = cache_dir_ + "/bundles/" + sha256_hex(files).substr(0, 16) + "-" +
-                    std::to_string(::getpid());
+  std::string dir =
+      cache_dir_ + "/bundles/" + sha256_hex(files).substr(0, 16) + "-" + std::to_string(::getpid());
   try {
     blobs_.materialize(bundle, dir);
   } catch (const std::exception& e) {
@@ -272,18 +256,19 @@ void Worker::fail_task(const pb::Task& task, const std::string& message, bool ha
   req.set_message(message);
   req.set_handed_back(handed_back);
   grpc::ClientContext ctx;
-  set_deadline(ctx, 10);
+  set_deadline(ctx, 10, kWaitForReady);
   pb::FailResponse resp;
   grpc::Status s = stub_->FailTask(&ctx, req, &resp);
-  if (!s.ok()) spdlog::warn("task {}: reporting {}: {}", task.task_id(),
-                            handed_back ? "the hand-back" : "the failure", s.error_message());
+  if (!s.ok())
+    spdlog::warn("task {}: reporting {}: {}", task.task_id(),
+                 handed_back ? "the hand-back" : "the failure", s.error_message());
 }
 
 void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds) {
   std::string bytes = encode_buffer(buffer);
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
-    set_deadline(ctx, 600);
+    set_deadline(ctx, 600, kWaitForReady);
     pb::CompleteResponse resp;
     auto w = stub_->CompleteTask(&ctx, &resp);
     pb::CompleteRequest head;
@@ -323,7 +308,7 @@ void Worker::run_task(const pb::Task& task) {
     fail_task(task, e.what(), false);
     return;
   }
-  Rect rect{task.rect().x0(), task.rect().y0(), task.rect().w(), task.rect().h()};
+  Rect rect = from_wire(task.rect());
   SampleBuffer result;
   std::string render_error;
   bool finished = false;
@@ -344,7 +329,8 @@ void Worker::run_task(const pb::Task& task) {
   std::unique_lock lock(m_);
   while (!finished) {
     auto wake = next_renew;
-    if (stopping()) wake = std::min(wake, stop_at_ + std::chrono::duration<double>(o_.drain_seconds));
+    if (stopping())
+      wake = std::min(wake, stop_at_ + std::chrono::duration<double>(o_.drain_seconds));
     bool was_stopping = stopping();  // a signal moves the wake-up to the drain deadline
     cv_.wait_until(lock, wake, [&] { return finished || stopping() != was_stopping; });
     if (finished) break;
@@ -364,12 +350,13 @@ void Worker::run_task(const pb::Task& task) {
       req.set_worker_id(worker_id_);
       req.set_lease_id(task.lease_id());
       grpc::ClientContext ctx;
-      set_deadline(ctx, 10);
+      set_deadline(ctx, 10, kWaitForReady);
       pb::RenewResponse resp;
       grpc::Status s = stub_->RenewLease(&ctx, req, &resp);
       if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
           s.error_code() == grpc::StatusCode::NOT_FOUND) {
-        spdlog::info("task {}: lease ended ({}); finishing anyway", task.task_id(), s.error_message());
+        spdlog::info("task {}: lease ended ({}); finishing anyway", task.task_id(),
+                     s.error_message());
         renewing = false;
       }
       next_renew = Clock::now() + std::chrono::duration<double>(keepalive_seconds_);
@@ -430,7 +417,7 @@ int Worker::run() {
     pb::LeaseRequest req;
     req.set_worker_id(worker_id_);
     grpc::ClientContext ctx;
-    set_deadline(ctx, 5);
+    set_deadline(ctx, 5, kWaitForReady);
     pb::LeaseResponse resp;
     grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
     if (!s.ok()) {

@@ -91,7 +91,7 @@ class ImageStats {
   double image_sum_[3] = {0, 0, 0}, image_sum_sq_[3] = {0, 0, 0};  // per-pass image means
 };
 
-// Renders passes 0..passes-1 of the whole frame (Renderer::render_task, parallel) and collects
+// Renders passes 0..passes-1 of the whole frame (Renderer::render, parallel) and collects
 // them. block <= 0 picks the default: 4 for splatting integrators, 1 otherwise. Throws
 // std::invalid_argument for fewer than 32 passes (batch-means variances from fewer passes are
 // too noisy for the t test's tails).

@@ -21,7 +21,7 @@
 #include <type_traits>
 #include <vector>
 
-#include "engine/film.h"
+#include "engine/buffer_file.h"
 
 namespace {
 

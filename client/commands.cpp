@@ -1,7 +1,6 @@
-// The farm's client commands: submit, status, watch, fetch, cancel, health (and the coordinator
-// and worker entry points). Each talks to one coordinator: --coordinator ADDR, else
-// $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
-#include "cli/farm.h"
+// The farm's client commands: submit, status, watch, fetch, cancel, health. Each talks to one
+// coordinator: --coordinator ADDR, else $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
+#include "client/commands.h"
 
 #include <grpcpp/grpcpp.h>
 #include <unistd.h>
@@ -13,17 +12,20 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <set>
 #include <thread>
 
-#include "coordinator/blob_store.h"
-#include "coordinator/frame_range.h"
 #include "engine/buffer_file.h"
 #include "engine/digest.h"
 #include "engine/image_io.h"
-#include "proto/chunking.h"
-#include "proto/convert.h"
-#include "proto/probe.h"
+#include "engine/progress.h"
+#include "farm/blob_store.h"
+#include "farm/channel.h"
+#include "farm/chunking.h"
+#include "farm/convert.h"
+#include "farm/frame_range.h"
+#include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
 
 namespace rf {
@@ -39,31 +41,31 @@ std::string default_coordinator() {
 namespace {
 
 std::unique_ptr<pb::JobService::Stub> job_stub(const std::string& addr) {
-  grpc::ChannelArguments args;
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
-  return pb::JobService::NewStub(
-      grpc::CreateCustomChannel(addr, grpc::InsecureChannelCredentials(), args));
-}
-
-void set_deadline(grpc::ClientContext& ctx, double seconds) {
-  ctx.set_deadline(std::chrono::system_clock::now() +
-                   std::chrono::milliseconds(int64_t(seconds * 1000)));
+  return pb::JobService::NewStub(coordinator_channel(addr));
 }
 
 const char* code_name(grpc::StatusCode c) {
   switch (c) {
-    case grpc::StatusCode::CANCELLED: return "CANCELLED";
-    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
-    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
-    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
-    case grpc::StatusCode::INTERNAL: return "INTERNAL";
-    default: return "ERROR";
+    case grpc::StatusCode::CANCELLED:
+      return "CANCELLED";
+    case grpc::StatusCode::INVALID_ARGUMENT:
+      return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND:
+      return "NOT_FOUND";
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return "FAILED_PRECONDITION";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::DATA_LOSS:
+      return "DATA_LOSS";
+    case grpc::StatusCode::UNAVAILABLE:
+      return "UNAVAILABLE";
+    case grpc::StatusCode::INTERNAL:
+      return "INTERNAL";
+    default:
+      return "ERROR";
   }
 }
 
@@ -80,35 +82,32 @@ void check(const grpc::Status& s, const std::string& what, const std::string& ad
 
 const char* state_name(pb::JobState s) {
   switch (s) {
-    case pb::JOB_QUEUED: return "queued";
-    case pb::JOB_RUNNING: return "running";
-    case pb::JOB_COMPLETED: return "completed";
-    case pb::JOB_FAILED: return "failed";
-    case pb::JOB_CANCELLED: return "cancelled";
-    default: return "unknown";
+    case pb::JOB_QUEUED:
+      return "queued";
+    case pb::JOB_RUNNING:
+      return "running";
+    case pb::JOB_COMPLETED:
+      return "completed";
+    case pb::JOB_FAILED:
+      return "failed";
+    case pb::JOB_CANCELLED:
+      return "cancelled";
+    default:
+      return "unknown";
   }
-}
-
-std::string eta_text(double s) {
-  if (s < 0) return "?";
-  char buf[32];
-  if (s < 120)
-    std::snprintf(buf, sizeof buf, "%.0f s", s);
-  else if (s < 7200)
-    std::snprintf(buf, sizeof buf, "%.0f min", s / 60);
-  else
-    std::snprintf(buf, sizeof buf, "%.1f h", s / 3600);
-  return buf;
 }
 
 }  // namespace
 
-int cmd_submit(const std::string& addr, const SubmitArgs& a) {
+namespace {
+
+// The job a submit describes. Its bundle: every distinct scene file the frames name, and every
+// asset they use, by path relative to the scene's directory. Parsing here also refuses a bad
+// scene before upload.
+JobSpec job_spec(const SubmitArgs& a) {
   fs::path scene(a.scene);
   fs::path dir = scene.parent_path();
   std::string pattern = scene.filename().string();
-  // The bundle: every distinct scene file the frames name, and every asset they use, by path
-  // relative to the scene's directory. Parsing here also refuses a bad scene before upload.
   std::vector<uint32_t> frames;
   if (!a.frames.empty()) {
     try {
@@ -122,47 +121,39 @@ int cmd_submit(const std::string& addr, const SubmitArgs& a) {
     scene_files.insert(pattern);
   else
     for (uint32_t f : frames) scene_files.insert(expand_frame_pattern(pattern, f));
-  std::map<std::string, std::string> files;  // path -> digest
+  std::map<std::string, std::string> files;  // path -> digest, in path order
   for (const std::string& name : scene_files) {
     if (!fs::exists(dir / name)) throw FarmError((dir / name).string() + ": no such scene file", 2);
     for (const BundleEntry& e : bundle_of_scene((dir / name).string())) files[e.path] = e.sha256;
   }
-  pb::JobSpec spec;
+  JobSpec spec;
   // Default name: the scene's stem, or its directory's name for the usual "scene.json".
   std::string stem = scene.stem().string();
   if (stem == "scene" && !dir.filename().empty()) stem = dir.filename().string();
-  spec.set_name(a.name.empty() ? stem : a.name);
-  spec.set_scene_path(pattern);
-  spec.set_frames(a.frames);
-  *spec.mutable_overrides() = to_wire_overrides(a.overrides);
-  spec.set_priority(a.priority);
-  spec.set_tile_size(uint32_t(a.tile_size));
-  pb::MissingBlobsRequest missing_req;
-  for (const auto& [path, digest] : files) {
-    pb::BundleFile* f = spec.add_files();
-    f->set_path(path);
-    f->set_sha256(digest);
-    missing_req.add_sha256(digest);
-  }
-  auto stub = job_stub(addr);
-  pb::MissingBlobsResponse missing;
-  {
-    grpc::ClientContext ctx;
-    set_deadline(ctx, 30);
-    check(stub->MissingBlobs(&ctx, missing_req, &missing), "submit", addr);
-  }
-  std::set<std::string> upload(missing.sha256().begin(), missing.sha256().end());
+  spec.name = a.name.empty() ? stem : a.name;
+  spec.scene_path = pattern;
+  for (const auto& [path, digest] : files) spec.files.push_back({path, digest});
+  spec.frames = a.frames;
+  spec.overrides = a.overrides;
+  spec.priority = a.priority;
+  spec.tile_size = uint32_t(a.tile_size);
+  return spec;
+}
+
+// Streams the spec, then the bundle's files the coordinator lacks (each once), in chunks.
+std::string upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const fs::path& dir,
+                       std::set<std::string> missing, const std::string& addr) {
   grpc::ClientContext ctx;
   set_deadline(ctx, 3600);
   pb::SubmitResponse resp;
-  auto w = stub->Submit(&ctx, &resp);
+  auto w = stub.Submit(&ctx, &resp);
   pb::SubmitRequest first;
-  *first.mutable_spec() = spec;
+  *first.mutable_spec() = to_wire(spec);
   bool ok = w->Write(first);
-  for (const auto& [path, digest] : files) {
-    if (!ok || !upload.count(digest)) continue;
-    upload.erase(digest);
-    std::string bytes = read_file_bytes((dir / path).string());
+  for (const BundleEntry& f : spec.files) {
+    if (!ok || !missing.count(f.sha256)) continue;
+    missing.erase(f.sha256);
+    std::string bytes = read_file_bytes((dir / f.path).string());
     for_each_chunk(bytes, [&](pb::Chunk&& c) {
       if (!ok) return;
       pb::SubmitRequest m;
@@ -172,7 +163,25 @@ int cmd_submit(const std::string& addr, const SubmitArgs& a) {
   }
   if (ok) w->WritesDone();
   check(w->Finish(), "submit", addr);
-  std::printf("%s\n", resp.job_id().c_str());
+  return resp.job_id();
+}
+
+}  // namespace
+
+int cmd_submit(const std::string& addr, const SubmitArgs& a) {
+  JobSpec spec = job_spec(a);
+  pb::MissingBlobsRequest missing_req;
+  for (const BundleEntry& f : spec.files) missing_req.add_sha256(f.sha256);
+  auto stub = job_stub(addr);
+  pb::MissingBlobsResponse missing;
+  {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 30);
+    check(stub->MissingBlobs(&ctx, missing_req, &missing), "submit", addr);
+  }
+  std::string id = upload_job(*stub, spec, fs::path(a.scene).parent_path(),
+                              {missing.sha256().begin(), missing.sha256().end()}, addr);
+  std::printf("%s\n", id.c_str());
   return 0;
 }
 
@@ -189,9 +198,12 @@ nlohmann::json to_json(const pb::JobStatus& j) {
                       {"eta_seconds", f.eta_seconds()},
                       {"done", f.done()},
                       {"stopped_on_target", f.stopped_on_target()}});
-  return {{"job_id", j.job_id()},         {"name", j.name()},
-          {"state", state_name(j.state())}, {"error", j.error()},
-          {"core_seconds", j.core_seconds()}, {"submitted_unix", j.submitted_unix()},
+  return {{"job_id", j.job_id()},
+          {"name", j.name()},
+          {"state", state_name(j.state())},
+          {"error", j.error()},
+          {"core_seconds", j.core_seconds()},
+          {"submitted_unix", j.submitted_unix()},
           {"frames", frames}};
 }
 
@@ -211,11 +223,12 @@ std::string job_line(const pb::JobStatus& j) {
     }
   }
   char buf[512];
-  std::snprintf(buf, sizeof buf,
-                "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  ETA %s",
-                j.job_id().c_str(), j.name().c_str(), state_name(j.state()), done,
-                j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
-                j.core_seconds(), eta_known ? eta_text(eta).c_str() : "?");
+  std::snprintf(
+      buf, sizeof buf,
+      "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  ETA %s",
+      j.job_id().c_str(), j.name().c_str(), state_name(j.state()), done, j.frames_size(),
+      (unsigned long long)merged, (unsigned long long)total, worst, j.core_seconds(),
+      eta_known ? duration_text(eta).c_str() : "?");
   return buf;
 }
 
@@ -253,6 +266,7 @@ int cmd_status(const std::string& addr, const std::string& job, bool json) {
 int cmd_watch(const std::string& addr, const std::string& job) {
   auto stub = job_stub(addr);
   std::map<uint32_t, std::string> last;
+  std::mt19937 rng(std::random_device{}());
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
     if (attempt > 0) ctx.set_wait_for_ready(true);  // reconnecting: wait for the coordinator
@@ -268,10 +282,10 @@ int cmd_watch(const std::string& addr, const std::string& job) {
       error = s.error();
       for (const pb::FrameStatus& f : s.frames()) {
         char buf[256];
-        std::snprintf(buf, sizeof buf, "frame %u: passes %u/%u, %.0f spp, relMSE %.4g, %s", f.frame(),
-                      f.passes_merged(), f.passes_total(), f.spp(), f.rel_mse(),
+        std::snprintf(buf, sizeof buf, "frame %u: passes %u/%u, %.0f spp, relMSE %.4g, %s",
+                      f.frame(), f.passes_merged(), f.passes_total(), f.spp(), f.rel_mse(),
                       f.done() ? (f.stopped_on_target() ? "done (noise target)" : "done")
-                               : ("ETA " + eta_text(f.eta_seconds())).c_str());
+                               : ("ETA " + duration_text(f.eta_seconds())).c_str());
         if (last[f.frame()] != buf) {
           std::printf("%s\n", buf);
           last[f.frame()] = buf;
@@ -293,9 +307,11 @@ int cmd_watch(const std::string& addr, const std::string& job) {
     if (!st.ok() && st.error_code() != grpc::StatusCode::UNAVAILABLE &&
         st.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED)
       check(st, "watch", addr);
-    if (attempt == 0) std::fprintf(stderr, "watch: connection lost (%s); reconnecting\n",
-                                   st.error_message().c_str());
-    std::this_thread::sleep_for(std::chrono::milliseconds(std::min(10000, 250 << std::min(attempt, 6))));
+    if (attempt == 0)
+      std::fprintf(stderr, "watch: connection lost (%s); reconnecting\n",
+                   st.error_message().c_str());
+    std::this_thread::sleep_for(
+        std::chrono::duration<double>(backoff_seconds(attempt, 0.25, 10, rng)));
   }
 }
 
@@ -332,7 +348,8 @@ int cmd_fetch(const std::string& addr, const std::string& job, const std::string
         problem = chunks.error();
     check(reader->Finish(), "fetch frame " + std::to_string(f.frame()), addr);
     if (problem.empty() && chunks.finish() != ChunkAssembler::Status::Ok) problem = chunks.error();
-    if (!problem.empty()) throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
+    if (!problem.empty())
+      throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
     SampleBuffer frame = decode_buffer(chunks.take(), "frame " + std::to_string(f.frame()));
     char name[64];
     std::snprintf(name, sizeof name, "%s.%04u", job.c_str(), f.frame());
@@ -341,10 +358,8 @@ int cmd_fetch(const std::string& addr, const std::string& job, const std::string
     write_exr(exr, frame, {{"job", job}});
     write_png(png, frame, exposure);
     std::fprintf(stderr, "frame %u: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
-                 frame.header.passes.count(),
-                 double(frame.total_samples() ? frame.total_samples() : frame.light_paths) /
-                     double(frame.rect.area()),
-                 frame.rel_mse(), exr.c_str());
+                 frame.header.passes.count(), samples_per_pixel(frame), frame.rel_mse(),
+                 exr.c_str());
     ++written;
   }
   if (only_frame && written == 0)

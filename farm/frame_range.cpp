@@ -1,4 +1,4 @@
-#include "coordinator/frame_range.h"
+#include "farm/frame_range.h"
 
 #include <charconv>
 #include <set>

@@ -20,7 +20,7 @@ struct FarmError : std::runtime_error {
 std::string default_coordinator();
 
 struct SubmitArgs {
-  std::string scene;  // a file, or a per-frame pattern ("shot.####.json")
+  std::string scene;   // a file, or a per-frame pattern ("shot.####.json")
   std::string frames;  // Open Job Description range; empty: the scene's frame
   std::string name;
   SceneOverrides overrides;
@@ -30,7 +30,8 @@ struct SubmitArgs {
 
 int cmd_submit(const std::string& addr, const SubmitArgs& args);  // prints the job id
 int cmd_status(const std::string& addr, const std::string& job, bool json);
-int cmd_watch(const std::string& addr, const std::string& job);  // 0 completed, 1 failed, 3 cancelled
+int cmd_watch(const std::string& addr,
+              const std::string& job);  // 0 completed, 1 failed, 3 cancelled
 int cmd_fetch(const std::string& addr, const std::string& job, const std::string& out_dir,
               std::optional<uint32_t> frame, float exposure);
 int cmd_cancel(const std::string& addr, const std::string& job);

@@ -1,4 +1,4 @@
-#include "proto/chunking.h"
+#include "farm/chunking.h"
 
 #include "engine/digest.h"
 

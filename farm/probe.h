@@ -1,6 +1,6 @@
-// Probes any gRPC server speaks, without their generated stubs: the standard health check
-// (grpc.health.v1.Health/Check) and server reflection's service list
-// (grpc.reflection.v1alpha.ServerReflection). Used by `rayfarm health` and by the tests.
+// Probes any gRPC server speaks: the standard health check (grpc.health.v1.Health/Check) and
+// server reflection's service list, through stubs generated from the standard protos (Debian's
+// grpc-proto; proto/CMakeLists.txt). Used by `rayfarm health` and by the tests.
 #pragma once
 
 #include <stdexcept>

@@ -1,4 +1,4 @@
-#include "coordinator/blob_store.h"
+#include "farm/blob_store.h"
 
 #include <filesystem>
 

@@ -1,0 +1,647 @@
+#include "coordinator/core.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include "coordinator/checkpoint.h"
+#include "engine/digest.h"
+#include "engine/buffer_file.h"
+#include "engine/frame_accumulator.h"
+#include "engine/work_units.h"
+#include "engine/render.h"
+#include "farm/convert.h"
+#include "farm/frame_range.h"
+
+namespace rf {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr int kDefaultTileSize = 128;  // big enough that per-task costs stay small
+
+[[noreturn]] void refuse(ErrorCode code, const std::string& message) {
+  throw CoordinatorError(code, message);
+}
+
+double unix_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+CoreOptions with_defaults(CoreOptions o) {
+  if (o.instance.empty())
+    o.instance = sha256_hex(std::to_string(unix_now()) + std::to_string(::getpid())).substr(0, 8);
+  if (!o.clock) {
+    auto start = std::chrono::steady_clock::now();
+    o.clock = [start] {
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    };
+  }
+  return o;
+}
+
+// How the engine splits and checks one frame of a job: the engine calls the coordinator makes,
+// in one place.
+struct FramePlan {
+  BufferHeader base;  // what every task buffer of the frame must match
+  std::vector<Rect> tiles;
+  bool splats = false;
+  uint32_t passes = 0;
+  double noise_target = 0;
+};
+
+FramePlan plan_frame(const Scene& scene, uint32_t frame, int tile_size) {
+  try {
+    check_renderable(scene);
+  } catch (const std::exception& e) {
+    refuse(ErrorCode::InvalidArgument, e.what());
+  }
+  return {frame_header(scene, frame, PassSet{}), work_units(scene, tile_size),
+          integrator_splats(scene.render.integrator.method), scene.render.passes,
+          scene.render.noise_target};
+}
+
+// Every file of the spec's bundle has a safe path and a digest whose content was uploaded.
+void check_bundle(const JobSpec& spec, const BlobStore& blobs) {
+  for (const BundleEntry& f : spec.files) {
+    try {
+      check_bundle_path(f.path);
+    } catch (const BlobError& e) {
+      refuse(ErrorCode::InvalidArgument, std::string("files: ") + e.what());
+    }
+    if (!is_sha256_hex(f.sha256))
+      refuse(ErrorCode::InvalidArgument,
+             "files: '" + f.path + "' has no valid SHA-256 (64 lower-case hex digits)");
+    if (!blobs.has(f.sha256))
+      refuse(ErrorCode::InvalidArgument,
+             "files: the content of '" + f.path + "' (" + f.sha256 + ") was not uploaded");
+  }
+}
+
+// The scenes of a job's bundle, each file parsed once with the job's overrides.
+class BundleScenes {
+ public:
+  BundleScenes(std::string dir, const std::vector<BundleEntry>& bundle, SceneOverrides overrides)
+      : dir_(std::move(dir)), bundle_(bundle), overrides_(std::move(overrides)) {}
+
+  const Scene& operator()(const std::string& path) {
+    auto it = parsed_.find(path);
+    if (it != parsed_.end()) return it->second;
+    bool in_bundle = false;
+    for (const BundleEntry& e : bundle_) in_bundle |= e.path == path;
+    if (!in_bundle)
+      refuse(ErrorCode::InvalidArgument,
+             "scene file '" + path + "' is not in the submitted bundle");
+    try {
+      return parsed_.emplace(path, load_scene(dir_ + "/" + path, overrides_)).first->second;
+    } catch (const std::exception& e) {
+      refuse(ErrorCode::InvalidArgument, e.what());
+    }
+  }
+
+ private:
+  std::string dir_;
+  const std::vector<BundleEntry>& bundle_;
+  SceneOverrides overrides_;
+  std::map<std::string, Scene> parsed_;
+};
+
+}  // namespace
+
+bool terminal(JobState s) {
+  return s == JobState::Completed || s == JobState::Failed || s == JobState::Cancelled;
+}
+
+const char* job_state_name(JobState s) {
+  switch (s) {
+    case JobState::Queued:
+      return "JOB_QUEUED";
+    case JobState::Running:
+      return "JOB_RUNNING";
+    case JobState::Completed:
+      return "JOB_COMPLETED";
+    case JobState::Failed:
+      return "JOB_FAILED";
+    case JobState::Cancelled:
+      return "JOB_CANCELLED";
+  }
+  return "JOB_STATE_UNSPECIFIED";
+}
+
+// One frame of a job: its merge state, durable checkpoint and progress figures.
+struct FrameRecord {
+  uint32_t number = 0;
+  std::string scene_path;                 // in the bundle
+  BufferHeader base;                      // what every task buffer of this frame must match
+  std::mutex m;                           // serializes merges and checkpoints of this frame
+  std::unique_ptr<FrameAccumulator> acc;  // created on the first result; dropped when done
+  std::unique_ptr<FrameCheckpoint> checkpoint;
+  // Under the coordinator's mutex: the figures of the last merge (the ETA is taken when
+  // reported), and when the frame's first task was leased in this run.
+  FrameProgress progress;
+  double first_lease_at = -1;
+};
+
+struct JobRecord {
+  std::string id;
+  uint64_t seq = 0;
+  JobSpec spec;
+  JobState state = JobState::Queued;
+  std::string error;
+  int64_t submitted_unix = 0;
+  double core_seconds = 0;
+  std::vector<Rect> tiles;
+  bool splats = false;
+  uint32_t passes = 0;
+  double noise_target = 0;
+  std::vector<std::unique_ptr<FrameRecord>> frames;
+  std::map<uint32_t, FrameRecord*> by_number;
+
+  ProgressiveOptions merge_options() const { return {0, passes, noise_target}; }
+  std::vector<uint32_t> frame_numbers() const {
+    std::vector<uint32_t> out;
+    for (const auto& f : frames) out.push_back(f->number);
+    return out;
+  }
+};
+
+Coordinator::Coordinator(CoreOptions o)
+    : options_(with_defaults(std::move(o))),
+      blobs_(options_.state_dir + "/blobs"),  // creates the state directory too
+      store_(options_.state_dir + "/jobs.sqlite"),
+      scheduler_(SchedulerOptions{options_.lease_seconds, options_.max_failures,
+                                  options_.window_frames, options_.instance + "-L"}) {
+  next_seq_ = store_.next_seq();
+  for (const StoredJob& j : store_.jobs()) restore(j);
+}
+
+Coordinator::~Coordinator() = default;
+
+// Validates a spec against the stored blobs and makes the job's record.
+std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_t seq,
+                                                  const JobSpec& spec) {
+  auto job = std::make_shared<JobRecord>();
+  job->id = id;
+  job->seq = seq;
+  job->spec = spec;
+  if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
+  check_bundle(spec, blobs_);
+  std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
+  try {
+    blobs_.materialize(spec.files, bundle_dir);
+  } catch (const BlobError& e) {
+    refuse(ErrorCode::InvalidArgument, e.what());
+  }
+  add_frames(*job, bundle_dir);
+  return job;
+}
+
+// Splits every frame of the job; all must agree on resolution and passes.
+void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
+  const JobSpec& spec = job.spec;
+  std::vector<uint32_t> frames;
+  if (!spec.frames.empty()) {
+    try {
+      frames = parse_frame_range(spec.frames);
+    } catch (const FrameRangeError& e) {
+      refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
+    }
+  }
+  int tile_size = spec.tile_size ? int(spec.tile_size) : kDefaultTileSize;
+  if (tile_size < 8 || tile_size > 4096)
+    refuse(ErrorCode::InvalidArgument,
+           "tile_size: " + std::to_string(tile_size) + " is outside 8..4096");
+  BundleScenes scene_for(bundle_dir, spec.files, spec.overrides);
+  if (frames.empty())
+    frames.push_back(0);  // a job without a frame range renders frame 0
+  for (uint32_t number : frames) {
+    auto f = std::make_unique<FrameRecord>();
+    f->number = number;
+    f->scene_path = expand_frame_pattern(spec.scene_path, number);
+    FramePlan plan = plan_frame(scene_for(f->scene_path), number, tile_size);
+    f->base = plan.base;
+    if (job.frames.empty()) {
+      job.tiles = plan.tiles;
+      job.splats = plan.splats;
+      job.passes = plan.passes;
+      job.noise_target = plan.noise_target;
+    } else if (plan.tiles != job.tiles || plan.passes != job.passes) {
+      refuse(ErrorCode::InvalidArgument,
+             "frame " + std::to_string(number) + " (" + f->scene_path +
+                 ") differs from the first frame in resolution or passes; one job renders "
+                 "frames of one size and pass count");
+    }
+    f->progress.passes_total = job.passes;
+    f->checkpoint = std::make_unique<FrameCheckpoint>(options_.state_dir + "/jobs/" + job.id +
+                                                      "/frame-" + std::to_string(number));
+    job.by_number[number] = f.get();
+    job.frames.push_back(std::move(f));
+  }
+}
+
+// Rebuilds a frame's accumulator from its checkpoint; the scheduler learns which tasks are in.
+void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
+  FrameCheckpoint::Loaded loaded = f.checkpoint->load();
+  for (const std::string& p : loaded.problems)
+    spdlog::warn("job {} frame {}: {} (its tasks will be rendered again)", job.id, f.number, p);
+  if (!loaded.prefix && loaded.tasks.empty()) return;
+  f.acc = std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+  if (loaded.prefix) {
+    try {
+      f.acc->resume_from(std::move(*loaded.prefix));
+    } catch (const std::exception& e) {
+      spdlog::warn("job {} frame {}: checkpoint not used: {}", job.id, f.number, e.what());
+      f.acc =
+          std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+    }
+  }
+  for (FrameCheckpoint::TaskResult& t : loaded.tasks) {
+    if (t.tile >= job.tiles.size()) continue;
+    try {
+      if (f.acc->add(std::move(t.buffer)) != FrameAccumulator::AddResult::Dropped)
+        scheduler_.mark_done(TaskRef{job.id, f.number, t.pass, t.tile});
+    } catch (const std::exception& e) {
+      spdlog::warn("job {} frame {} task {}/{}: not used: {}", job.id, f.number, t.pass, t.tile,
+                   e.what());
+    }
+  }
+  for (uint32_t p = 0; p < f.acc->passes_merged(); ++p)
+    for (uint32_t t = 0; t < job.tiles.size(); ++t)
+      scheduler_.mark_done(TaskRef{job.id, f.number, p, t});
+  if (f.acc->passes_merged() > 0) f.checkpoint->save_prefix(f.acc->frame());
+  publish_frame(job, f);
+}
+
+void Coordinator::restore(const StoredJob& stored) {
+  std::optional<JobSpec> spec = decode_job_spec(stored.spec);
+  if (!spec) {
+    spdlog::error("job {}: stored spec does not parse; skipped", stored.id);
+    return;
+  }
+  std::shared_ptr<JobRecord> job;
+  try {
+    job = build_job(stored.id, stored.seq, *spec);
+  } catch (const CoordinatorError& e) {
+    spdlog::error("job {}: cannot be restored: {}", stored.id, e.what());
+    return;
+  }
+  job->state = JobState(stored.state);
+  job->error = stored.error;
+  job->submitted_unix = stored.submitted_unix;
+  job->core_seconds = stored.core_seconds;
+  scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
+                     spec->priority);
+  if (terminal(job->state)) {
+    scheduler_.cancel_job(job->id);
+  } else {
+    // Failures before the restart still count toward failing a task (and skipping a worker).
+    for (const JobStore::TaskFailure& e : store_.failures(job->id))
+      scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id, e.message);
+    if (scheduler_.job_failed(job->id))
+      set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
+  }
+  for (auto& f : job->frames) resume_frame(*job, *f);
+  jobs_[job->id] = job;
+  spdlog::info("restored job {} ({}), {} tasks done in the database", job->id,
+               job_state_name(job->state), store_.tasks_done(job->id));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Jobs
+
+std::vector<std::string> Coordinator::missing_blobs(const std::vector<std::string>& sha256) const {
+  std::vector<std::string> missing;
+  for (const std::string& d : sha256) {
+    if (!is_sha256_hex(d))
+      refuse(ErrorCode::InvalidArgument, "'" + d + "' is not a SHA-256 (64 lower-case hex)");
+    if (!blobs_.has(d)) missing.push_back(d);
+  }
+  return missing;
+}
+
+std::string Coordinator::put_blob(std::string_view bytes) { return blobs_.put(bytes); }
+
+std::string Coordinator::submit(const JobSpec& spec) {
+  uint64_t seq;
+  {
+    std::lock_guard lock(mu_);
+    seq = next_seq_++;
+  }
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "j%06llu", (unsigned long long)seq);
+  std::string id = buf;
+  std::shared_ptr<JobRecord> job;
+  try {
+    job = build_job(id, seq, spec);
+  } catch (...) {
+    std::error_code ec;  // a refused job leaves nothing behind
+    fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
+    throw;
+  }
+  job->submitted_unix = int64_t(unix_now());
+  std::lock_guard lock(mu_);
+  store_.insert_job(
+      {id, seq, encode_job_spec(spec), int(JobState::Queued), "", job->submitted_unix, 0});
+  scheduler_.add_job(id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
+                     spec.priority);
+  jobs_[id] = job;
+  ++version_;
+  changed_.notify_all();
+  spdlog::info("job {} submitted: {} frames x {} passes x {} tiles ({})", id, job->frames.size(),
+               job->passes, job->tiles.size(), job->frames[0]->base.integrator);
+  return id;
+}
+
+std::shared_ptr<JobRecord> Coordinator::find(const std::string& id) const {
+  auto it = jobs_.find(id);
+  return it == jobs_.end() ? nullptr : it->second;
+}
+
+std::shared_ptr<JobRecord> Coordinator::find_or_throw(const std::string& id) const {
+  std::shared_ptr<JobRecord> job = find(id);
+  if (!job) refuse(ErrorCode::NotFound, "no job '" + id + "'");
+  return job;
+}
+
+// The last merge's figures, with the ETA from this frame's time per pass in this run so far.
+FrameStatus Coordinator::frame_status(const JobRecord& job, const FrameRecord& f) const {
+  FrameStatus s{f.number, f.progress};
+  FrameProgress& p = s.progress;
+  double seconds = f.first_lease_at < 0 ? -1 : now() - f.first_lease_at;
+  p.eta_seconds =
+      p.done ? 0
+             : eta_seconds(p.passes_merged, p.passes_total, p.rel_mse, job.noise_target, seconds);
+  return s;
+}
+
+JobStatus Coordinator::status_of(const JobRecord& job) const {
+  JobStatus s{job.id,           job.spec.name,      job.state, job.error,
+              job.core_seconds, job.submitted_unix, {}};
+  for (const auto& f : job.frames) s.frames.push_back(frame_status(job, *f));
+  return s;
+}
+
+// After a merge or a restore: the frame's figures, the scheduler's stop, the job's completion.
+void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
+  if (f.acc)
+    f.progress = frame_progress(f.acc->frame(), job.passes, f.acc->done(),
+                                f.acc->stopped_on_target(), job.noise_target, -1);
+  if (f.progress.done) scheduler_.stop_frame(job.id, f.number, f.progress.passes_merged);
+  bool all_done = true;
+  for (auto& g : job.frames) all_done &= g->progress.done;
+  if (all_done && !terminal(job.state)) set_state(job, JobState::Completed, "");
+  ++version_;
+  changed_.notify_all();
+}
+
+void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) {
+  job.state = s;
+  job.error = err;
+  store_.set_state(job.id, int(s), err);
+  if (terminal(s))
+    spdlog::info("job {} {}{}", job.id, job_state_name(s), err.empty() ? "" : ": " + err);
+  ++version_;
+  changed_.notify_all();
+}
+
+std::vector<JobStatus> Coordinator::list() const {
+  std::lock_guard lock(mu_);
+  std::vector<const JobRecord*> order;
+  for (auto& [id, j] : jobs_) order.push_back(j.get());
+  std::sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->seq < b->seq; });
+  std::vector<JobStatus> out;
+  for (const JobRecord* j : order) out.push_back(status_of(*j));
+  return out;
+}
+
+JobStatus Coordinator::status(const std::string& id) const {
+  std::lock_guard lock(mu_);
+  return status_of(*find_or_throw(id));
+}
+
+std::optional<JobStatus> Coordinator::next_status(const std::string& id, uint64_t& seen,
+                                                  double timeout) const {
+  std::unique_lock lock(mu_);
+  std::shared_ptr<JobRecord> job = find_or_throw(id);
+  if (seen == version_) {
+    if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
+    changed_.wait_for(lock, std::chrono::duration<double>(timeout));
+    if (seen == version_) return std::nullopt;
+  }
+  seen = version_;
+  return status_of(*job);
+}
+
+void Coordinator::cancel(const std::string& id) {
+  std::lock_guard lock(mu_);
+  std::shared_ptr<JobRecord> job = find_or_throw(id);
+  if (terminal(job->state))
+    refuse(ErrorCode::FailedPrecondition,
+           "job " + id + " has already ended (" + job_state_name(job->state) + ")");
+  scheduler_.cancel_job(id);
+  set_state(*job, JobState::Cancelled, "cancelled by a user");
+}
+
+FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame) const {
+  FrameImage image;
+  std::shared_ptr<JobRecord> job;
+  FrameRecord* f = nullptr;
+  {
+    std::lock_guard lock(mu_);
+    job = find_or_throw(job_id);
+    auto it = job->by_number.find(frame);
+    if (it == job->by_number.end())
+      refuse(ErrorCode::NotFound, "job " + job->id + " has no frame " + std::to_string(frame));
+    f = it->second;
+    image.status = frame_status(*job, *f);
+  }
+  std::lock_guard frame_lock(f->m);
+  if (f->acc && f->acc->passes_merged() > 0) {
+    image.buffer = encode_buffer(f->acc->frame());
+  } else {
+    std::string path = f->checkpoint->dir() + "/prefix.rfb";
+    if (!fs::exists(path))
+      refuse(ErrorCode::FailedPrecondition, "frame " + std::to_string(f->number) + " of job " +
+                                                job->id + " has no complete pass yet");
+    image.buffer = read_file_bytes(path);
+  }
+  return image;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Workers
+
+Registration Coordinator::register_worker(const WorkerInfo& w) {
+  std::lock_guard lock(mu_);
+  std::string host = w.hostname.empty() ? "worker" : w.hostname;
+  Registration r;
+  r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
+  r.lease_seconds = uint32_t(std::max(1.0, options_.lease_seconds));
+  r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
+  spdlog::info("worker {} registered: {} cores, {}, {}", r.worker_id, w.cores, w.build_id, w.isa);
+  return r;
+}
+
+LeaseResult Coordinator::lease(const std::string& worker_id) {
+  if (worker_id.empty()) refuse(ErrorCode::InvalidArgument, "worker_id is empty");
+  std::lock_guard lock(mu_);
+  if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
+  LeaseResult out;
+  std::optional<Lease> l = scheduler_.lease(worker_id, now());
+  if (!l) {
+    out.no_more_work = !scheduler_.work_left_for(worker_id);
+    return out;
+  }
+  std::shared_ptr<JobRecord> job = find(l->task.job_id);
+  FrameRecord* f = job->by_number.at(l->task.frame);
+  if (f->first_lease_at < 0) f->first_lease_at = now();
+  if (job->state == JobState::Queued) set_state(*job, JobState::Running, "");
+  out.task =
+      TaskAssignment{l->task,         l->lease_id,         job->tiles[l->task.tile], f->scene_path,
+                     job->spec.files, job->spec.overrides, f->base.scene_digest};
+  return out;
+}
+
+uint32_t Coordinator::renew(const std::string& lease_id) {
+  std::lock_guard lock(mu_);
+  switch (scheduler_.renew(lease_id, now())) {
+    case LeaseOutcome::Ok:
+      return uint32_t(std::max(1.0, options_.lease_seconds));
+    case LeaseOutcome::NotFound:
+      refuse(ErrorCode::NotFound, "no lease '" + lease_id + "'");
+    case LeaseOutcome::Ended:
+      break;
+  }
+  refuse(ErrorCode::FailedPrecondition,
+         "lease " + lease_id +
+             " has ended (it expired, its task was completed by another lease, or its job "
+             "stopped)");
+}
+
+std::string Coordinator::blob(const std::string& sha256) const {
+  if (!is_sha256_hex(sha256))
+    refuse(ErrorCode::InvalidArgument,
+           "'" + sha256 + "' is not a SHA-256 (64 lower-case hex digits)");
+  std::optional<std::string> bytes = blobs_.get(sha256);
+  if (!bytes) refuse(ErrorCode::NotFound, "no blob " + sha256);
+  return std::move(*bytes);
+}
+
+// Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
+// frame's header (scene digest, seed, frame, integrator, settings, resolution).
+SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord& f,
+                                         const TaskResult& r) const {
+  std::string task_id = task_id_text(r.task);
+  SampleBuffer buffer;
+  try {
+    buffer = decode_buffer(r.buffer, "sample buffer of task " + task_id);
+  } catch (const std::exception& e) {
+    refuse(ErrorCode::InvalidArgument, e.what());
+  }
+  const Rect& rect = job.tiles[r.task.tile];
+  if (!(buffer.rect == rect))
+    refuse(ErrorCode::InvalidArgument,
+           "task " + task_id + ": buffer covers " + std::to_string(buffer.rect.w) + "x" +
+               std::to_string(buffer.rect.h) + " at " + std::to_string(buffer.rect.x0) + "," +
+               std::to_string(buffer.rect.y0) + ", not the task's tile");
+  if (!(buffer.header.passes == PassSet::range(r.task.pass, r.task.pass + 1)))
+    refuse(ErrorCode::InvalidArgument, "task " + task_id + ": buffer holds passes " +
+                                           buffer.header.passes.to_string() + ", not pass " +
+                                           std::to_string(r.task.pass));
+  if (std::string why = merge_incompatibility(f.base, buffer.header); !why.empty())
+    refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
+  return buffer;
+}
+
+// The scheduler's verdict on a durable result and, when it is the first, the database row.
+bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds) {
+  if (scheduler_.complete(r.lease_id, r.task, now()) != CompleteOutcome::Accepted)
+    return false;  // another result came first, or the job was cancelled or failed meanwhile
+  std::string worker = scheduler_.lease_worker(r.lease_id);
+  if (worker.empty()) worker = r.worker_id;  // a lease from before a restart
+  store_.task_done(job.id, r.task.frame, r.task.pass, r.task.tile, worker);
+  job.core_seconds += core_seconds;
+  store_.add_core_seconds(job.id, core_seconds);
+  return true;
+}
+
+bool Coordinator::complete(const TaskResult& r) {
+  std::shared_ptr<JobRecord> job;
+  FrameRecord* f = nullptr;
+  {
+    std::lock_guard lock(mu_);
+    job = find_or_throw(r.task.job_id);
+    auto it = job->by_number.find(r.task.frame);
+    if (it == job->by_number.end() || r.task.tile >= job->tiles.size() ||
+        r.task.pass >= job->passes)
+      refuse(ErrorCode::NotFound, "job " + job->id + " has no task " + task_id_text(r.task));
+    f = it->second;
+  }
+  SampleBuffer buffer = checked_buffer(*job, *f, r);
+  std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
+  if (!f->acc) {
+    if (f->progress.done) return false;  // merged and checkpointed already
+    f->acc =
+        std::make_unique<FrameAccumulator>(f->base, job->tiles, job->splats, job->merge_options());
+  }
+  if (!f->acc->task_needed(buffer.rect, r.task.pass)) {  // merged already, or beyond the stop
+    std::lock_guard lock(mu_);
+    scheduler_.complete(r.lease_id, r.task, now());
+    return false;
+  }
+  // Durable first: the task's result, then the database, then the answer.
+  try {
+    f->checkpoint->save_task(r.task.pass, r.task.tile, buffer);
+  } catch (const std::exception& e) {
+    refuse(ErrorCode::Internal, std::string("cannot store the result: ") + e.what());
+  }
+  {
+    std::lock_guard lock(mu_);
+    if (!record_result(*job, r, buffer.header.core_seconds)) return false;
+  }
+  // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
+  // frames' merges go on meanwhile.
+  bool merged = f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
+  if (merged) f->checkpoint->save_prefix(f->acc->frame());
+  std::lock_guard lock(mu_);
+  publish_frame(*job, *f);
+  if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
+  return true;
+}
+
+void Coordinator::fail(const TaskFailureReport& report) {
+  std::lock_guard lock(mu_);
+  std::optional<TaskRef> task = scheduler_.lease_task(report.lease_id);
+  switch (scheduler_.fail(report.lease_id, report.message, report.handed_back, now())) {
+    case LeaseOutcome::NotFound:
+      refuse(ErrorCode::NotFound, "no lease '" + report.lease_id + "'");
+    case LeaseOutcome::Ended:
+      refuse(ErrorCode::FailedPrecondition, "lease " + report.lease_id + " has ended");
+    case LeaseOutcome::Ok:
+      break;
+  }
+  if (task && !report.handed_back) {
+    // Recorded under the id the scheduler counted it under (the lease's worker).
+    store_.task_failed(task->job_id, task->frame, task->pass, task->tile,
+                       scheduler_.lease_worker(report.lease_id), report.message);
+    spdlog::warn("task {} failed on {}: {}", task_id_text(*task), report.worker_id, report.message);
+  }
+  if (task && scheduler_.job_failed(task->job_id)) {
+    std::shared_ptr<JobRecord> job = find(task->job_id);
+    if (job && !terminal(job->state))
+      set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
+  }
+}
+
+void Coordinator::shut_down() {
+  std::lock_guard lock(mu_);
+  closing_ = true;
+  changed_.notify_all();
+}
+
+}  // namespace rf

@@ -1,0 +1,199 @@
+// The coordinator's job logic (DESIGN.md "Coordinator") in plain C++ types, knowing no gRPC:
+// jobs and their frames, submission checks, leasing, completion, failure counting, restart and
+// recovery, and the progress report. service.cpp puts it behind the gRPC services; the tests
+// drive it directly (tests/coordinator_core_test.cpp).
+//
+// State: jobs and task events in SQLite (job_store.h), per-frame results in atomic checkpoint
+// files (checkpoint.h), scene bundles in a content-addressed blob store (farm/blob_store.h); the
+// task queue and leases in memory (scheduler.h), rebuilt from those on start. The frame merge is
+// the engine's FrameAccumulator: passes merged in order, the stop taken on the completed prefix.
+//
+// Every method may be called from any thread. A refused request throws CoordinatorError with
+// its code; anything else thrown is an internal error.
+#pragma once
+
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "coordinator/job_store.h"
+#include "coordinator/scheduler.h"
+#include "engine/sample_buffer.h"
+#include "engine/progress.h"
+#include "farm/blob_store.h"
+#include "farm/job.h"
+
+namespace rf {
+
+enum class ErrorCode {
+  InvalidArgument,     // malformed request, frame range, bundle, scene or sample buffer
+  NotFound,            // unknown job, frame, task, lease or blob
+  FailedPrecondition,  // a lease that has ended; a frame with no pass yet; a job that has ended
+  ResourceExhausted,   // over a configured limit
+  DataLoss,            // a payload's checksum does not match
+  Unavailable,         // shutting down
+  Internal,            // the coordinator could not do what it should (e.g. a disk write failed)
+};
+
+struct CoordinatorError : std::runtime_error {
+  CoordinatorError(ErrorCode code, const std::string& message)
+      : std::runtime_error(message), code(code) {}
+  ErrorCode code;
+};
+
+// The numbers are rayfarm.v1.JobState's and are stored in jobs.sqlite: state directories
+// written by earlier versions read the same.
+enum class JobState : int { Queued = 1, Running = 2, Completed = 3, Failed = 4, Cancelled = 5 };
+bool terminal(JobState state);
+const char* job_state_name(JobState state);  // "JOB_QUEUED", ..., as logs and errors spell it
+
+struct FrameStatus {
+  uint32_t frame = 0;
+  FrameProgress progress;  // engine/progress.h: passes, spp, relMSE, ETA
+};
+
+struct JobStatus {
+  std::string job_id, name;
+  JobState state = JobState::Queued;
+  std::string error;  // why it failed (the workers' messages) or was cancelled
+  double core_seconds = 0;
+  int64_t submitted_unix = 0;
+  std::vector<FrameStatus> frames;
+};
+
+// The current image of a frame: its merged prefix as an encoded sample buffer (engine/buffer_file.h).
+struct FrameImage {
+  FrameStatus status;
+  std::string buffer;
+};
+
+struct WorkerInfo {
+  std::string hostname;
+  uint32_t cores = 0;
+  std::string build_id, isa;
+};
+
+struct Registration {
+  std::string worker_id;
+  uint32_t lease_seconds = 0;      // renew well within this
+  uint32_t keepalive_seconds = 0;  // a third of the lease
+};
+
+// What a worker needs to render a task, with the lease it holds it under.
+struct TaskAssignment {
+  TaskRef task;
+  std::string lease_id;
+  Rect rect;
+  std::string scene_path;          // in the bundle
+  std::vector<BundleEntry> files;  // the bundle
+  SceneOverrides overrides;        // the job's settings
+  std::string scene_digest;        // what the worker's parse must reproduce
+};
+
+struct LeaseResult {
+  std::optional<TaskAssignment> task;  // nothing to do now when absent
+  bool no_more_work = false;           // nothing queued or leased that this worker could get
+};
+
+// A task's result as uploaded: the encoded sample buffer, its transfer checksum already checked.
+struct TaskResult {
+  std::string worker_id;  // counted for a lease from before a restart
+  std::string lease_id;
+  TaskRef task;
+  std::string buffer;
+};
+
+struct TaskFailureReport {
+  std::string worker_id, lease_id, message;
+  bool handed_back = false;  // the worker is shutting down: not a failure
+};
+
+struct CoreOptions {
+  std::string state_dir;
+  double lease_seconds = 30;
+  uint32_t window_frames = 4;
+  int max_failures = 3;  // workers a task may fail on, and tasks a worker may fail, per job
+  // Distinguishes this run's lease and worker ids from an earlier run's; empty: made up from
+  // the time and process id.
+  std::string instance;
+  // Seconds on a monotonic clock (leases and ETAs use differences only); empty: steady_clock.
+  std::function<double()> clock;
+};
+
+struct JobRecord;
+struct FrameRecord;
+
+class Coordinator {
+ public:
+  // Opens (or creates) the state directory and restores every job in it.
+  explicit Coordinator(CoreOptions options);
+  ~Coordinator();
+  Coordinator(const Coordinator&) = delete;
+  Coordinator& operator=(const Coordinator&) = delete;
+
+  // ---- Jobs
+  std::vector<std::string> missing_blobs(const std::vector<std::string>& sha256) const;
+  std::string put_blob(std::string_view bytes);  // one uploaded bundle file; returns its digest
+  // Checks the spec against the stored blobs (every frame's scene parsed with the job's
+  // overrides, so a bad scene is refused now, not by a worker later) and queues the job.
+  std::string submit(const JobSpec& spec);  // the new job's id
+  std::vector<JobStatus> list() const;      // in submission order
+  JobStatus status(const std::string& job_id) const;
+  // For watching a job: its status if it changed since version `seen` (0: never seen), waiting
+  // up to timeout_seconds for a change; `seen` becomes the version returned.
+  std::optional<JobStatus> next_status(const std::string& job_id, uint64_t& seen,
+                                       double timeout_seconds) const;
+  void cancel(const std::string& job_id);
+  FrameImage fetch(const std::string& job_id, uint32_t frame) const;
+
+  // ---- Workers
+  Registration register_worker(const WorkerInfo& worker);
+  LeaseResult lease(const std::string& worker_id);
+  uint32_t renew(const std::string& lease_id);  // the lease's length from now, in seconds
+  std::string blob(const std::string& sha256) const;
+  // True when the result was merged; false when another result for the task came first, or the
+  // task is no longer needed (stopped frame, ended job). The result is durable before this
+  // returns true.
+  bool complete(const TaskResult& result);
+  void fail(const TaskFailureReport& report);
+
+  // Refuses leases and ends watches from now on.
+  void shut_down();
+
+ private:
+  double now() const { return options_.clock(); }
+  std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec);
+  void add_frames(JobRecord& job, const std::string& bundle_dir);
+  void restore(const StoredJob& stored);
+  void resume_frame(JobRecord& job, FrameRecord& f);
+  SampleBuffer checked_buffer(const JobRecord& job, const FrameRecord& f,
+                              const TaskResult& r) const;
+  bool record_result(JobRecord& job, const TaskResult& r, double core_seconds);  // under mu_
+  void publish_frame(JobRecord& job, FrameRecord& f);                            // under mu_
+  void set_state(JobRecord& job, JobState s, const std::string& error);          // under mu_
+  JobStatus status_of(const JobRecord& job) const;                               // under mu_
+  FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;    // under mu_
+  std::shared_ptr<JobRecord> find(const std::string& id) const;                  // under mu_
+  std::shared_ptr<JobRecord> find_or_throw(const std::string& id) const;         // under mu_
+
+  CoreOptions options_;
+  BlobStore blobs_;
+  JobStore store_;
+  mutable std::mutex mu_;
+  mutable std::condition_variable changed_;
+  uint64_t version_ = 1;  // bumped at every change a watcher may want to see
+  bool closing_ = false;
+  Scheduler scheduler_;
+  std::map<std::string, std::shared_ptr<JobRecord>> jobs_;
+  uint64_t next_seq_ = 1, next_worker_ = 1;
+};
+
+}  // namespace rf

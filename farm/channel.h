@@ -1,0 +1,31 @@
+// Client-side gRPC plumbing shared by the worker and the client commands (DESIGN.md
+// "Coordinator": every RPC has a deadline; workers keep alive at most a third of the lease time
+// and reconnect with capped, jittered backoff).
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <memory>
+#include <random>
+#include <string>
+
+namespace rf {
+
+// A channel to a coordinator. Reconnect attempts back off (jittered by gRPC) from 100 ms up to
+// 2 s, so a restarted coordinator is found again within about 2 s. With keepalive_seconds > 0
+// it also pings that often (the coordinator permits it), so a partition is noticed in time.
+std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
+                                                   int keepalive_seconds = 0);
+
+// Every RPC has a deadline. With wait_for_ready the call waits for the channel to (re)connect
+// within it, instead of failing at once while the coordinator restarts.
+void set_deadline(grpc::ClientContext& ctx, double seconds, bool wait_for_ready = false);
+
+// A failure worth retrying: the coordinator is unreachable or slow, not refusing the request.
+bool transient(const grpc::Status& status);
+
+// Capped exponential backoff: first * 2^attempt seconds, at most cap, times a factor drawn from
+// [0.5, 1] so that clients who lost the same coordinator do not come back in lockstep.
+double backoff_seconds(int attempt, double first, double cap, std::mt19937& rng);
+
+}  // namespace rf

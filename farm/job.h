@@ -1,0 +1,44 @@
+// A job and its tasks in plain types (DESIGN.md "Work units"), shared by the client that submits
+// a job, the coordinator that splits and leases it and the worker that renders it. No protobuf
+// here: farm/convert.h maps these to the wire.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <tuple>
+#include <vector>
+
+#include "engine/scene.h"
+#include "farm/blob_store.h"
+
+namespace rf {
+
+struct JobSpec {
+  std::string name;
+  std::string scene_path;          // the scene file's path in the bundle; may hold '#' digits
+  std::vector<BundleEntry> files;  // the bundle: every scene file of the job and its assets
+  std::string frames;              // Open Job Description range (frame_range.h); empty: the
+                                   // scene's own frame
+  SceneOverrides overrides;        // the job's settings over the scene file's
+  int priority = 0;                // higher first
+  uint32_t tile_size = 0;          // pixels; 0: the coordinator's default
+};
+
+// One task of a job: a pass of one tile (by its index in the frame's split) of one frame.
+struct TaskRef {
+  std::string job_id;
+  uint32_t frame = 0, pass = 0, tile = 0;
+  bool operator<(const TaskRef& o) const {
+    return std::tie(job_id, frame, pass, tile) < std::tie(o.job_id, o.frame, o.pass, o.tile);
+  }
+  bool operator==(const TaskRef&) const = default;
+};
+
+// "job/frame/pass/tile": a task's id on the wire and in logs.
+std::string task_id_text(const TaskRef& task);
+// The task an id names; nothing for text that is not such an id.
+std::optional<TaskRef> parse_task_id(std::string_view text);
+
+}  // namespace rf

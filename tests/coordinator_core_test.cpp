@@ -1,0 +1,315 @@
+// The coordinator's core (coordinator/core.h) driven directly, without processes or sockets: a
+// temporary state directory, an explicit clock, and task results made up as a worker would send
+// them. Completion after a restart, late and duplicate results, failure counting, the progress
+// report, and the codes of refused requests.
+#include "coordinator/core.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <map>
+#include <set>
+
+#include "engine/buffer_file.h"
+#include "engine/digest.h"
+#include "engine/render.h"
+#include "engine/scene.h"
+#include "tests/support/test_support.h"
+
+namespace rf {
+
+// Readable failure messages.
+void PrintTo(const TaskRef& t, std::ostream* os) { *os << task_id_text(t); }
+void PrintTo(JobState s, std::ostream* os) { *os << job_state_name(s); }
+void PrintTo(ErrorCode c, std::ostream* os) { *os << "ErrorCode " << int(c); }
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kScene = "scenes/cornell-box/scene.json";
+constexpr int kSamplesPerPass = 4;
+
+// A coordinator on a temporary state directory with a clock the test sets. Jobs render the
+// Cornell box at 16x16 in 8x8 tiles: 4 tiles per pass.
+class CoreBench {
+ public:
+  explicit CoreBench(const std::string& tag) : state_(test::make_temp_dir(tag) + "/state") {
+    start("A");
+  }
+
+  // Starts the coordinator (again) on the same state directory, as a restarted process would.
+  void start(const std::string& instance) {
+    core_.reset();
+    CoreOptions o;
+    o.state_dir = state_;
+    o.lease_seconds = 10;
+    o.instance = instance;
+    o.clock = [this] { return now; };
+    core_ = std::make_unique<Coordinator>(o);
+  }
+
+  Coordinator& core() { return *core_; }
+
+  // Uploads the scene's bundle and submits a job of `passes` passes of frame 1.
+  std::string submit(uint32_t passes) {
+    std::string scene = test::source_dir() + "/" + kScene;
+    JobSpec spec;
+    spec.name = "cornell";
+    spec.scene_path = "scene.json";
+    spec.files = bundle_of_scene(scene);
+    for (const BundleEntry& f : spec.files)
+      core_->put_blob(read_file_bytes((fs::path(scene).parent_path() / f.path).string()));
+    spec.frames = "1";
+    spec.overrides.width = 16;
+    spec.overrides.height = 16;
+    spec.overrides.passes = passes;
+    spec.overrides.spp = kSamplesPerPass * passes;
+    spec.tile_size = 8;
+    return core_->submit(spec);
+  }
+
+  TaskAssignment lease(const std::string& worker = "w") {
+    LeaseResult l = core_->lease(worker);
+    EXPECT_TRUE(l.task) << worker << " got no task";
+    return l.task.value_or(TaskAssignment{});
+  }
+
+  // The task's result as a worker would send it: one pass of its tile, every sample `value`.
+  std::string result(const TaskAssignment& a, float value) {
+    SampleBuffer b(header(a), a.rect, false);
+    for (int y = a.rect.y0; y < a.rect.y1(); ++y)
+      for (int x = a.rect.x0; x < a.rect.x1(); ++x)
+        for (int s = 0; s < kSamplesPerPass; ++s) b.add_sample(x, y, RGB(value));
+    b.finish_pass();
+    return encode_buffer(b);
+  }
+
+  bool complete(const TaskAssignment& a, float value, const std::string& worker = "w") {
+    return core_->complete({worker, a.lease_id, a.task, result(a, value)});
+  }
+
+  SampleBuffer image(const std::string& job) {
+    return decode_buffer(core_->fetch(job, 1).buffer, "fetched frame");
+  }
+
+  double now = 0;
+
+ private:
+  // The header a worker's renderer puts on the task's buffer (the engine's calls in one place).
+  BufferHeader header(const TaskAssignment& a) {
+    Scene scene = load_scene(test::source_dir() + "/" + kScene, a.overrides);
+    return frame_header(scene, a.task.frame, PassSet::range(a.task.pass, a.task.pass + 1));
+  }
+
+  std::string state_;
+  std::unique_ptr<Coordinator> core_;
+};
+
+// The code a call is refused with; nothing when it is not refused.
+template <class F>
+std::optional<ErrorCode> refusal(F&& f) {
+  try {
+    f();
+  } catch (const CoordinatorError& e) {
+    return e.code;
+  }
+  return std::nullopt;
+}
+
+// The result of a lease issued before a restart arrives after it: accepted by its task, once.
+// A task completed before the restart is not leased again; nothing is lost or counted twice.
+TEST(CoordinatorCore, ResultOfALeaseFromBeforeARestartIsAcceptedOnce) {
+  CoreBench bench("core-restart");
+  std::string job = bench.submit(2);
+  TaskAssignment done = bench.lease(), late = bench.lease();
+  EXPECT_TRUE(bench.complete(done, 1.0f));
+  bench.start("B");  // the coordinator restarts; `late` was leased by the old one
+  EXPECT_EQ(bench.core().status(job).frames[0].progress.passes_merged, 0u);
+  EXPECT_TRUE(bench.complete(late, 1.0f));
+  EXPECT_FALSE(bench.complete(late, 1.0f)) << "the same result again";
+  std::set<TaskRef> rest;
+  while (std::optional<TaskAssignment> a = bench.core().lease("w").task) {
+    EXPECT_EQ(a->lease_id.rfind("B-L", 0), 0u) << a->lease_id;
+    EXPECT_NE(a->task, done.task);
+    EXPECT_NE(a->task, late.task);
+    rest.insert(a->task);
+    EXPECT_TRUE(bench.complete(*a, 1.0f));
+  }
+  EXPECT_EQ(rest.size(), 6u) << "8 tasks, 2 of them completed";
+  JobStatus s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Completed);
+  EXPECT_EQ(s.frames[0].progress.passes_merged, 2u);
+  EXPECT_DOUBLE_EQ(s.frames[0].progress.spp, 2.0 * kSamplesPerPass);
+}
+
+// A lease expires, its task goes to another worker, and the first worker's result arrives late:
+// it is merged (results are deterministic), and the second lease ends.
+TEST(CoordinatorCore, LateResultOfAnExpiredLeaseIsMergedAndEndsTheNewerLease) {
+  CoreBench bench("core-late");
+  std::string job = bench.submit(1);
+  TaskAssignment slow = bench.lease("slow");
+  bench.now = 5;
+  EXPECT_EQ(bench.core().renew(slow.lease_id), 10u);  // renewed until 15
+  bench.now = 16;
+  TaskAssignment fast = bench.lease("fast");
+  ASSERT_EQ(fast.task, slow.task) << "the expired task is handed out again first";
+  EXPECT_EQ(refusal([&] { bench.core().renew(slow.lease_id); }), ErrorCode::FailedPrecondition);
+  bench.now = 17;
+  EXPECT_TRUE(bench.complete(slow, 2.0f, "slow"));
+  EXPECT_EQ(refusal([&] { bench.core().renew(fast.lease_id); }), ErrorCode::FailedPrecondition);
+  EXPECT_FALSE(bench.complete(fast, 5.0f, "fast"));
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 2.0f));
+  SampleBuffer frame = bench.image(job);
+  EXPECT_EQ(frame.estimate(slow.rect.x0, slow.rect.y0)[0], 2.0f) << "the late result is merged";
+}
+
+// A second result for a task is answered not-accepted and changes nothing: neither while its
+// pass is still being assembled, nor after the pass was merged.
+TEST(CoordinatorCore, DuplicateCompletionIsNotAcceptedAndLeavesTheImageUnchanged) {
+  CoreBench bench("core-duplicate");
+  std::string job = bench.submit(2);
+  std::vector<TaskAssignment> pass0, pass1;
+  for (int i = 0; i < 4; ++i) pass0.push_back(bench.lease());
+  for (int i = 0; i < 4; ++i) pass1.push_back(bench.lease());
+  for (const TaskAssignment& a : pass0) EXPECT_TRUE(bench.complete(a, 1.0f));
+  std::string merged = bench.core().fetch(job, 1).buffer;
+  EXPECT_FALSE(bench.complete(pass0[0], 9.0f)) << "pass 0 is merged already";
+  EXPECT_EQ(bench.core().fetch(job, 1).buffer, merged);
+
+  EXPECT_TRUE(bench.complete(pass1[0], 3.0f));
+  EXPECT_FALSE(bench.complete(pass1[0], 9.0f)) << "its pass is still being assembled";
+  for (size_t i = 1; i < 4; ++i) EXPECT_TRUE(bench.complete(pass1[i], 3.0f));
+  SampleBuffer frame = bench.image(job);
+  EXPECT_EQ(frame.header.passes, PassSet::range(0, 2));
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) ASSERT_EQ(frame.estimate(x, y)[0], 2.0f) << x << "," << y;
+  EXPECT_DOUBLE_EQ(bench.core().status(job).frames[0].progress.spp, 2.0 * kSamplesPerPass);
+}
+
+// A worker that failed max_failures (3) tasks of a job gets no more of them; the others still do.
+TEST(CoordinatorCore, AWorkerThatFailsRepeatedlyGetsNoMoreTasksOfTheJob) {
+  CoreBench bench("core-bad-worker");
+  std::string job = bench.submit(2);
+  std::set<TaskRef> failed;
+  for (int i = 0; i < 3; ++i) {
+    TaskAssignment a = bench.lease("bad");
+    EXPECT_TRUE(failed.insert(a.task).second) << "a worker does not get back a task it failed";
+    bench.core().fail({"bad", a.lease_id, "driver crash", false});
+  }
+  EXPECT_FALSE(bench.core().lease("bad").task);
+  EXPECT_EQ(bench.core().status(job).state, JobState::Running) << "each task failed once";
+  TaskAssignment good = bench.lease("good");
+  EXPECT_TRUE(failed.count(good.task)) << "a failed task is queued again";
+}
+
+// A task failing on max_failures (3) different workers fails its job with their messages, also
+// when the failures straddle a restart.
+TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
+  CoreBench bench("core-failing-task");
+  std::string job = bench.submit(1);
+  auto fail_on = [&](const std::string& worker) {
+    TaskAssignment a = bench.lease(worker);
+    EXPECT_EQ(a.task.tile, 0u) << "the failed task comes first again";
+    bench.core().fail({worker, a.lease_id, "out of memory on " + worker, false});
+  };
+  fail_on("w1");
+  fail_on("w2");
+  bench.start("B");
+  EXPECT_EQ(bench.core().status(job).state, JobState::Running);
+  fail_on("w3");
+  JobStatus s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Failed);
+  for (const char* w : {"w1", "w2", "w3"})
+    EXPECT_NE(s.error.find(std::string("out of memory on ") + w), std::string::npos) << s.error;
+  EXPECT_FALSE(bench.core().lease("w4").task) << "a failed job hands out nothing";
+}
+
+// Tasks handed back by workers shutting down are queued again without counting as failures.
+TEST(CoordinatorCore, HandedBackTasksAreNotFailures) {
+  CoreBench bench("core-hand-back");
+  std::string job = bench.submit(1);
+  for (const char* w : {"w1", "w2", "w3", "w4", "w1", "w1", "w1"}) {
+    TaskAssignment a = bench.lease(w);
+    EXPECT_EQ(a.task.tile, 0u) << "the handed-back task is next, for any worker";
+    bench.core().fail({w, a.lease_id, "worker shutting down", true});
+  }
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease("w1"), 1.0f));
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
+}
+
+// spp, relMSE and ETA per frame, from engine/progress.h's model. Every sample of pass p has
+// radiance v_p = 1, 3, 2, ...: after 3 passes each pixel's mean is 2 and its batch-means
+// variance of the mean s^2/n = 1/3, so relMSE = (1/3) / (2^2 + 0.01).
+TEST(CoordinatorCore, ProgressReportsSppRelMseAndEta) {
+  CoreBench bench("core-progress");
+  std::string job = bench.submit(4);
+  FrameProgress p = bench.core().status(job).frames[0].progress;
+  EXPECT_EQ(p.passes_total, 4u);
+  EXPECT_EQ(p.eta_seconds, -1.0) << "unknown before the first pass";
+  bench.now = 100;  // the frame's first lease
+  std::vector<TaskAssignment> tasks;
+  for (int i = 0; i < 16; ++i) tasks.push_back(bench.lease());
+  const float values[4] = {1.0f, 3.0f, 2.0f, 2.0f};
+  for (int i = 0; i < 12; ++i) EXPECT_TRUE(bench.complete(tasks[i], values[tasks[i].task.pass]));
+  bench.now = 130;  // 3 passes in 30 s: 10 s per pass, 1 pass to go
+  p = bench.core().status(job).frames[0].progress;
+  EXPECT_EQ(p.passes_merged, 3u);
+  EXPECT_DOUBLE_EQ(p.spp, 3.0 * kSamplesPerPass);
+  EXPECT_NEAR(p.rel_mse, (1.0 / 3.0) / 4.01, 1e-12);
+  EXPECT_DOUBLE_EQ(p.eta_seconds, 10.0);
+  EXPECT_FALSE(p.done);
+  EXPECT_DOUBLE_EQ(bench.core().list()[0].frames[0].progress.eta_seconds, 10.0);
+  FrameImage image = bench.core().fetch(job, 1);
+  EXPECT_DOUBLE_EQ(image.status.progress.spp, 3.0 * kSamplesPerPass);
+  for (int i = 12; i < 16; ++i) EXPECT_TRUE(bench.complete(tasks[i], values[tasks[i].task.pass]));
+  p = bench.core().status(job).frames[0].progress;
+  EXPECT_TRUE(p.done);
+  EXPECT_EQ(p.eta_seconds, 0.0);
+  EXPECT_DOUBLE_EQ(p.spp, 4.0 * kSamplesPerPass);
+}
+
+// Each refusal carries the code the gRPC service answers with (DESIGN.md "Status codes"), and
+// a refused submit leaves no job behind.
+TEST(CoordinatorCore, RefusalsCarryTheirCodes) {
+  CoreBench bench("core-refusals");
+  Coordinator& core = bench.core();
+  EXPECT_EQ(refusal([&] { core.status("j999999"); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.missing_blobs({"not-hex"}); }), ErrorCode::InvalidArgument);
+  EXPECT_EQ(refusal([&] { core.blob(std::string(64, 'a')); }), ErrorCode::NotFound);
+  JobSpec missing;
+  missing.scene_path = "scene.json";
+  missing.files = {{"scene.json", std::string(64, 'a')}};
+  EXPECT_EQ(refusal([&] { core.submit(missing); }), ErrorCode::InvalidArgument);
+  EXPECT_TRUE(core.list().empty());
+  std::string job = bench.submit(1);
+  EXPECT_EQ(refusal([&] { core.fetch(job, 1); }), ErrorCode::FailedPrecondition) << "no pass yet";
+  EXPECT_EQ(refusal([&] { core.fetch(job, 7); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.renew("no-such-lease"); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.lease(""); }), ErrorCode::InvalidArgument);
+  TaskAssignment a = bench.lease();
+  TaskAssignment wrong = a;
+  wrong.rect.w = 4;  // a buffer that does not cover the task's tile
+  EXPECT_EQ(refusal([&] {
+              core.complete({"w", a.lease_id, a.task, bench.result(wrong, 1)});
+            }),
+            ErrorCode::InvalidArgument);
+  EXPECT_EQ(refusal([&] {
+              core.complete({"w", a.lease_id, a.task, "not a buffer"});
+            }),
+            ErrorCode::InvalidArgument);
+  TaskRef unknown = a.task;
+  unknown.tile = 99;
+  EXPECT_EQ(refusal([&] {
+              core.complete({"w", a.lease_id, unknown, bench.result(a, 1)});
+            }),
+            ErrorCode::NotFound);
+  core.cancel(job);
+  EXPECT_EQ(refusal([&] { core.cancel(job); }), ErrorCode::FailedPrecondition);
+  core.shut_down();
+  EXPECT_EQ(refusal([&] { core.lease("w"); }), ErrorCode::Unavailable);
+}
+
+}  // namespace
+}  // namespace rf
