@@ -1,7 +1,9 @@
 # The library graph's rules, checked on CMake's own view of it (a ctest, label unit):
+#   - docs/design.md's table of the project's targets and their direct project links is the
+#     graph CMake has, edge for edge;
 #   - the worker, client and farm libraries link no SQLite, however indirectly: only the
 #     coordinator keeps a job store;
-#   - the engine links neither gRPC nor protobuf (DESIGN.md: the engine never includes gRPC).
+#   - the engine links neither gRPC nor protobuf (docs/design.md: the engine knows no RPC).
 # Configures the source tree into WORK_DIR with `cmake --graphviz`, then walks each library's
 # link closure in the graph CMake writes (every edge counts: a static library's private links
 # reach whatever links it).
@@ -66,6 +68,52 @@ function(forbid target pattern why)
   list(LENGTH seen count)
   message(STATUS "${target}: ${count} libraries in its link closure, none matching '${pattern}'")
 endfunction()
+
+# docs/design.md's table of the project's targets and the project libraries each links directly
+# must be CMake's graph, edge for edge (test and tool targets aside).
+file(READ ${SOURCE_DIR}/docs/design.md design)
+string(REGEX MATCH "<!-- library-graph:begin -->(.*)<!-- library-graph:end -->" _ "${design}")
+if(NOT CMAKE_MATCH_1)
+  message(FATAL_ERROR "docs/design.md has no library-graph table")
+endif()
+string(REPLACE "\n" ";" rows "${CMAKE_MATCH_1}")
+set(documented "")
+foreach(row IN LISTS rows)
+  if(row MATCHES "^\\| (rayfarm[a-z_]*) \\|([^|]*)\\|")
+    set(target ${CMAKE_MATCH_1})
+    string(REGEX MATCHALL "rayfarm[a-z_]*" links "${CMAKE_MATCH_2}")
+    list(SORT links)
+    list(APPEND documented ${target})
+    set(doc_links_${target} "${links}")
+  endif()
+endforeach()
+set(actual "")
+foreach(node IN LISTS nodes)
+  set(name ${label_${node}})
+  if(name MATCHES "^rayfarm(_[a-z_]+)?$" AND NOT name STREQUAL "rayfarm_testlib")
+    list(APPEND actual ${name})
+    set(links "")
+    foreach(next IN LISTS edges_${node})
+      if(label_${next} MATCHES "^rayfarm_[a-z_]+$")
+        list(APPEND links ${label_${next}})
+      endif()
+    endforeach()
+    list(REMOVE_DUPLICATES links)
+    list(SORT links)
+    if(NOT DEFINED doc_links_${name})
+      message(SEND_ERROR "${name} is in the build but not in docs/design.md's library table")
+    elseif(NOT "${links}" STREQUAL "${doc_links_${name}}")
+      message(SEND_ERROR "${name} links [${links}] but docs/design.md says [${doc_links_${name}}]")
+    endif()
+  endif()
+endforeach()
+foreach(target IN LISTS documented)
+  if(NOT target IN_LIST actual)
+    message(SEND_ERROR "docs/design.md lists ${target}, which the build does not have")
+  endif()
+endforeach()
+list(LENGTH actual n)
+message(STATUS "docs/design.md's library table matches CMake's graph (${n} targets)")
 
 set(no_store "only the coordinator library keeps the SQLite job store")
 forbid(rayfarm_worker "sqlite" "${no_store}")
