@@ -43,10 +43,14 @@ inline Ray start_camera_sample(const RenderContext& ctx, Sampler& sampler, const
 
 // Runs produce(chunk, out) for every chunk in [0, chunks), in parallel waves when `parallel`,
 // and consume(out) on each chunk's output in chunk order: whatever the thread count, consume sees
-// the same sequence. A wave holds a few chunks per thread, so memory stays bounded.
+// the same sequence. A wave holds a few chunks per thread, so memory stays bounded (splat lists);
+// a caller that keeps every output anyway asks for one wave of all chunks (no barriers).
 template <class T, class Produce, class Consume>
-void for_chunks_in_order(uint64_t chunks, bool parallel, Produce&& produce, Consume&& consume) {
-  const uint64_t wave = parallel ? uint64_t(8 * tbb::this_task_arena::max_concurrency()) : 1;
+void for_chunks_in_order(uint64_t chunks, bool parallel, Produce&& produce, Consume&& consume,
+                         bool one_wave = false) {
+  const uint64_t wave = !parallel  ? 1
+                        : one_wave ? std::max<uint64_t>(chunks, 1)
+                                   : uint64_t(8 * tbb::this_task_arena::max_concurrency());
   std::vector<T> outs(size_t(std::min(wave, chunks)));
   for (uint64_t first = 0; first < chunks; first += outs.size()) {
     const size_t n = size_t(std::min<uint64_t>(outs.size(), chunks - first));

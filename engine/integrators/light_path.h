@@ -124,7 +124,8 @@ std::vector<T> trace_light_paths(const RenderContext& ctx, uint32_t frame, uint3
         }
         rays += local.rays;
       },
-      [&](const std::vector<T>& out) { all.insert(all.end(), out.begin(), out.end()); });
+      [&](const std::vector<T>& out) { all.insert(all.end(), out.begin(), out.end()); },
+      /*one_wave=*/true);
   counters.rays += rays;
   return all;
 }
