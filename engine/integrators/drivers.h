@@ -150,6 +150,25 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
   return buf;
 }
 
+// render_camera_paths<false> for an estimator that reads per-pass state (instant radiosity's VPLs,
+// photon mapping's photons): build(counters) -> shared_ptr<const State> runs once per (frame,
+// pass) through the pass cache (the task that runs it counts its rays), then every camera ray is
+// estimate(state, ray, sampler, counters).
+template <class State, class Build, class Estimate>
+SampleBuffer render_camera_paths_with_pass_state(const RenderContext& ctx, const TaskKey& task,
+                                                 bool parallel, Build&& build,
+                                                 Estimate&& estimate) {
+  TraceCounters built;
+  std::shared_ptr<const State> state =
+      ctx.pass_cache.get<State>(task.frame, task.pass, [&] { return build(built); });
+  SampleBuffer buf = render_camera_paths<false>(
+      ctx, task, parallel, [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
+        return estimate(*state, ray, sampler, counters);
+      });
+  buf.rays += built.rays;
+  return buf;
+}
+
 // One pass of light paths over the whole frame: `paths` paths, path i traced by
 // trace(sampler, splats, counters) with the sampler started for (seed, frame, pass, i) (light
 // paths always use the independent sampler, sampler.h), in fixed chunks of paths whose splats are

@@ -184,15 +184,12 @@ void IrIntegrator::check(const Scene& scene) const { require_finite_emitters(sce
 
 SampleBuffer IrIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                   bool parallel) const {
-  TraceCounters built;
-  std::shared_ptr<const VplSet> vpls = ctx.pass_cache.get<VplSet>(
-      task.frame, task.pass, [&] { return build_vpls(*this, ctx, task.frame, task.pass, built); });
-  SampleBuffer buf = render_camera_paths<false>(
-      ctx, task, parallel, [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
-        return ir_radiance(*this, ctx, *vpls, ray, sampler, counters);
+  return render_camera_paths_with_pass_state<VplSet>(
+      ctx, task, parallel,
+      [&](TraceCounters& c) { return build_vpls(*this, ctx, task.frame, task.pass, c); },
+      [&](const VplSet& vpls, Ray ray, Sampler& sampler, TraceCounters& c) {
+        return ir_radiance(*this, ctx, vpls, ray, sampler, c);
       });
-  buf.rays += built.rays;  // the task that built the pass's VPLs counts their rays
-  return buf;
 }
 
 }  // namespace rf

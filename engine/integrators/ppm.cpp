@@ -167,16 +167,12 @@ void PpmIntegrator::check(const Scene& scene) const { require_finite_emitters(sc
 
 SampleBuffer PpmIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                    bool parallel) const {
-  TraceCounters built;
-  std::shared_ptr<const PhotonMap> photons = ctx.pass_cache.get<PhotonMap>(
-      task.frame, task.pass,
-      [&] { return build_photon_map(*this, ctx, task.frame, task.pass, built); });
-  SampleBuffer buf = render_camera_paths<false>(
-      ctx, task, parallel, [&](Ray ray, Sampler& sampler, TraceCounters& counters) {
-        return ppm_radiance(ctx, *photons, ray, sampler, counters);
+  return render_camera_paths_with_pass_state<PhotonMap>(
+      ctx, task, parallel,
+      [&](TraceCounters& c) { return build_photon_map(*this, ctx, task.frame, task.pass, c); },
+      [&](const PhotonMap& photons, Ray ray, Sampler& sampler, TraceCounters& c) {
+        return ppm_radiance(ctx, photons, ray, sampler, c);
       });
-  buf.rays += built.rays;  // the task that built the pass's photon map counts its rays
-  return buf;
 }
 
 }  // namespace rf
