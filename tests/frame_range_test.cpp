@@ -41,5 +41,13 @@ TEST(FrameRange, ErrorsSayWhichItemAndWhy) {
   expect_error("1-99999999999", "too large");
 }
 
+TEST(ExpandFramePattern, PadsEachRunOfHashes) {
+  EXPECT_EQ(expand_frame_pattern("shot.####.json", 7), "shot.0007.json");
+  EXPECT_EQ(expand_frame_pattern("shot.####.json", 12345), "shot.12345.json");
+  EXPECT_EQ(expand_frame_pattern("a#b##", 3), "a3b03");
+  EXPECT_EQ(expand_frame_pattern("scene.json", 42), "scene.json");
+  EXPECT_EQ(expand_frame_pattern("#", 0), "0");
+}
+
 }  // namespace
 }  // namespace rf

@@ -600,5 +600,48 @@ TEST(Lights, LightsWithoutPowerAreNeverReturned) {
   EXPECT_TRUE(LightSet(scene_of({}, "empty")).empty());
 }
 
+Scene two_light_scene() {
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
+  Mesh a = test::make_uv_sphere({-2, 0, 0}, 0.5f, 6, 12, 0);
+  a.emission = Emission{RGB(4, 1, 1), false};
+  Mesh b = test::make_uv_sphere({2, 0, 0}, 1.0f, 6, 12, 0);
+  b.emission = Emission{RGB(1, 1, 1), true};
+  Mesh c = test::make_uv_sphere({0, 3, 0}, 1.0f, 4, 8, 0);  // not a light
+  return test::make_scene({m}, {a, b, c}, {0, 0, 8}, {0, 0, 0}, 8, 8, "lights");
+}
+
+TEST(Lights, SelectionProbabilitiesSumToOneAndFollowPower) {
+  Scene s = two_light_scene();
+  LightSet lights(s);
+  ASSERT_EQ(lights.size(), s.meshes[0].triangle_count() + s.meshes[1].triangle_count());
+  double total = 0;
+  for (size_t i = 0; i < lights.size(); ++i) total += lights.selection_pmf(i);
+  EXPECT_NEAR(total, 1.0, 1e-5);  // float pmfs of ~130 lights: rounding only
+}
+
+TEST(Lights, SampledPdfEqualsPdfQuery) {
+  Scene s = two_light_scene();
+  Accel accel(s);
+  LightSet lights(s);
+  IndependentSampler smp;
+  Vec3 p{0, 0, 0};
+  int checked = 0;
+  for (int i = 0; i < 2000; ++i) {
+    smp.start_light_path(1, 0, 0, uint64_t(i));
+    LightSample ls;
+    if (!lights.sample(p, smp.get_1d(), smp.get_2d(), ls)) continue;
+    // Find which triangle the sample lies on by tracing towards it.
+    SurfaceHit hit;
+    ASSERT_TRUE(accel.intersect(Ray{p, ls.wi, kInf}, hit));
+    if (std::fabs(hit.t - ls.distance) > 1e-3f * ls.distance) continue;  // occluded by the sphere itself
+    // A sample on a triangle's edge may be hit on its neighbour, whose normal (so pdf) differs.
+    if (std::fabs(dot(hit.ng, ls.n)) < 1 - 1e-5f) continue;
+    float q = lights.pdf_solid_angle(p, hit.mesh, hit.prim, hit.p, hit.ng);
+    EXPECT_NEAR(q, ls.pdf_solid_angle, 1e-3f * ls.pdf_solid_angle);
+    ++checked;
+  }
+  EXPECT_GT(checked, 500);
+}
+
 }  // namespace
 }  // namespace rf

@@ -304,5 +304,36 @@ TEST(SamplerTest, SobolIsUnbiasedOverPasses) {
     }
 }
 
+TEST(Sampler, IsAPureFunctionOfItsKey) {
+  IndependentSampler a, b;
+  a.start_camera_sample(1, 2, 3, 4, 5, 6);
+  b.start_camera_sample(1, 2, 3, 4, 5, 6);
+  for (int i = 0; i < 32; ++i) EXPECT_EQ(a.get_1d(), b.get_1d());
+  // Any key component changes the stream.
+  b.start_camera_sample(1, 2, 3, 5, 4, 6);
+  a.start_camera_sample(1, 2, 3, 4, 5, 6);
+  EXPECT_NE(a.get_1d(), b.get_1d());
+}
+
+TEST(Sampler, UniformAndUncorrelatedAcrossDimensionsAndPixels) {
+  // n = 2^20 values: the mean of U(0,1) has sd 1/sqrt(12 n) = 2.8e-4; allow 5 sd (false failure
+  // ~6e-7). Correlation between consecutive dimensions / neighbouring pixels: sd 1/sqrt(n)
+  // ~ 1e-3; allow 5e-3.
+  const int n = 1 << 20;
+  double sum = 0, sum_xy = 0, sum_pix = 0;
+  IndependentSampler s, t;
+  for (int i = 0; i < n; ++i) {
+    s.start_camera_sample(9, 0, 0, i % 1024, i / 1024, 0);
+    t.start_camera_sample(9, 0, 0, i % 1024 + 1, i / 1024, 0);
+    double x = s.get_1d(), y = s.get_1d(), z = t.get_1d();
+    sum += x;
+    sum_xy += (x - 0.5) * (y - 0.5);
+    sum_pix += (x - 0.5) * (z - 0.5);
+  }
+  EXPECT_NEAR(sum / n, 0.5, 5 * std::sqrt(1.0 / 12 / n));
+  EXPECT_NEAR(12 * sum_xy / n, 0.0, 5e-3);
+  EXPECT_NEAR(12 * sum_pix / n, 0.0, 5e-3);
+}
+
 }  // namespace
 }  // namespace rf

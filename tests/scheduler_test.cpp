@@ -103,5 +103,65 @@ TEST(Scheduler, CancelEndsEverything) {
   EXPECT_EQ(s.queued_tasks(), 0u);
 }
 
+// Restarts: results of leases issued before a coordinator restart.
+
+TEST(SchedulerRestart, ResultOfALeaseFromBeforeARestartCountsOnce) {
+  Scheduler before({30, 3, 4, "A"});
+  before.add_job("j", {0, 1}, /*tiles=*/2, /*passes=*/1, 0);
+  auto old = before.lease("w", 0);
+  ASSERT_TRUE(old);
+  EXPECT_EQ(old->lease_id.rfind("A", 0), 0u) << old->lease_id;
+  EXPECT_EQ(before.lease_task(old->lease_id), old->task);
+
+  Scheduler after({30, 3, 4, "B"});  // the restarted coordinator
+  after.add_job("j", {0, 1}, 2, 1, 0);
+  EXPECT_FALSE(after.lease_task(old->lease_id)) << "the old lease is unknown after the restart";
+  EXPECT_EQ(after.complete(old->lease_id, old->task, 1), CompleteOutcome::Accepted);
+  EXPECT_EQ(after.complete(old->lease_id, old->task, 2), CompleteOutcome::Duplicate);
+  EXPECT_EQ(after.complete(old->lease_id, 2), CompleteOutcome::NotFound) << "by lease id alone";
+  EXPECT_EQ(after.complete(old->lease_id, TaskRef{"gone", 0, 0, 0}, 2),
+            CompleteOutcome::NotFound);
+
+  // The accepted task is not handed out again; the others are, under the new prefix.
+  std::vector<TaskRef> leased;
+  while (auto l = after.lease("w", 3)) {
+    EXPECT_EQ(l->lease_id.rfind("B", 0), 0u) << l->lease_id;
+    EXPECT_EQ(after.lease_task(l->lease_id), l->task);
+    leased.push_back(l->task);
+  }
+  EXPECT_EQ(leased.size(), 3u);
+  for (const TaskRef& t : leased) EXPECT_FALSE(t == old->task);
+}
+
+TEST(SchedulerRestart, ALeaseIdReusedForAnotherTaskIsMatchedByTask) {
+  Scheduler after;  // default prefix "L", as before the restart: lease ids repeat
+  after.add_job("j", {0}, 2, 1, 0);
+  auto fresh = after.lease("v", 1);  // "L1" again, now for tile 0
+  ASSERT_TRUE(fresh);
+  ASSERT_EQ(fresh->lease_id, "L1");
+  TaskRef old_task{"j", 0, 0, 1};  // what "L1" was for before the restart
+  EXPECT_EQ(after.complete("L1", old_task, 2), CompleteOutcome::Accepted);
+  EXPECT_EQ(after.renew("L1", 2), LeaseOutcome::Ok) << "the other task's lease lives on";
+  EXPECT_FALSE(after.lease("w", 2)) << "tile 1 is done, tile 0 is leased";
+  EXPECT_EQ(after.complete("L1", fresh->task, 3), CompleteOutcome::Accepted);
+  EXPECT_FALSE(after.work_left_for("w"));
+}
+
+TEST(SchedulerRestart, MarkDoneTasksAreNeverLeased) {
+  Scheduler s;
+  s.add_job("j", {4}, /*tiles=*/3, /*passes=*/1, 0);
+  s.mark_done({"j", 4, 0, 0});
+  s.mark_done({"j", 4, 0, 2});
+  s.mark_done({"j", 4, 0, 2});    // twice: no effect
+  s.mark_done({"j", 9, 0, 0});    // unknown task: ignored
+  auto l = s.lease("w", 0);
+  ASSERT_TRUE(l);
+  EXPECT_EQ(l->task, (TaskRef{"j", 4, 0, 1}));
+  EXPECT_FALSE(s.lease("w", 0));
+  EXPECT_EQ(s.complete(l->lease_id, 1), CompleteOutcome::Accepted);
+  EXPECT_FALSE(s.work_left_for("w"));
+  EXPECT_EQ(s.complete("x", {"j", 4, 0, 0}, 2), CompleteOutcome::Duplicate) << "already done";
+}
+
 }  // namespace
 }  // namespace rf

@@ -13,6 +13,8 @@
 
 #include <unistd.h>
 
+#include "engine/shapes.h"
+
 namespace rf::test {
 
 std::string source_dir() { return RAYFARM_SOURCE_DIR; }
@@ -54,26 +56,12 @@ void write_text(const std::string& path, const std::string& text) {
 namespace rf::test {
 
 Mesh make_uv_sphere(Vec3 c, float r, int n_theta, int n_phi, uint32_t material) {
+  MeshData data = make_sphere(c, r, n_theta, n_phi);  // the scene format's sphere
   Mesh m;
   m.name = "sphere";
   m.material = material;
-  // Vertex rows from the north pole (theta = 0) to the south pole.
-  for (int i = 0; i <= n_theta; ++i) {
-    float th = kPi * float(i) / float(n_theta);
-    for (int j = 0; j < n_phi; ++j) {
-      float ph = 2 * kPi * float(j) / float(n_phi);
-      m.positions.push_back(c + r * Vec3(std::sin(th) * std::cos(ph), std::cos(th),
-                                         std::sin(th) * std::sin(ph)));
-    }
-  }
-  for (int i = 0; i < n_theta; ++i)
-    for (int j = 0; j < n_phi; ++j) {
-      uint32_t a = uint32_t(i * n_phi + j), b = uint32_t(i * n_phi + (j + 1) % n_phi);
-      uint32_t c2 = a + uint32_t(n_phi), d = b + uint32_t(n_phi);
-      // Winding (a, b, c2) gives an outward normal for this parametrisation.
-      if (i != 0) m.indices.insert(m.indices.end(), {a, b, c2});
-      if (i != n_theta - 1) m.indices.insert(m.indices.end(), {b, d, c2});
-    }
+  m.positions = std::move(data.positions);
+  m.indices = std::move(data.indices);  // flat shaded: no normals, no uvs
   return m;
 }
 

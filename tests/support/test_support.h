@@ -27,7 +27,8 @@ void write_text(const std::string& path, const std::string& text);
 
 namespace rf::test {
 
-// A closed UV sphere (outward right-hand normals) of 2*n_theta*n_phi - 2*n_phi triangles.
+// The scene format's closed UV sphere (engine/shapes.h), flat shaded (no vertex normals, no uvs):
+// outward right-hand winding, 2*n_theta*n_phi - 2*n_phi triangles.
 Mesh make_uv_sphere(Vec3 center, float radius, int n_theta, int n_phi, uint32_t material);
 
 // A minimal valid scene around the given meshes: pinhole camera at eye looking at target,

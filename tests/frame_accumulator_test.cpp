@@ -1,0 +1,110 @@
+// Tests of engine/frame_accumulator resumed from a checkpointed prefix: bit-identical to an
+// uninterrupted merge, the same stop on a noise target, and refusals of what is not its prefix.
+#include "engine/frame_accumulator.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "engine/buffer_file.h"
+#include "tests/support/fixtures.h"
+
+namespace rf {
+namespace {
+
+// Synthetic buffers of an 8x8 frame (tests/support/fixtures.h).
+BufferHeader make_header(PassSet passes) { return test::test_header(std::move(passes), 8, 8); }
+SampleBuffer random_pass(uint32_t pass, Rect rect, uint64_t seed) {
+  return test::random_pass(pass, rect, false, seed, 8, 8);
+}
+using test::expect_bit_identical;
+
+const std::vector<Rect> kTiles = {{0, 0, 4, 4}, {4, 0, 4, 4}, {0, 4, 4, 4}, {4, 4, 4, 4}};
+
+// Feeds passes [from, to) tile by tile (tiles in reverse order) until the accumulator is done.
+void feed(FrameAccumulator& acc, uint32_t from, uint32_t to) {
+  for (uint32_t p = from; p < to && !acc.done(); ++p)
+    for (size_t t = kTiles.size(); t-- > 0;) acc.add(random_pass(p, kTiles[t], 1000 * p + t));
+}
+
+TEST(FrameAccumulator, ResumedFromEncodedPrefixIsBitIdentical) {
+  ProgressiveOptions opt;
+  opt.pass_count = 6;
+  FrameAccumulator whole(make_header({}), kTiles, false, opt);
+  feed(whole, 0, 6);
+  ASSERT_TRUE(whole.done());
+  ASSERT_EQ(whole.passes_merged(), 6u);
+
+  for (uint32_t k : {0u, 1u, 3u, 5u}) {
+    SCOPED_TRACE("resumed after " + std::to_string(k) + " passes");
+    FrameAccumulator first(make_header({}), kTiles, false, opt);
+    feed(first, 0, k);
+    SampleBuffer saved = decode_buffer(encode_buffer(first.frame()), "prefix");
+    FrameAccumulator resumed(make_header({}), kTiles, false, opt);
+    resumed.resume_from(std::move(saved));
+    EXPECT_EQ(resumed.passes_merged(), k);
+    EXPECT_FALSE(resumed.done());
+    if (k > 0) {
+      EXPECT_EQ(resumed.add(random_pass(k - 1, kTiles[0], 1000 * (k - 1))),
+                FrameAccumulator::AddResult::Duplicate) << "inside the restored prefix";
+    }
+    feed(resumed, k, 6);
+    ASSERT_TRUE(resumed.done());
+    expect_bit_identical(resumed.frame(), whole.frame());
+  }
+}
+
+TEST(FrameAccumulator, ResumedStopsOnNoiseTargetAtTheSamePass) {
+  ProgressiveOptions opt;
+  opt.pass_count = 32;
+  // relMSE after n passes is about (1/12) / 1.01 / n for these samples: 0.01 stops near pass 9.
+  opt.noise_target = 0.01;
+  FrameAccumulator whole(make_header({}), kTiles, false, opt);
+  feed(whole, 0, 32);
+  ASSERT_TRUE(whole.stopped_on_target());
+  uint32_t stop = whole.passes_merged();
+  ASSERT_GT(stop, opt.min_passes);
+  ASSERT_LT(stop, 32u);
+
+  for (uint32_t k : {2u, stop - 1, stop}) {
+    SCOPED_TRACE("resumed after " + std::to_string(k) + " passes");
+    FrameAccumulator first(make_header({}), kTiles, false, opt);
+    feed(first, 0, k);
+    FrameAccumulator resumed(make_header({}), kTiles, false, opt);
+    resumed.resume_from(decode_buffer(encode_buffer(first.frame()), "prefix"));
+    EXPECT_EQ(resumed.done(), k == stop) << "the stop decision is taken again on the prefix";
+    feed(resumed, k, 32);
+    EXPECT_TRUE(resumed.stopped_on_target());
+    EXPECT_EQ(resumed.passes_merged(), stop);
+    expect_bit_identical(resumed.frame(), whole.frame());
+  }
+}
+
+TEST(FrameAccumulator, ResumeRefusesAnotherImageOrANonPrefix) {
+  ProgressiveOptions opt;
+  opt.pass_count = 6;
+  FrameAccumulator first(make_header({}), kTiles, false, opt);
+  feed(first, 0, 3);
+  SampleBuffer prefix = first.frame();
+
+  SampleBuffer other_seed = prefix;
+  other_seed.header.seed = 8;
+  FrameAccumulator a(make_header({}), kTiles, false, opt);
+  EXPECT_THROW(a.resume_from(other_seed), MergeError);
+
+  SampleBuffer not_prefix = prefix;
+  not_prefix.header.passes = PassSet::range(1, 3);
+  FrameAccumulator b(make_header({}), kTiles, false, opt);
+  EXPECT_THROW(b.resume_from(not_prefix), MergeError);
+
+  SampleBuffer too_long = prefix;
+  too_long.header.passes = PassSet::range(0, 7);
+  EXPECT_THROW(b.resume_from(too_long), MergeError);
+
+  EXPECT_THROW(first.resume_from(prefix), MergeError) << "not a fresh accumulator";
+  EXPECT_EQ(b.passes_merged(), 0u) << "a refused resume leaves the accumulator as it was";
+}
+
+}  // namespace
+}  // namespace rf
