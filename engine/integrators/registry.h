@@ -1,6 +1,6 @@
 // The closed list of integrators (docs/adding-an-integrator.md). Each is a struct in its own
-// NAME.h / NAME.cpp pair (module.h says what it holds); adding one is a new pair and one line in
-// the variant below. Everything that depends on which integrator a scene uses dispatches here, on
+// NAME.h / NAME.cpp pair (module.h says what it holds); adding one is a new pair, its #include
+// and one entry in the variant below. Everything that depends on which integrator a scene uses dispatches here, on
 // the variant: names, scene keys, settings text, checks, splatting and rendering.
 #pragma once
 
