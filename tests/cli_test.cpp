@@ -1,6 +1,8 @@
 // The command line end to end: render, partial renders + merge, refusals, repeatability.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <filesystem>
 
 #include "engine/buffer_file.h"
@@ -94,6 +96,29 @@ TEST(Cli, BadArgumentsAreNamed) {
   r = test::run_command(cli("render scenes/nope/missing.json -o /tmp/x.exr"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("missing.json"), std::string::npos) << r.output;
+}
+
+// `compare`: an image against itself has no error; against a differently seeded render of the
+// same scene it has (relMSE of the two images' noise); a window is checked against the image.
+TEST(Cli, CompareReportsTheErrorAndRefusesABadWindow) {
+  std::string dir = test::make_temp_dir("cli-compare");
+  std::string args = " --res 16x16 --spp 4 --passes 2 --max-depth 4 -q";
+  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/a.exr" + args)).exit_code, 0);
+  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/b.exr --seed 5" + args)).exit_code, 0);
+  auto same = test::run_command(cli("compare " + dir + "/a.exr " + dir + "/a.exr"));
+  ASSERT_EQ(same.exit_code, 0) << same.output;
+  EXPECT_NE(same.output.find("rmse 0 relmse 0 mae 0"), std::string::npos) << same.output;
+  auto other = test::run_command(cli("compare " + dir + "/a.exr " + dir + "/b.exr --window 0,0,8,8"));
+  ASSERT_EQ(other.exit_code, 0) << other.output;
+  double rmse = -1, rel = -1, mae = -1;
+  ASSERT_EQ(std::sscanf(other.output.c_str(), "rmse %lf relmse %lf mae %lf", &rmse, &rel, &mae), 3)
+      << other.output;
+  EXPECT_GT(rmse, 0);
+  EXPECT_GT(rel, 0);
+  EXPECT_GT(mae, 0);
+  auto bad = test::run_command(cli("compare " + dir + "/a.exr " + dir + "/b.exr --window 0,0,17,8"));
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("window"), std::string::npos) << bad.output;
 }
 
 TEST(Cli, BenchQuickRuns) {
