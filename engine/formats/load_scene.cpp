@@ -22,8 +22,10 @@ std::string extension_of(const std::string& path) {
 
 Scene load_scene(const std::string& path, const SceneOverrides& overrides) {
   const std::string ext = extension_of(path);
-  Scene scene = load_json_scene(path);  // .json, and any other extension (the native format)
-  (void)ext;
+  Scene scene = ext == ".pbrt"                    ? load_pbrt_scene(path)
+                : ext == ".xml"                   ? load_mitsuba_scene(path)
+                : ext == ".gltf" || ext == ".glb" ? load_gltf_scene(path)
+                                                  : load_json_scene(path);  // .json and the rest
   for (const std::string& w : scene.warnings) spdlog::warn("{}", w);
   flatten_instances(scene);
   apply_overrides(scene, overrides);
