@@ -42,6 +42,7 @@ struct OverrideArgs {
   std::optional<uint32_t> passes;
   std::optional<int> max_depth;
   std::optional<double> noise_target;
+  std::optional<std::string> aovs;
 };
 void add_override_options(CLI::App& cmd, OverrideArgs& args);
 SceneOverrides overrides_of(const OverrideArgs& args);  // throws UsageError

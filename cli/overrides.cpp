@@ -27,6 +27,8 @@ void add_override_options(CLI::App& cmd, OverrideArgs& a) {
   cmd.add_option("--filter", a.filter, "pixel filter (box, triangle, gaussian)");
   cmd.add_option("--sampler", a.sampler, "sampler (independent, sobol)");
   cmd.add_option("--noise-target", a.noise_target, "stop when relMSE <= this");
+  cmd.add_option("--aov", a.aovs,
+                 "auxiliary outputs, comma-separated: albedo, normal, depth (docs/outputs.md)");
 }
 
 SceneOverrides overrides_of(const OverrideArgs& a) {
@@ -39,6 +41,7 @@ SceneOverrides overrides_of(const OverrideArgs& a) {
   if (!a.integrator.empty()) ov.integrator = a.integrator;
   if (!a.filter.empty()) ov.filter = a.filter;
   if (!a.sampler.empty()) ov.sampler = a.sampler;
+  if (a.aovs) ov.aovs = *a.aovs;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
   return ov;
 }

@@ -47,6 +47,39 @@ Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
   return po;
 }
 
+namespace {
+
+// One Embree triangle geometry of a mesh, attached to `scene` under `id`.
+void attach_mesh(RTCDevice device, RTCScene scene, const Mesh& m, unsigned id) {
+  RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  // Copied into Embree-owned buffers: Embree may read 16 bytes at the last vertex, which a
+  // tightly packed std::vector<Vec3> does not guarantee.
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+      g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, sizeof(Vec3), m.positions.size()));
+  std::memcpy(v, m.positions.data(), m.positions.size() * sizeof(Vec3));
+  auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(
+      g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(uint32_t), m.triangle_count()));
+  std::memcpy(idx, m.indices.data(), m.indices.size() * sizeof(uint32_t));
+  rtcCommitGeometry(g);
+  rtcAttachGeometryByID(scene, g, id);
+  rtcReleaseGeometry(g);
+}
+
+// Moves an object-space hit point to world space with pbrt-v4's error bound of a transformed
+// point: |M| e (1 + gamma3) + gamma3 (|M_linear p| + |t|), per axis.
+void transform_hit_point(const Mat4& m, Vec3& p, Vec3& p_error) {
+  Vec3 w = m.point(p), e;
+  for (int i = 0; i < 3; ++i) {
+    float lin = std::fabs(m.m[i][0] * p.x) + std::fabs(m.m[i][1] * p.y) + std::fabs(m.m[i][2] * p.z);
+    float err = std::fabs(m.m[i][0]) * p_error.x + std::fabs(m.m[i][1]) * p_error.y +
+                std::fabs(m.m[i][2]) * p_error.z;
+    e[i] = (1 + gamma_n(3)) * err + gamma_n(3) * (lin + std::fabs(m.m[i][3]));
+  }
+  p = w, p_error = e;
+}
+
+}  // namespace
+
 Accel::Accel(const Scene& scene) : scene_(scene) {
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw std::runtime_error("embree: cannot create device");
@@ -54,18 +87,34 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
   rtc_scene_ = rtcNewScene(device_);
   rtcSetSceneBuildQuality(rtc_scene_, RTC_BUILD_QUALITY_HIGH);
   for (size_t i = 0; i < scene.meshes.size(); ++i) {
-    const Mesh& m = scene.meshes[i];
-    RTCGeometry g = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_TRIANGLE);
-    // Copied into Embree-owned buffers: Embree may read 16 bytes at the last vertex, which a
-    // tightly packed std::vector<Vec3> does not guarantee.
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
-        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, sizeof(Vec3), m.positions.size()));
-    std::memcpy(v, m.positions.data(), m.positions.size() * sizeof(Vec3));
-    auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(
-        g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(uint32_t), m.triangle_count()));
-    std::memcpy(idx, m.indices.data(), m.indices.size() * sizeof(uint32_t));
+    surfaces_.push_back(&scene.meshes[i]);
+    attach_mesh(device_, rtc_scene_, scene.meshes[i], unsigned(i));  // geometry id == mesh index
+  }
+  // Objects: one Embree scene each, built only if some instance places it.
+  std::vector<bool> placed(scene.objects.size(), false);
+  for (const Instance& inst : scene.instances) placed.at(inst.object) = true;
+  for (size_t o = 0; o < scene.objects.size(); ++o) {
+    object_first_surface_.push_back(uint32_t(surfaces_.size()));
+    for (const Mesh& m : scene.objects[o].meshes) surfaces_.push_back(&m);
+    RTCScene os = nullptr;
+    if (placed[o] && !scene.objects[o].meshes.empty()) {
+      os = rtcNewScene(device_);
+      rtcSetSceneBuildQuality(os, RTC_BUILD_QUALITY_HIGH);
+      for (size_t k = 0; k < scene.objects[o].meshes.size(); ++k)
+        attach_mesh(device_, os, scene.objects[o].meshes[k], unsigned(k));
+      rtcCommitScene(os);
+    }
+    object_scenes_.push_back(os);
+  }
+  for (size_t i = 0; i < scene.instances.size(); ++i) {
+    const Instance& inst = scene.instances[i];
+    RTCScene os = object_scenes_[inst.object];
+    if (!os) continue;
+    RTCGeometry g = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(g, os);
+    rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, &inst.to_world.m[0][0]);
     rtcCommitGeometry(g);
-    rtcAttachGeometryByID(rtc_scene_, g, unsigned(i));  // geometry id == mesh index
+    rtcAttachGeometryByID(rtc_scene_, g, unsigned(scene.meshes.size() + i));
     rtcReleaseGeometry(g);
   }
   rtcCommitScene(rtc_scene_);
@@ -73,6 +122,8 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
 
 Accel::~Accel() {
   if (rtc_scene_) rtcReleaseScene(rtc_scene_);
+  for (RTCScene os : object_scenes_)
+    if (os) rtcReleaseScene(os);
   if (device_) rtcReleaseDevice(device_);
 }
 
@@ -87,7 +138,13 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   rtcIntersect1(rtc_scene_, &ctx, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
 
-  const Mesh& m = scene_.meshes[rh.hit.geomID];
+  const Instance* inst = nullptr;
+  uint32_t surface = rh.hit.geomID;
+  if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
+    inst = &scene_.instances[rh.hit.instID[0] - scene_.meshes.size()];
+    surface = object_first_surface_[inst->object] + rh.hit.geomID;
+  }
+  const Mesh& m = *surfaces_[surface];
   uint32_t prim = rh.hit.primID;
   uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
   Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
@@ -104,6 +161,11 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   } else {
     hit.ns = hit.ng;
   }
+  if (inst) {  // object space to world space (flatten_instances' placement)
+    transform_hit_point(inst->to_world, hit.p, hit.p_error);
+    hit.ng = normalize(inst->to_world.normal(hit.ng));
+    hit.ns = normalize(inst->to_world.normal(hit.ns));
+  }
   if (!m.uvs.empty()) {
     Vec2 a = m.uvs[i0], b = m.uvs[i1], c = m.uvs[i2];
     hit.uv = {b0 * a.x + b1 * b.x + b2 * c.x, b0 * a.y + b1 * b.y + b2 * c.y};
@@ -111,7 +173,7 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
     hit.uv = {b1, b2};
   }
   hit.t = rh.ray.tfar;
-  hit.mesh = rh.hit.geomID;
+  hit.mesh = surface;
   hit.prim = prim;
   return true;
 }

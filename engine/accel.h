@@ -1,12 +1,19 @@
-// The Embree 3 scene: one triangle geometry per mesh (geometry id == mesh index), closest-hit
-// and occlusion queries, and the surface interaction rebuilt from a hit with a floating-point
-// error bound for robust ray spawning.
+// The Embree 3 scene: one triangle geometry per world-space mesh (geometry id == mesh index),
+// one Embree scene per instanced object placed by an Embree instance per Scene::instances entry
+// (geometry id == meshes + instance index), closest-hit and occlusion queries, and the surface
+// interaction rebuilt from a hit with a floating-point error bound for robust ray spawning.
+//
+// Surfaces: a hit names the mesh it is on by a surface id, Accel::mesh(id). Ids below
+// Scene::meshes.size() are the world meshes (so a light's mesh index is its surface id); the
+// meshes of objects follow, object by object. A hit on an instance is computed in object space
+// and moved to world space by the instance's transform (normals by the inverse transpose).
 #pragma once
 
 #include <embree3/rtcore.h>
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "engine/scene.h"
 
@@ -24,7 +31,7 @@ struct SurfaceHit {
   Vec3 ns;      // unit shading normal (interpolated vertex normals, else ng), same side as ng
   Vec2 uv;
   float t = 0;
-  uint32_t mesh = 0, prim = 0;
+  uint32_t mesh = 0, prim = 0;  // mesh: surface id (Accel::mesh); prim: its triangle
 };
 
 // Moves p off its surface along ng, towards the side w points to, by the hit's error bound
@@ -52,9 +59,14 @@ class Accel {
   float cast(Vec3 o, Vec3 d) const;
 
   const Scene& scene() const { return scene_; }
+  // The mesh of a surface id (see above): its material, emission and object-space geometry.
+  const Mesh& mesh(uint32_t surface) const { return *surfaces_[surface]; }
 
  private:
   const Scene& scene_;
+  std::vector<const Mesh*> surfaces_;         // by surface id
+  std::vector<uint32_t> object_first_surface_;  // surface id of each object's first mesh
+  std::vector<RTCScene> object_scenes_;       // one per object (nullptr: placed by no instance)
   RTCDevice device_ = nullptr;
   RTCScene rtc_scene_ = nullptr;
 };

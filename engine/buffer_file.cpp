@@ -1,9 +1,11 @@
-// .rfb format, version 1 (docs/sample-buffer-format.md). All integers and floats little-endian.
+// .rfb format, version 2 (docs/sample-buffer-format.md). All integers and floats little-endian.
+// Version 2 added the AOV plane and the "aovs" header key; version 1 files (no AOVs) are still
+// read.
 //
 //   offset  size     content
 //   0       8        magic 89 52 46 42 0D 0A 1A 0A ("\x89RFB\r\n\x1a\n"; PNG-style, so 7-bit
 //                    transfers and line-ending conversion are caught at the first bytes)
-//   8       4        u32 format version = 1
+//   8       4        u32 format version = 2 (1 is read too)
 //   12      4        u32 header length L
 //   16      L        header: UTF-8 JSON object, padded with trailing spaces so that 16 + L is a
 //                    multiple of 8 (the planes are then 8-byte aligned in the file)
@@ -13,11 +15,12 @@
 //                      sum_sq       f64 x 3A
 //                      batch_sum    f64 x 3A
 //                      batch_sum_sq f64 x 3A
+//                      aov          f64 x C * A   (C = channels of the "aovs" set, engine/aov.h)
 //                      splat        f64 x 3 * width * height   (only when has_splats)
 //   end-32  32       SHA-256 of every byte before it
 //
 // Header keys: format ("rayfarm-sample-buffer"), scene_digest, seed, frame, integrator, settings,
-// width, height, passes (PassSet::to_string), build_id, isa, core_seconds, rect {x0, y0, w, h},
+// width, height, aovs (version 2: engine/aov.h's canonical list, "" for none), passes (PassSet::to_string), build_id, isa, core_seconds, rect {x0, y0, w, h},
 // has_splats, light_paths, nonfinite_samples, rays. Unknown keys are ignored, so a later version
 // may add keys without breaking this reader.
 //
@@ -43,7 +46,8 @@ namespace {
 using nlohmann::json;
 
 constexpr char kMagic[8] = {'\x89', 'R', 'F', 'B', '\r', '\n', '\x1a', '\n'};
-constexpr uint32_t kFormatVersion = 1;
+constexpr uint32_t kFormatVersion = 2;
+constexpr uint32_t kOldestReadableVersion = 1;
 constexpr size_t kPreambleBytes = 16;  // magic, version, header length
 constexpr size_t kChecksumBytes = 32;
 constexpr uint64_t kMaxDimension = 1 << 20;  // larger frames are refused as implausible
@@ -98,6 +102,7 @@ void for_each_plane(Buf& b, F&& f) {
   f(b.sum_sq);
   f(b.batch_sum);
   f(b.batch_sum_sq);
+  f(b.aov);  // empty without AOVs (always in version 1)
   if (!b.splat.empty()) f(b.splat);
 }
 
@@ -118,6 +123,7 @@ json header_json(const SampleBuffer& b) {
               {"settings", h.settings},
               {"width", h.width},
               {"height", h.height},
+              {"aovs", to_string(h.aovs)},
               {"passes", h.passes.to_string()},
               {"build_id", h.build_id},
               {"isa", h.isa},
@@ -166,7 +172,7 @@ struct HeaderReader {
   }
 };
 
-BufferHeader read_header(const HeaderReader& r) {
+BufferHeader read_header(const HeaderReader& r, uint32_t version) {
   BufferHeader h;
   h.scene_digest = r.str("scene_digest");
   h.seed = r.uint("seed");
@@ -175,6 +181,13 @@ BufferHeader read_header(const HeaderReader& r) {
   h.settings = r.str("settings");
   h.width = int(r.uint("width", kMaxDimension));
   h.height = int(r.uint("height", kMaxDimension));
+  if (version >= 2) {
+    try {
+      h.aovs = parse_aovs(r.str("aovs"));
+    } catch (const std::invalid_argument& e) {
+      throw BufferFileError(r.what + ": header field \"aovs\": " + e.what());
+    }
+  }
   try {
     h.passes = PassSet::parse(r.str("passes"));
   } catch (const std::invalid_argument& e) {
@@ -199,8 +212,9 @@ Rect read_rect(const HeaderReader& r, const BufferHeader& h) {
   return rect;
 }
 
-// Checks everything before the JSON header is parsed; returns the header length.
-size_t check_preamble(const std::string& bytes, const std::string& what) {
+// Checks everything before the JSON header is parsed; returns the header length and sets the
+// format version.
+size_t check_preamble(const std::string& bytes, const std::string& what, uint32_t& version) {
   auto fail = [&](const std::string& why) { return BufferFileError(what + ": " + why); };
   size_t n = bytes.size();
   if (std::memcmp(bytes.data(), kMagic, std::min<size_t>(n, 8)) != 0) {
@@ -210,10 +224,10 @@ size_t check_preamble(const std::string& bytes, const std::string& what) {
     throw fail("truncated (" + std::to_string(n) + " bytes; the smallest buffer file has " +
                std::to_string(kPreambleBytes + kChecksumBytes) + ")");
   }
-  uint32_t version = get_u32(bytes, 8);
-  if (version != kFormatVersion) {
+  version = get_u32(bytes, 8);
+  if (version < kOldestReadableVersion || version > kFormatVersion) {
     throw fail("unsupported format version " + std::to_string(version) + " (this build reads " +
-               std::to_string(kFormatVersion) + ")");
+               std::to_string(kOldestReadableVersion) + " to " + std::to_string(kFormatVersion) + ")");
   }
   size_t header_len = get_u32(bytes, 12);
   if (header_len > n - kPreambleBytes - kChecksumBytes) {
@@ -236,7 +250,7 @@ std::string encode_buffer(const SampleBuffer& buf) {
   }
   std::string header = header_json(buf).dump();
   header.append((8 - (kPreambleBytes + header.size()) % 8) % 8, ' ');
-  size_t plane_bytes = 8 * (13 * buf.count.size() + buf.splat.size());
+  size_t plane_bytes = 8 * (13 * buf.count.size() + buf.aov.size() + buf.splat.size());
   std::string out;
   out.reserve(kPreambleBytes + header.size() + plane_bytes + kChecksumBytes);
   out.append(kMagic, sizeof kMagic);
@@ -250,24 +264,26 @@ std::string encode_buffer(const SampleBuffer& buf) {
 
 SampleBuffer decode_buffer(const std::string& bytes, const std::string& what_for_errors) {
   const std::string& what = what_for_errors;
-  size_t header_len = check_preamble(bytes, what);
+  uint32_t version = 0;
+  size_t header_len = check_preamble(bytes, what, version);
   json j = json::parse(bytes.begin() + kPreambleBytes,
                        bytes.begin() + std::ptrdiff_t(kPreambleBytes + header_len), nullptr,
                        /*allow_exceptions=*/false);
   if (!j.is_object()) throw BufferFileError(what + ": header is not a JSON object");
   HeaderReader r{j, what};
-  BufferHeader h = read_header(r);
+  BufferHeader h = read_header(r, version);
   Rect rect = read_rect(r, h);
   bool has_splats = r.boolean("has_splats");
 
   // Sizes are bounded by kMaxDimension, so these products cannot overflow.
-  uint64_t expected = 8 * (13 * uint64_t(rect.area()) +
+  uint64_t expected = 8 * ((13 + uint64_t(h.aovs.channels())) * uint64_t(rect.area()) +
                            (has_splats ? 3 * uint64_t(h.width) * uint64_t(h.height) : 0));
   uint64_t actual = bytes.size() - kPreambleBytes - header_len - kChecksumBytes;
   if (expected != actual) {
     throw BufferFileError(what + ": header describes " + std::to_string(expected) +
                           " bytes of planes (rect " + to_string(rect) +
-                          (has_splats ? ", with splats" : "") + ") but the file holds " +
+                          (has_splats ? ", with splats" : "") +
+                          (h.aovs.any() ? ", AOVs " + to_string(h.aovs) : "") + ") but the file holds " +
                           std::to_string(actual));
   }
   SampleBuffer buf(std::move(h), rect, has_splats);

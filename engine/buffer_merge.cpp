@@ -24,6 +24,7 @@ std::string identity_difference(const BufferHeader& a, const BufferHeader& b) {
   if (a.settings != b.settings) return str("settings", a.settings, b.settings);
   if (a.width != b.width) return num("width", a.width, b.width);
   if (a.height != b.height) return num("height", a.height, b.height);
+  if (a.aovs != b.aovs) return str("aovs", to_string(a.aovs), to_string(b.aovs));
   return "";
 }
 
@@ -103,6 +104,7 @@ void merge_into(SampleBuffer& dst, const SampleBuffer& src) {
   add_plane(dst.batch_sum, src.batch_sum);
   add_plane(dst.batch_sum_sq, src.batch_sum_sq);
   add_plane(dst.splat, src.splat);
+  add_plane(dst.aov, src.aov);
   dst.light_paths += src.light_paths;
   dst.nonfinite_samples += src.nonfinite_samples;
   dst.rays += src.rays;
@@ -136,6 +138,8 @@ void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile) {
     std::copy_n(tile.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
     std::copy_n(tile.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
     std::copy_n(tile.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
+    const size_t na = size_t(tile.header.aovs.channels());
+    std::copy_n(tile.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
   }
   dst.rays += tile.rays;
   dst.nonfinite_samples += tile.nonfinite_samples;

@@ -105,6 +105,7 @@ void provenance_attributes(ImageSpec& spec, const SampleBuffer& frame, const Att
   count_attribute(spec, "rayfarm:frame", h.frame);
   spec.attribute("rayfarm:integrator", h.integrator);
   spec.attribute("rayfarm:settings", h.settings);
+  if (h.aovs.any()) spec.attribute("rayfarm:aovs", to_string(h.aovs));
   spec.attribute("rayfarm:passes", h.passes.to_string());
   // Splatting integrators take no camera samples: their "spp" is light paths per pixel.
   uint64_t pixels = uint64_t(frame.rect.area());
@@ -138,25 +139,37 @@ uint8_t srgb8(double linear) {
 void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra) {
   check_writable(path, frame);
   const Rect& r = frame.rect;
-  ImageSpec spec(r.w, r.h, 7, TypeDesc::FLOAT);
+  const AovSet& aovs = frame.header.aovs;
+  std::vector<std::string> names = {"R", "G", "B", "A", "variance.R", "variance.G", "variance.B"};
+  if (aovs.albedo) names.insert(names.end(), {"albedo.R", "albedo.G", "albedo.B"});
+  if (aovs.normal) names.insert(names.end(), {"N.X", "N.Y", "N.Z"});
+  if (aovs.depth) names.insert(names.end(), {"Z", "coverage"});
+  const int nch = int(names.size());
+  ImageSpec spec(r.w, r.h, nch, TypeDesc::FLOAT);
   spec.x = r.x0;
   spec.y = r.y0;
   spec.full_x = 0;
   spec.full_y = 0;
   spec.full_width = frame.header.width;
   spec.full_height = frame.header.height;
-  spec.channelnames = {"R", "G", "B", "A", "variance.R", "variance.G", "variance.B"};
+  spec.channelnames = names;
   spec.alpha_channel = 3;
   spec.attribute("compression", "zip");
   spec.attribute("oiio:ColorSpace", "Linear");
   provenance_attributes(spec, frame, extra);
 
   std::vector<float> pixels;
-  pixels.reserve(size_t(r.area()) * 7);
+  pixels.reserve(size_t(r.area()) * size_t(nch));
   for (int y = r.y0; y < r.y1(); ++y) {
     for (int x = r.x0; x < r.x1(); ++x) {
       RGB e = frame.estimate(x, y), v = frame.variance_of_mean(x, y);
       pixels.insert(pixels.end(), {e.x, e.y, e.z, 1.0f, v.x, v.y, v.z});
+      if (!aovs.any()) continue;
+      float coverage = 0;
+      AovSample m = frame.aov_mean(x, y, &coverage);
+      if (aovs.albedo) pixels.insert(pixels.end(), {m.albedo.x, m.albedo.y, m.albedo.z});
+      if (aovs.normal) pixels.insert(pixels.end(), {m.normal.x, m.normal.y, m.normal.z});
+      if (aovs.depth) pixels.insert(pixels.end(), {m.depth, coverage});
     }
   }
   write_image_atomic(path, "openexr", spec, pixels.data());

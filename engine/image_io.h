@@ -1,5 +1,6 @@
 // Image output through OpenImageIO: the multi-channel OpenEXR of a frame (R, G, B, A,
-// variance.R/G/B, provenance in the header) and its tone-mapped PNG preview.
+// variance.R/G/B, the AOV layers albedo.R/G/B, N.X/Y/Z, Z and coverage when the frame carries
+// them (docs/outputs.md), provenance in the header) and its tone-mapped PNG preview.
 #pragma once
 
 #include <map>

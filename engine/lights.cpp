@@ -26,10 +26,9 @@ float cos_deg(float deg) { return std::cos(deg * kPi / 180.0f); }
 }  // namespace
 
 LightSet::LightSet(const Scene& scene) : scene_(scene) {
-  // Bounding sphere of the meshes' bounding box.
-  Vec3 lo(kInf), hi(-kInf);
-  for (const Mesh& m : scene.meshes)
-    for (Vec3 q : m.positions) lo = vmin(lo, q), hi = vmax(hi, q);
+  // Bounding sphere of the scene's bounding box (meshes and instances).
+  Vec3 lo, hi;
+  scene_bounds(scene, lo, hi);
   if (lo.x <= hi.x) {
     center_ = 0.5f * (lo + hi);
     radius_ = 0.5f * length(hi - lo);
@@ -171,7 +170,8 @@ bool LightSet::sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const
 
 float LightSet::pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light,
                                 Vec3 n_light) const {
-  uint32_t first = mesh_first_light_[mesh];
+  // Surface ids past the world meshes are instanced meshes, never lights (prepare_instances).
+  uint32_t first = mesh < mesh_first_light_.size() ? mesh_first_light_[mesh] : kNoLight;
   if (first == kNoLight) return 0.0f;
   const Tri& tri = tris_[first + prim];
   if (!(tri.area > 0)) return 0.0f;
@@ -286,7 +286,7 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
 }
 
 uint32_t LightSet::area_light_index(uint32_t mesh, uint32_t prim) const {
-  uint32_t first = mesh_first_light_[mesh];
+  uint32_t first = mesh < mesh_first_light_.size() ? mesh_first_light_[mesh] : kNoLight;
   return first == kNoLight ? kNoLight : first + prim;
 }
 

@@ -66,6 +66,40 @@ SampleBuffer::SampleBuffer(BufferHeader h, Rect r, bool with_splats)
   batch_sum.assign(3 * a, 0.0);
   batch_sum_sq.assign(3 * a, 0.0);
   if (with_splats) splat.assign(frame_channels(header), 0.0);
+  aov.assign(size_t(header.aovs.channels()) * a, 0.0);
+}
+
+void SampleBuffer::add_aov_sample(int x, int y, const AovSample& s) {
+  const AovSet& set = header.aovs;
+  double* px = aov.data() + pixel_index(x, y) * size_t(set.channels());
+  px[0] += 1;
+  if (set.albedo && is_finite(s.albedo))
+    for (int c = 0; c < 3; ++c) px[set.albedo_offset() + c] += s.albedo[c];
+  if (set.normal && is_finite(s.normal))
+    for (int c = 0; c < 3; ++c) px[set.normal_offset() + c] += s.normal[c];
+  if (set.depth && s.hit && std::isfinite(s.depth)) {
+    px[set.depth_offset()] += s.depth;
+    px[set.depth_offset() + 1] += 1;
+  }
+}
+
+AovSample SampleBuffer::aov_mean(int x, int y, float* coverage) const {
+  const AovSet& set = header.aovs;
+  AovSample m;
+  if (coverage) *coverage = 0;
+  if (!set.any()) return m;
+  const double* px = aov.data() + pixel_index(x, y) * size_t(set.channels());
+  if (!(px[0] > 0)) return m;
+  for (int c = 0; c < 3; ++c) {
+    if (set.albedo) m.albedo[c] = float(px[set.albedo_offset() + c] / px[0]);
+    if (set.normal) m.normal[c] = float(px[set.normal_offset() + c] / px[0]);
+  }
+  if (set.depth && px[set.depth_offset() + 1] > 0) {
+    m.hit = true;
+    m.depth = float(px[set.depth_offset()] / px[set.depth_offset() + 1]);
+    if (coverage) *coverage = float(px[set.depth_offset() + 1] / px[0]);
+  }
+  return m;
 }
 
 // A filter footprint may reach past the frame border: those pixels are not stored. A non-finite
@@ -164,6 +198,7 @@ bool SampleBuffer::planes_match_rect() const {
   size_t a = size_t(rect.area());
   return count.size() == a && sum.size() == 3 * a && sum_sq.size() == 3 * a &&
          batch_sum.size() == 3 * a && batch_sum_sq.size() == 3 * a &&
+         aov.size() == size_t(header.aovs.channels()) * a &&
          (splat.empty() || splat.size() == frame_channels(header));
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/aov.h"
 #include "engine/math.h"
 #include "engine/pass_set.h"
 
@@ -45,6 +46,7 @@ struct BufferHeader {
   std::string settings;       // canonical text of the other settings that change pixels
                               // (max depth, spp per pass, filter, ...)
   int width = 0, height = 0;  // full frame resolution
+  AovSet aovs;                // the AOV planes the buffer carries (engine/aov.h)
   PassSet passes;
   std::string build_id;
   std::string isa;            // Embree's ISA / CPU kind that made it
@@ -70,6 +72,10 @@ struct SampleBuffer {
   // the number of light paths it was made from.
   std::vector<double> splat;
   uint64_t light_paths = 0;
+
+  // AOV plane (engine/aov.h), per pixel of rect: header.aovs.channels() doubles; empty when no
+  // AOV is on.
+  std::vector<double> aov;
 
   // Diagnostics that travel with the buffer.
   uint64_t nonfinite_samples = 0;  // NaN/Inf samples counted and dropped (contributed zero)
@@ -101,6 +107,13 @@ struct SampleBuffer {
       sum_sq[3 * i + c] += v * v;
     }
   }
+  // Adds one AOV sample to pixel (x, y), frame coordinates (the buffer must carry AOVs).
+  // Non-finite values are dropped (the sample still counts).
+  void add_aov_sample(int x, int y, const AovSample& s);
+  // The AOV values of frame pixel (x, y): mean albedo and normal over the AOV samples, mean depth
+  // over those that hit and the hit fraction; zeros where no sample (or no hit) was taken.
+  AovSample aov_mean(int x, int y, float* coverage) const;
+
   // Adds a splat at frame pixel (x, y) (the caller applies the filter weight).
   void add_splat(int x, int y, RGB weighted_radiance);
   // Adds a list of splats (splat_to_film's output) in its order.

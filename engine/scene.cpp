@@ -1,5 +1,6 @@
 // The scene's settings independent of any file format: filter and sampler names, conductor
 // presets, default passes, and the command-line overrides every format's scene takes.
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 
@@ -112,6 +113,13 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   if (o.sampler && !contains_name(known_samplers(), *o.sampler))
     flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join_names(known_samplers()) + ")");
   if (o.sampler) rs.sampler = *o.sampler;
+  if (o.aovs) {
+    try {
+      rs.aovs = parse_aovs(*o.aovs);
+    } catch (const std::invalid_argument& e) {
+      flag_fail("--aov", e.what());
+    }
+  }
   if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
     flag_fail("--noise-target",
               "must be a finite number >= 0, got " + format_number(*o.noise_target));
@@ -122,23 +130,73 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   scene.render = rs;
 }
 
+namespace {
+
+// A world-space copy of an object's mesh placed by instance i (the same placement as
+// place_mesh: normals by the inverse transpose, winding swapped under mirroring so the front side
+// stays the front side).
+Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::string& object) {
+  Mesh w = m;
+  w.name = m.name + " (instance " + std::to_string(i) + " of " + object + ")";
+  for (Vec3& p : w.positions) p = inst.to_world.point(p);
+  for (Vec3& n : w.normals) n = normalize(inst.to_world.normal(n));
+  if (inst.to_world.det3() < 0)
+    for (size_t t = 0; t + 2 < w.indices.size(); t += 3) std::swap(w.indices[t + 1], w.indices[t + 2]);
+  return w;
+}
+
+}  // namespace
+
+void prepare_instances(Scene& scene) {
+  for (size_t i = 0; i < scene.instances.size(); ++i) {
+    const Instance& inst = scene.instances[i];
+    const std::string where = "instance " + std::to_string(i);
+    if (inst.object >= scene.objects.size())
+      throw SceneError(scene.path + ": " + where + ": object " + std::to_string(inst.object) +
+                       " does not exist (" + std::to_string(scene.objects.size()) + " objects)");
+    if (!inst.to_world.is_finite() || !(std::fabs(inst.to_world.det3()) > 0))
+      throw SceneError(scene.path + ": " + where + " of '" + scene.objects[inst.object].name +
+                       "': the transform must be finite and invertible");
+  }
+  for (uint32_t o = 0; o < scene.objects.size(); ++o) {
+    SceneObject& obj = scene.objects[o];
+    auto emissive = [](const Mesh& m) { return m.emission && !is_black(m.emission->radiance); };
+    if (std::none_of(obj.meshes.begin(), obj.meshes.end(), emissive)) continue;
+    for (size_t i = 0; i < scene.instances.size(); ++i)
+      if (scene.instances[i].object == o)
+        for (const Mesh& m : obj.meshes)
+          if (emissive(m)) scene.meshes.push_back(instanced_copy(m, scene.instances[i], i, obj.name));
+    obj.meshes.erase(std::remove_if(obj.meshes.begin(), obj.meshes.end(), emissive), obj.meshes.end());
+  }
+}
+
 void flatten_instances(Scene& scene) {
   for (size_t i = 0; i < scene.instances.size(); ++i) {
     const Instance& inst = scene.instances[i];
     const SceneObject& obj = scene.objects.at(inst.object);
-    const bool mirror = inst.to_world.det3() < 0;
-    for (const Mesh& m : obj.meshes) {
-      Mesh w = m;
-      w.name = m.name + " (instance " + std::to_string(i) + " of " + obj.name + ")";
-      for (Vec3& p : w.positions) p = inst.to_world.point(p);
-      for (Vec3& n : w.normals) n = normalize(inst.to_world.normal(n));
-      if (mirror)  // keep the front side: the winding's right-hand normal would flip
-        for (size_t t = 0; t + 2 < w.indices.size(); t += 3) std::swap(w.indices[t + 1], w.indices[t + 2]);
-      scene.meshes.push_back(std::move(w));
-    }
+    for (const Mesh& m : obj.meshes) scene.meshes.push_back(instanced_copy(m, inst, i, obj.name));
   }
   scene.instances.clear();
   scene.objects.clear();
+}
+
+void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi) {
+  lo = Vec3(kInf), hi = Vec3(-kInf);
+  for (const Mesh& m : scene.meshes)
+    for (Vec3 q : m.positions) lo = vmin(lo, q), hi = vmax(hi, q);
+  std::vector<std::pair<Vec3, Vec3>> object_box(scene.objects.size(), {Vec3(kInf), Vec3(-kInf)});
+  for (size_t o = 0; o < scene.objects.size(); ++o)
+    for (const Mesh& m : scene.objects[o].meshes)
+      for (Vec3 q : m.positions)
+        object_box[o].first = vmin(object_box[o].first, q), object_box[o].second = vmax(object_box[o].second, q);
+  for (const Instance& inst : scene.instances) {
+    auto [a, b] = object_box.at(inst.object);
+    if (a.x > b.x) continue;
+    for (int c = 0; c < 8; ++c) {
+      Vec3 q = inst.to_world.point({(c & 1) ? b.x : a.x, (c & 2) ? b.y : a.y, (c & 4) ? b.z : a.z});
+      lo = vmin(lo, q), hi = vmax(hi, q);
+    }
+  }
 }
 
 }  // namespace rf

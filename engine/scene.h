@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/aov.h"
 #include "engine/integrators/registry.h"
 #include "engine/math.h"
 #include "engine/scene_error.h"
@@ -147,6 +148,7 @@ struct RenderSettings {
   uint64_t seed = 0;
   double noise_target = 0;    // relMSE to stop at; 0 = render all passes
   std::string sampler = "independent";  // or "sobol": Owen-scrambled, scrambled per pass
+  AovSet aovs;                // auxiliary outputs (engine/aov.h, docs/outputs.md)
   uint64_t spp_per_pass() const { return spp / passes; }
 };
 
@@ -191,6 +193,7 @@ struct SceneOverrides {
   std::optional<std::string> filter;
   std::optional<double> noise_target;
   std::optional<std::string> sampler;
+  std::optional<std::string> aovs;  // comma-separated AOV names, "" for none
 };
 
 // Reads a scene file and every file it references, applies the overrides and validates the
@@ -202,9 +205,23 @@ Scene load_scene(const std::string& path, const SceneOverrides& overrides = {});
 // Applies and validates overrides on an already loaded scene (throws SceneError naming the flag).
 void apply_overrides(Scene& scene, const SceneOverrides& overrides);
 
+// Prepares instancing for rendering (load_scene calls it after the importer): checks every
+// instance (object index, finite invertible transform) and moves lights out of objects: each
+// instance of an object with an emissive mesh gets a world-space copy of that mesh in
+// Scene::meshes, because area lights are sampled per world-space triangle (lights.h). Everything
+// else stays instanced: the accelerator (accel.h) places one copy of each object's geometry with
+// Embree instances, however many times it is placed. Objects placed by no instance are dropped
+// from rendering (they cost nothing); throws SceneError naming the instance.
+void prepare_instances(Scene& scene);
+
 // Expands every instance into world-space copies of its object's meshes (Scene::meshes) and
-// clears objects and instances. The renderer does not instance yet: load_scene flattens.
+// clears objects and instances: the flattened equivalent of an instanced scene (tests compare
+// the two).
 void flatten_instances(Scene& scene);
+
+// World-space axis-aligned bounds of the meshes and of every instance's object (the object's
+// box transformed); lo > hi when the scene has no geometry.
+void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi);
 
 // Names and defaults every format maps onto.
 inline constexpr int kMaxResolution = 16384;

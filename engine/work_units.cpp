@@ -25,6 +25,7 @@ BufferHeader frame_header(const Scene& scene, uint32_t frame, const PassSet& pas
   h.settings = settings_text(scene);
   h.width = scene.film.width;
   h.height = scene.film.height;
+  h.aovs = scene.render.aovs;
   h.passes = passes;
   h.build_id = build_id();
   h.isa = cpu_isa();

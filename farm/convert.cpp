@@ -16,6 +16,7 @@ SceneOverrides to_scene_overrides(const pb::RenderOverrides& o) {
   if (o.has_filter()) s.filter = o.filter();
   if (o.has_noise_target()) s.noise_target = o.noise_target();
   if (o.has_sampler()) s.sampler = o.sampler();
+  if (o.has_aovs()) s.aovs = o.aovs();
   return s;
 }
 
@@ -31,6 +32,7 @@ pb::RenderOverrides to_wire_overrides(const SceneOverrides& s) {
   if (s.filter) o.set_filter(*s.filter);
   if (s.noise_target) o.set_noise_target(*s.noise_target);
   if (s.sampler) o.set_sampler(*s.sampler);
+  if (s.aovs) o.set_aovs(*s.aovs);
   return o;
 }
 

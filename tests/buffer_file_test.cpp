@@ -58,7 +58,7 @@ TEST(BufferFile, LayoutIsAsDocumented) {
   uint32_t version, header_len;
   std::memcpy(&version, bytes.data() + 8, 4);  // the tests run on little-endian hosts
   std::memcpy(&header_len, bytes.data() + 12, 4);
-  EXPECT_EQ(version, 1u);
+  EXPECT_EQ(version, 2u);
   EXPECT_EQ((16 + header_len) % 8, 0u);  // planes are 8-byte aligned
   EXPECT_EQ(bytes.size(), 16 + header_len + 8 * 13 * 6 + 32);
   uint64_t count0;
@@ -72,6 +72,7 @@ TEST(BufferFile, LayoutIsAsDocumented) {
   EXPECT_EQ(checksum_hex, sha256_hex(bytes.substr(0, bytes.size() - 32)));
   auto j = nlohmann::json::parse(bytes.substr(16, header_len));
   EXPECT_EQ(j["passes"], "4");
+  EXPECT_EQ(j["aovs"], "");  // no AOV plane
   EXPECT_EQ(j["rect"]["x0"], 2);
 }
 
@@ -105,9 +106,12 @@ TEST(BufferFile, RejectsBadMagicAndVersion) {
   EXPECT_THROW(decode_buffer("hello world, this is not a buffer at all....................", "t"),
                BufferFileError);
   bad = good;
-  bad[8] = 2;
+  bad[8] = 3;
   m = test::error_of([&] { decode_buffer(bad, "a.rfb"); });
-  EXPECT_EQ(m, "a.rfb: unsupported format version 2 (this build reads 1)");
+  EXPECT_EQ(m, "a.rfb: unsupported format version 3 (this build reads 1 to 2)");
+  bad[8] = 0;
+  m = test::error_of([&] { decode_buffer(bad, "a.rfb"); });
+  EXPECT_EQ(m, "a.rfb: unsupported format version 0 (this build reads 1 to 2)");
 }
 
 TEST(BufferFile, EveryTruncationThrows) {

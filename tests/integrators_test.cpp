@@ -115,7 +115,7 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
     SurfaceHit hit;
     if (!ctx.accel.intersect(ray, hit)) break;
     Vec3 wo = -ray.d;
-    radiance += beta * LightSet::emitted(ctx.scene.meshes[hit.mesh], hit.ng, wo);
+    radiance += beta * LightSet::emitted(ctx.accel.mesh(hit.mesh), hit.ng, wo);
     Bsdf bsdf = bsdf_at(ctx, hit, 0);
     Vec3 ns = bsdf.shading_normal();
     if (bsdf.is_delta()) {
@@ -138,7 +138,7 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
     if (bsdf.sample(wo, uc, sampler.get_2d(), TransportMode::Radiance, bs)) {
       SurfaceHit lh;
       if (ctx.accel.intersect(ctx.accel.spawn(hit, bs.wi), lh)) {
-        RGB le = LightSet::emitted(ctx.scene.meshes[lh.mesh], lh.ng, -bs.wi);
+        RGB le = LightSet::emitted(ctx.accel.mesh(lh.mesh), lh.ng, -bs.wi);
         float w = bs.is_delta ? 1.0f
                               : power_heuristic(bs.pdf_solid_angle,
                                                 ctx.lights.pdf_solid_angle(hit.p, lh.mesh, lh.prim, lh.p, lh.ng));

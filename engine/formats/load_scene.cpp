@@ -27,7 +27,7 @@ Scene load_scene(const std::string& path, const SceneOverrides& overrides) {
                 : ext == ".gltf" || ext == ".glb" ? load_gltf_scene(path)
                                                   : load_json_scene(path);  // .json and the rest
   for (const std::string& w : scene.warnings) spdlog::warn("{}", w);
-  flatten_instances(scene);
+  prepare_instances(scene);
   apply_overrides(scene, overrides);
   return scene;
 }

@@ -132,7 +132,7 @@ struct Tracer {
       v.wo = pv.wo;
       v.beta = pv.beta;
       v.pdf_fwd = to_area(path[n - 1], pdf_fwd, v);
-      if (tracer.ctx.scene.meshes[v.hit.mesh].emission)
+      if (tracer.ctx.accel.mesh(v.hit.mesh).emission)
         v.light = tracer.ctx.lights.area_light_index(v.hit.mesh, v.hit.prim);
       ++n;
     }
@@ -255,7 +255,7 @@ struct Tracer {
       if (pt.kind == VertexKind::Light)
         c = pt.beta * ctx.lights.environment_radiance(pt.dir);
       else if (pt.light != kNoLight)
-        c = pt.beta * LightSet::emitted(ctx.scene.meshes[pt.hit.mesh], pt.hit.ng, pt.wo);
+        c = pt.beta * LightSet::emitted(ctx.accel.mesh(pt.hit.mesh), pt.hit.ng, pt.wo);
     } else if (t == 1) {
       const Vertex& qs = light[s - 1];
       Vec2 u_lens = sampler.get_2d();

@@ -4,15 +4,13 @@
 
 namespace rf {
 
-namespace {
-
-// Material parameters at a hit, textures resolved. The footprint is a ray-cone estimate: the
-// cone's width at the hit, converted to uv units by the triangle's uv-to-world area ratio.
-BsdfParams resolve(const RenderContext& ctx, const Material& m, const SurfaceHit& hit,
-                   float cone_width) {
+// The footprint is a ray-cone estimate: the cone's width at the hit, converted to uv units by the
+// triangle's uv-to-world area ratio.
+BsdfParams material_params_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width) {
+  const Material& m = ctx.scene.materials[ctx.accel.mesh(hit.mesh).material];
   BsdfParams p = constant_params(m);
   if (m.reflectance.texture < 0 && m.specular.texture < 0 && m.roughness.texture < 0) return p;
-  const Mesh& mesh = ctx.scene.meshes[hit.mesh];
+  const Mesh& mesh = ctx.accel.mesh(hit.mesh);
   float footprint = 0;
   if (!mesh.uvs.empty()) {
     const uint32_t* t = &mesh.indices[3 * hit.prim];
@@ -28,11 +26,8 @@ BsdfParams resolve(const RenderContext& ctx, const Material& m, const SurfaceHit
   return p;
 }
 
-}  // namespace
-
 Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width) {
-  const Material& m = ctx.scene.materials[ctx.scene.meshes[hit.mesh].material];
-  return Bsdf::make(resolve(ctx, m, hit, cone_width), hit.ns, hit.ng);
+  return Bsdf::make(material_params_at(ctx, hit, cone_width), hit.ns, hit.ng);
 }
 
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {

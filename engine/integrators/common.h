@@ -71,7 +71,9 @@ struct TraceCounters {
   uint64_t rays = 0;
 };
 
-// The BSDF at a hit, its textures resolved with a ray-cone footprint of the given width.
+// The material's parameters at a hit, textures resolved with a ray-cone footprint of the given
+// width, and the BSDF they make.
+BsdfParams material_params_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
 Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
 // Whether a light sample is visible from a hit (a ray to infinity for infinite lights).
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);

@@ -6,6 +6,10 @@
 //                        connections: then the rect is the whole frame);
 //   render_light_paths   light paths of the whole frame, each splatting where it reaches the film.
 //
+// When the scene asks for AOVs (engine/aov.h), the camera-path driver traces each camera sample's
+// ray once more for them (aov_sample.h), and the light-path driver casts spp-per-pass camera rays
+// per pixel for them, started like camera samples; neither draws from the samplers the image uses.
+//
 // Both are bit-identical whatever the thread count: pixels are filled by one thread each, and
 // splats are recorded per fixed chunk of work and added in chunk order (for_chunks_in_order).
 // Every random number comes from a Sampler started for (seed, frame, pass, pixel, sample) or
@@ -22,6 +26,7 @@
 #include <vector>
 
 #include "engine/filter.h"
+#include "engine/integrators/aov_sample.h"
 #include "engine/integrators/common.h"
 #include "engine/sample_buffer.h"
 #include "engine/work_units.h"
@@ -87,6 +92,31 @@ struct Tally {
   }
 };
 
+// The AOVs of a light-path render: spp-per-pass camera rays per pixel, cast for them alone.
+inline void light_path_aovs(const RenderContext& ctx, const TaskKey& task, bool parallel,
+                            SampleBuffer& buf, Tally& tally) {
+  const uint64_t spp = ctx.scene.render.spp_per_pass();
+  const Sampler::Kind kind = kind_from_name(ctx.scene.render.sampler);
+  auto rows = [&](int y_begin, int y_end) {
+    double t0 = thread_cpu_seconds();
+    TraceCounters counters;
+    Sampler sampler(kind);
+    for (int y = y_begin; y < y_end; ++y)
+      for (int x = buf.rect.x0; x < buf.rect.x1(); ++x)
+        for (uint64_t s = 0; s < spp; ++s) {
+          float filter_weight;
+          Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
+          buf.add_aov_sample(x, y, aov_sample(ctx, ray, counters));
+        }
+    tally.add(counters, t0);
+  };
+  if (parallel)
+    tbb::parallel_for(tbb::blocked_range<int>(buf.rect.y0, buf.rect.y1(), 1),
+                      [&](const auto& r) { rows(r.begin(), r.end()); });
+  else
+    rows(buf.rect.y0, buf.rect.y1());
+}
+
 }  // namespace driver_detail
 
 // One pass of camera paths over task.rect: spp_per_pass samples per pixel, each
@@ -103,6 +133,7 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
   const uint64_t spp = ctx.scene.render.spp_per_pass();
   const Sampler::Kind kind = kind_from_name(ctx.scene.render.sampler);
   const int w = ctx.scene.film.width, h = ctx.scene.film.height;
+  const bool aovs = ctx.scene.render.aovs.any();
   driver_detail::Tally tally;
 
   // Rows are disjoint: no two threads share a pixel.
@@ -117,6 +148,7 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
         for (uint64_t s = 0; s < spp; ++s) {
           float filter_weight;
           Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
+          if (aovs) buf.add_aov_sample(x, y, aov_sample(ctx, ray, counters));
           RGB l;
           if constexpr (kSplats)
             l = estimate(ray, sampler, target, counters);
@@ -197,6 +229,7 @@ SampleBuffer render_light_paths(const RenderContext& ctx, const TaskKey& task, b
       },
       [&](const std::vector<Splat>& out) { buf.add_splats(out); });
   buf.light_paths = paths;
+  if (ctx.scene.render.aovs.any()) driver_detail::light_path_aovs(ctx, task, parallel, buf, tally);
   tally.finish(buf);
   return buf;
 }

@@ -102,7 +102,7 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
     SurfaceHit hit;
     ++counters.rays;
     if (!ctx.accel.intersect(ray, hit)) break;  // no environment: refused by build_vpls
-    const Mesh& mesh = ctx.scene.meshes[hit.mesh];
+    const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
 

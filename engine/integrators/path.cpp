@@ -26,7 +26,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
       }
       break;
     }
-    const Mesh& mesh = ctx.scene.meshes[hit.mesh];
+    const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
 

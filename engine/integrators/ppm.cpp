@@ -98,7 +98,7 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
     SurfaceHit hit;
     ++counters.rays;
     if (!ctx.accel.intersect(ray, hit)) break;  // no environment: refused by build_photon_map
-    const Mesh& mesh = ctx.scene.meshes[hit.mesh];
+    const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
 

@@ -52,7 +52,7 @@ class SceneParser {
     parse_version(root);
     r_.check_keys(root, "",
                   {"format", "version", "camera", "film", "render", "textures", "materials", "shapes",
-                   "lights", "environment"});
+                   "lights", "environment", "objects", "instances"});
     parse_camera(r_.require(root, "", "camera"));
     parse_film(r_.require(root, "", "film"));
     if (const json* j = r_.find(root, "render"))
@@ -62,7 +62,10 @@ class SceneParser {
     if (const json* t = r_.find(root, "textures")) parse_textures(*t);
     parse_materials(r_.require(root, "", "materials"));
     const json& shapes = r_.array(r_.require(root, "", "shapes"), "shapes");
-    for (size_t i = 0; i < shapes.size(); ++i) parse_shape(shapes[i], json_child("shapes", i));
+    for (size_t i = 0; i < shapes.size(); ++i)
+      scene_.meshes.push_back(parse_shape(shapes[i], json_child("shapes", i)));
+    if (const json* o = r_.find(root, "objects")) parse_objects(*o);
+    if (const json* i = r_.find(root, "instances")) parse_instances(*i);
     if (const json* l = r_.find(root, "lights")) {
       r_.array(*l, "lights");
       for (size_t i = 0; i < l->size(); ++i) parse_light((*l)[i], json_child("lights", i));
@@ -172,7 +175,7 @@ class SceneParser {
 
   void parse_render(const json& j) {
     const std::string p = "render";
-    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target", "sampler"});
+    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target", "sampler", "aovs"});
     RenderSettings& rs = scene_.render;
     if (const json* i = r_.find(j, "integrator"))
       rf::parse_integrator(r_, *i, "render.integrator", rs.integrator);
@@ -190,6 +193,16 @@ class SceneParser {
       rs.sampler = r_.string(*v, "render.sampler");
       if (!contains_name(known_samplers(), rs.sampler))
         r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join_names(known_samplers()) + ")");
+    }
+    if (const json* v = r_.find(j, "aovs")) {
+      std::string list;
+      for (size_t i = 0; i < r_.array(*v, "render.aovs").size(); ++i)
+        list += (i ? "," : "") + r_.string((*v)[i], json_child("render.aovs", i));
+      try {
+        rs.aovs = parse_aovs(list);
+      } catch (const std::invalid_argument& e) {
+        r_.fail("render.aovs", e.what());
+      }
     }
     if (const json* v = r_.find(j, "noise_target")) {
       rs.noise_target = r_.real(*v, "render.noise_target");
@@ -447,7 +460,48 @@ class SceneParser {
     scene_.environment = env;
   }
 
-  void parse_shape(const json& j, const std::string& p) {
+  // Instancing: objects are named groups of shapes in their own space; instances place them.
+  void parse_objects(const json& j) {
+    r_.array(j, "objects");
+    for (size_t i = 0; i < j.size(); ++i) {
+      const std::string p = json_child("objects", i);
+      r_.expect_object(j[i], p);
+      r_.check_keys(j[i], p, {"name", "shapes"});
+      SceneObject obj;
+      obj.name = r_.string(r_.require(j[i], p, "name"), p + ".name");
+      if (object_ids_.count(obj.name)) r_.fail(p + ".name", "duplicate object name '" + obj.name + "'");
+      const json& shapes = r_.array(r_.require(j[i], p, "shapes"), p + ".shapes");
+      for (size_t k = 0; k < shapes.size(); ++k)
+        obj.meshes.push_back(parse_shape(shapes[k], json_child(p + ".shapes", k)));
+      object_ids_[obj.name] = uint32_t(scene_.objects.size());
+      scene_.objects.push_back(std::move(obj));
+    }
+  }
+
+  void parse_instances(const json& j) {
+    r_.array(j, "instances");
+    for (size_t i = 0; i < j.size(); ++i) {
+      const std::string p = json_child("instances", i);
+      r_.expect_object(j[i], p);
+      r_.check_keys(j[i], p, {"object", "transform"});
+      std::string name = r_.string(r_.require(j[i], p, "object"), p + ".object");
+      auto it = object_ids_.find(name);
+      if (it == object_ids_.end()) {
+        std::vector<std::string> known;
+        for (const SceneObject& o : scene_.objects) known.push_back(o.name);
+        r_.fail(p + ".object", "unknown object '" + name + "' (known: " +
+                                   (known.empty() ? std::string("none") : join_names(known)) + ")");
+      }
+      Instance inst;
+      inst.object = it->second;
+      if (const json* t = r_.find(j[i], "transform")) inst.to_world = parse_transform(*t, p + ".transform");
+      if (!(std::fabs(inst.to_world.det3()) > 0))
+        r_.fail(p + ".transform", "must be invertible (a zero scale flattens the object)");
+      scene_.instances.push_back(inst);
+    }
+  }
+
+  Mesh parse_shape(const json& j, const std::string& p) {
     r_.expect_object(j, p);
     std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
     std::vector<std::string> keys = {"type", "name", "material", "transform", "emission"};
@@ -489,7 +543,7 @@ class SceneParser {
       data = type == "rectangle" ? make_rectangle() : make_cube();
     }
     place_mesh(std::move(data), to_world, r_.file(), where, mesh);
-    scene_.meshes.push_back(std::move(mesh));
+    return mesh;
   }
 
   uint32_t material_ref(const json& j, const std::string& p) {
@@ -600,6 +654,7 @@ class SceneParser {
   Scene& scene_;
   SceneFiles& files_;
   std::map<std::string, uint32_t> material_ids_;
+  std::map<std::string, uint32_t> object_ids_;
 };
 
 }  // namespace
