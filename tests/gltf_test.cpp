@@ -15,6 +15,7 @@
 
 #include "engine/digest.h"
 #include "engine/formats/importers.h"
+#include "engine/fresnel.h"
 #include "engine/scene.h"
 #include "engine/texture.h"
 #include "tests/support/fixtures.h"
@@ -175,9 +176,15 @@ TEST(GltfTest, MaterialMapping) {
   EXPECT_TRUE(mat(0).conductor_tint);
   expect_vec(mat(0).specular.value, Vec3(0.9f, 0.6f, 0.3f), 1e-6f, "metal F0");
   EXPECT_FLOAT_EQ(mat(0).roughness.value, 0.25f);
-  // dielectric: plastic, IOR 1.5, diffuse base = base colour.
+  // dielectric: plastic, IOR 1.5, its base R compensated for the coat so that the diffuse albedo
+  // (1 - F) R (1 - F_dr) / (1 - R F_dr) (engine/bsdfs/plastic.h) is glTF's (1 - F) baseColor.
   EXPECT_EQ(mat(1).type, MaterialType::Plastic);
-  expect_vec(mat(1).reflectance.value, Vec3(0.2f, 0.4f, 0.6f), 1e-6f, "plastic base");
+  const float fdr = fresnel_diffuse_reflectance_interior(1.5f);
+  const RGB base(0.2f, 0.4f, 0.6f), r = mat(1).reflectance.value;
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_GT(r[k], base[k]);
+    EXPECT_NEAR(r[k] * (1 - fdr) / (1 - r[k] * fdr), base[k], 1e-6f) << "channel " << k;
+  }
   EXPECT_FLOAT_EQ(mat(1).roughness.value, 0.25f);
   EXPECT_FLOAT_EQ(mat(1).ior, 1.5f);
   // roughness 1 (the default) and specularFactor 0: Lambertian.
@@ -219,8 +226,8 @@ void expect_textured(const Scene& s) {
   EXPECT_FLOAT_EQ(base.uv_offset.x, 0.5f);
   EXPECT_FLOAT_EQ(base.uv_offset.y, -1.0f);
   const Material& m = s.materials.at(s.meshes.at(0).material);
-  EXPECT_EQ(m.type, MaterialType::Plastic);
-  EXPECT_EQ(m.reflectance.texture, 0);
+  EXPECT_EQ(m.type, MaterialType::RoughConductor);  // metallicFactor 1: F0 = the texture
+  EXPECT_EQ(m.specular.texture, 0);
   TextureEvaluator ev(s);
   ColorParam b{RGB(0.0f), 0};
   // glTF uv -> uv' = 2 uv + (0.5, 0) -> texel; engine uv = (u, 1 - v). Texel centres, so the
@@ -246,6 +253,18 @@ TEST(GltfTest, DataUriTexturesAndPackedRoughness) {
   EXPECT_NEAR(ev.eval(r, {0.25f, 0.75f}, 0), (0.8f * g00) * (0.8f * g00), 1e-3f * 0.04f);
   EXPECT_NEAR(ev.eval(r, {0.75f, 0.25f}, 0), (0.8f * g11) * (0.8f * g11), 1e-3f * 0.64f);
   EXPECT_TRUE(has_warning(s, "/samplers/0", "the texture repeats")) << all_warnings(s);
+  EXPECT_TRUE(has_warning(s, "/materials/0/pbrMetallicRoughness/metallicRoughnessTexture",
+                          "cannot vary over a surface"));
+  // As a dielectric (metallic 0) the textured base colour becomes a Lambertian, with a warning.
+  std::string dir = test::make_temp_dir("gltf");
+  json j = read_json(data("textured.gltf"));
+  j["materials"][0]["pbrMetallicRoughness"]["metallicFactor"] = 0;
+  test::write_text(dir + "/dielectric.gltf", j.dump());
+  Scene d = load_gltf_scene(dir + "/dielectric.gltf");
+  EXPECT_EQ(d.materials.at(d.meshes.at(0).material).type, MaterialType::Diffuse);
+  EXPECT_EQ(d.materials.at(d.meshes.at(0).material).reflectance.texture, 0);
+  EXPECT_TRUE(
+      has_warning(d, "/materials/0/pbrMetallicRoughness/baseColorTexture", "rendered Lambertian"));
 }
 
 TEST(GltfTest, ExternalImageIsRegisteredForTheBundle) {

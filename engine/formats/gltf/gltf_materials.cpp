@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "engine/formats/gltf/gltf_internal.h"
+#include "engine/fresnel.h"
 #include "engine/json_reader.h"
 #include "engine/microfacet.h"
 
@@ -115,6 +116,17 @@ int32_t add_texture(Context& c, const tinygltf::TextureInfo& info, const std::st
   t.uv_offset = {o.x, 1.0f - s.y - o.y};
   c.scene->textures.push_back(std::move(t));
   return int32_t(c.scene->textures.size() - 1);
+}
+
+// The plastic's diffuse albedo is (1 - F(cos_o)) R (1 - F_dr) / (1 - R F_dr), F_dr its coat's
+// internal diffuse reflectance (engine/bsdfs/plastic.h); glTF's dielectric BRDF weighs its
+// Lambertian lobe by (1 - F) baseColor. R = b / ((1 - F_dr) + b F_dr), per channel, makes them
+// equal (R <= 1 for b <= 1); without it the base would render 30-60% too dark at IOR 1.5.
+RGB coat_compensated(RGB b, float ior) {
+  const float fdr = fresnel_diffuse_reflectance_interior(ior);
+  RGB r;
+  for (int k = 0; k < 3; ++k) r[k] = b[k] / ((1 - fdr) + b[k] * fdr);
+  return r;
 }
 
 // glTF's default material (a primitive without one): base colour 1, metallic 1, roughness 1.
@@ -248,9 +260,17 @@ Converted convert(Context& c, size_t index, MaterialMap& out) {
   } else if ((!mr_texture && rough == 1.0) || specular == 0 || ior == 1.0) {
     m.type = MaterialType::Diffuse;  // no specular lobe worth a coat
     m.reflectance = base_param;
+  } else if (base_param.texture >= 0) {
+    // The coat's compensation (below) is not linear in the base colour, so it cannot follow a
+    // texture; an uncompensated plastic would be 30-60% too dark, so keep the albedo instead.
+    m.type = MaterialType::Diffuse;
+    m.reflectance = base_param;
+    c.warn(ptr(pbrp, "baseColorTexture"),
+           "a textured dielectric is rendered Lambertian (its specular coat, roughness " +
+               format_number(rough) + ", is dropped to keep the textured colour's albedo)");
   } else {
     m.type = MaterialType::Plastic;
-    m.reflectance = base_param;
+    m.reflectance.value = coat_compensated(base, engine_ior);
     m.roughness = alpha;
     m.ior = engine_ior;
   }

@@ -167,7 +167,7 @@ def textured():
     b.j["materials"] = [{"name": "textured", "pbrMetallicRoughness": {
         "baseColorFactor": [0.5, 1, 1, 1],
         "baseColorTexture": {"index": 0, "extensions": {"KHR_texture_transform": {"offset": [0.5, 0], "scale": [2, 2]}}},
-        "metallicFactor": 0, "roughnessFactor": 0.8, "metallicRoughnessTexture": {"index": 1}}}]
+        "metallicFactor": 1, "roughnessFactor": 0.8, "metallicRoughnessTexture": {"index": 1}}}]
     b.j["meshes"] = [{"primitives": [dict(b.quad(), material=0)]}]
     b.j["nodes"] = [{"mesh": 0}]
     b.j["scenes"] = [{"nodes": [0]}]
