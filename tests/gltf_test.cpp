@@ -335,6 +335,23 @@ TEST(GltfTest, PrimitiveModesIndexTypesAndSparse) {
   EXPECT_TRUE(has_warning(s, "/meshes/2/primitives/0/mode", "points and lines")) << all_warnings(s);
 }
 
+TEST(GltfTest, InterleavedNormalizedAndQuantizedAccessors) {
+  Scene s = load_gltf_scene(data("interleaved.gltf"));
+  ASSERT_EQ(s.meshes.size(), 2u) << all_warnings(s);
+  const Mesh& m = s.meshes[0];
+  // Positions and normals interleaved in one 24-byte stride.
+  expect_vec(m.positions[1], Vec3(2, 0, 0), 0, "interleaved position");
+  expect_vec(m.positions[2], Vec3(0, 2, 0), 0, "interleaved position");
+  expect_vec(m.normals[1], Vec3(0, 0, 1), 0, "interleaved normal");
+  // Normalized u8 uvs (0,255) (255,255) (0,0) -> glTF (0,1) (1,1) (0,0) -> engine v = 1 - v.
+  EXPECT_FLOAT_EQ(m.uvs[0].y, 0);
+  EXPECT_FLOAT_EQ(m.uvs[1].x, 1);
+  EXPECT_FLOAT_EQ(m.uvs[2].y, 1);
+  // KHR_mesh_quantization: plain (not normalized) int16 positions, 8-byte stride.
+  expect_vec(s.meshes[1].positions[1], Vec3(4, 0, 0), 0, "quantized position");
+  expect_vec(s.meshes[1].positions[2], Vec3(0, 4, 0), 0, "quantized position");
+}
+
 // Each malformed file: the message starts with the file and the JSON pointer and says why.
 TEST(GltfTest, MalformedFilesNameThePointerAndTheProblem) {
   struct Case {

@@ -209,6 +209,28 @@ def primitives():
     return b.done()
 
 
+def interleaved():
+    """Interleaved float positions and normals (stride 24), normalized u8 uvs (stride 4) and
+    KHR_mesh_quantization's plain int16 positions (stride 8)."""
+    b = Builder()
+    v = b.view(struct.pack("<18f", 0, 0, 0, 0, 0, 1, 2, 0, 0, 0, 0, 1, 0, 2, 0, 0, 0, 1), stride=24)
+    b.j["accessors"] += [
+        {"bufferView": v, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [2, 2, 0]},
+        {"bufferView": v, "byteOffset": 12, "componentType": 5126, "count": 3, "type": "VEC3"}]
+    uv = b.view(bytes([0, 255, 0, 0, 255, 255, 0, 0, 0, 0, 0, 0]), stride=4)
+    b.j["accessors"].append({"bufferView": uv, "componentType": 5121, "normalized": True, "count": 3, "type": "VEC2"})
+    q = b.view(struct.pack("<12h", 0, 0, 0, 0, 4, 0, 0, 0, 0, 4, 0, 0), stride=8)
+    b.j["accessors"].append({"bufferView": q, "componentType": 5122, "count": 3, "type": "VEC3",
+                             "min": [0, 0, 0], "max": [4, 4, 0]})
+    b.j["extensionsUsed"] = ["KHR_mesh_quantization"]
+    b.j["extensionsRequired"] = ["KHR_mesh_quantization"]
+    b.j["meshes"] = [{"name": "interleaved", "primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2}}]},
+                     {"name": "quantized", "primitives": [{"attributes": {"POSITION": 3}}]}]
+    b.j["nodes"] = [{"mesh": 0}, {"mesh": 1}]
+    b.j["scenes"] = [{"nodes": [0, 1]}]
+    return b.done()
+
+
 def malformed():
     bad = {}
     base = hierarchy()
@@ -285,6 +307,7 @@ if __name__ == "__main__":
     write("textured.gltf", textured())
     write("textured_external.gltf", textured_external())
     write("primitives.gltf", primitives())
+    write("interleaved.gltf", interleaved())
     with open("checker.png", "wb") as f:
         f.write(TEXTURE_PNG)
     malformed()
