@@ -38,6 +38,13 @@ struct Texture {
   std::string resolved_path;     // image: path to open (scene dir + file)
   bool is_data = false;          // image: true = linear values (roughness maps); false = colour,
                                  // 8-bit images sRGB-decoded
+  // Post-lookup remapping (all kinds; the defaults change nothing), used by glTF's factor x
+  // texture products and its packed metallic-roughness maps (engine/texture.h states the order):
+  RGB scale{1.0f};               // multiplies the looked-up RGB, channel by channel
+  int8_t channel = -1;           // FloatParam: read channel 0..3 (R, G, B, A); -1 = single
+                                 // channel or luminance
+  bool squared = false;          // FloatParam: the scalar is squared last (perceptual roughness
+                                 // -> GGX alpha)
 };
 
 enum class MaterialType : uint8_t {

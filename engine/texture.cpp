@@ -256,6 +256,7 @@ TextureEvaluator::TextureEvaluator(const Scene& scene, size_t cache_megabytes)
   ts->attribute("automip", 1);
   ts->attribute("accept_untiled", 1);
   ts->attribute("accept_unmipped", 1);
+  ts->attribute("unassociatedalpha", 1);  // colours as stored, never multiplied by alpha
   try {
     for (size_t i = 0; i < textures_.size(); ++i)
       if (textures_[i].type == TextureType::Image) open_image(int(i));
@@ -281,7 +282,11 @@ void TextureEvaluator::open_image(int index) {
   const Texture& t = textures_[index];
   OIIO::TextureSystem* ts = as_ts(texture_system_);
   std::string path = t.resolved_path.empty() ? t.file : t.resolved_path;
-  auto in = OIIO::ImageInput::open(path);
+  // Colour channels as stored: OIIO would otherwise multiply PNG/TIFF colours by their alpha
+  // (associate it), darkening the colour wherever alpha < 1; no material reads alpha as coverage.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto in = OIIO::ImageInput::open(path, &config);
   if (!in) throw texture_error(t, "cannot open image: " + OIIO::geterror());
   const OIIO::ImageSpec spec = in->spec();
   bool decode = !t.is_data && !spec.format.is_floating_point() && !tagged_linear(spec);
@@ -311,16 +316,18 @@ void TextureEvaluator::lookup(int index, Vec2 uv, float fp, bool want_scalar, fl
   const Texture& t = textures_[index];
   float u = uv.x * t.uv_scale.x + t.uv_offset.x;
   float v = uv.y * t.uv_scale.y + t.uv_offset.y;
+  float c[3] = {0, 0, 0}, alpha = 1;
+  bool grey = false;  // a one-channel image: its scalar is that channel, not a luminance
   switch (t.type) {
     case TextureType::Constant:
-      out[0] = t.value.x, out[1] = t.value.y, out[2] = t.value.z;
+      c[0] = t.value.x, c[1] = t.value.y, c[2] = t.value.z;
       break;
     case TextureType::Checkerboard: {
       double fu = odd_fraction(u, double(fp) * std::fabs(t.uv_scale.x));
       double fv = odd_fraction(v, double(fp) * std::fabs(t.uv_scale.y));
       float b = float(fu * (1.0 - fv) + fv * (1.0 - fu));  // fraction of b cells (odd sum)
-      RGB c = t.color_a * (1.0f - b) + t.color_b * b;
-      out[0] = c.x, out[1] = c.y, out[2] = c.z;
+      RGB col = t.color_a * (1.0f - b) + t.color_b * b;
+      c[0] = col.x, c[1] = col.y, c[2] = col.z;
       break;
     }
     case TextureType::Image: {
@@ -334,19 +341,30 @@ void TextureEvaluator::lookup(int index, Vec2 uv, float fp, bool want_scalar, fl
       // of an isotropic square lookup, scaled like the coordinates.
       float ds = fp * std::fabs(t.uv_scale.x), dt = fp * std::fabs(t.uv_scale.y);
       int n = colour_channels(img.channels);
-      float r[3] = {0, 0, 0};
-      if (!ts->texture(img.handle, ts->get_perthread_info(), opt, u, 1.0f - v, ds, 0, 0, dt, n, r))
+      if (!ts->texture(img.handle, ts->get_perthread_info(), opt, u, 1.0f - v, ds, 0, 0, dt, n, c))
         ts->geterror();  // clear the message; the lookup reads black (the file opened at start)
-      if (n == 1) r[1] = r[2] = r[0];
-      if (want_scalar) {
-        out[0] = n == 1 ? r[0] : luminance(RGB(r[0], r[1], r[2]));
-        return;
+      int alpha_channel = img.channels == 2 ? 1 : img.channels >= 4 ? 3 : -1;
+      if (want_scalar && t.channel == 3 && alpha_channel >= 0) {
+        opt.firstchannel = alpha_channel;
+        if (!ts->texture(img.handle, ts->get_perthread_info(), opt, u, 1.0f - v, ds, 0, 0, dt, 1,
+                         &alpha))
+          ts->geterror();
       }
-      out[0] = r[0], out[1] = r[1], out[2] = r[2];
-      return;
+      if (n == 1) c[1] = c[2] = c[0];
+      grey = n == 1;
+      break;
     }
   }
-  if (want_scalar) out[0] = luminance(RGB(out[0], out[1], out[2]));
+  for (int k = 0; k < 3; ++k) c[k] *= t.scale[k];
+  if (!want_scalar) {
+    out[0] = c[0], out[1] = c[1], out[2] = c[2];
+    return;
+  }
+  float s = t.channel == 3                    ? alpha
+            : t.channel >= 0 && t.channel < 3 ? c[t.channel]
+            : grey                            ? c[0]
+                                              : luminance(RGB(c[0], c[1], c[2]));
+  out[0] = t.squared ? s * s : s;
 }
 
 RGB TextureEvaluator::eval(const ColorParam& p, Vec2 uv, float uv_footprint) const {

@@ -24,7 +24,14 @@
 //   with the evaluator; ready-made .tx files skip both.
 // - A checkerboard is colour a where floor(u') + floor(v') is even, else b; with a footprint it is
 //   box-filtered in closed form over a square of that width.
+// - Colour channels are read as stored, never multiplied by the image's alpha (OIIO associates
+//   alpha by default for PNG and TIFF; the engine has no cut-outs, so alpha is not coverage).
 // - FloatParam textures read their single channel, or the luminance of a colour.
+// - Remapping after the lookup (Texture::scale, channel, squared; defaults are the identity): the
+//   RGB is multiplied by scale; a FloatParam with channel c in 0..2 reads (scale * RGB)[c]
+//   (a one- or two-channel image, grey or grey-alpha, gives its grey for every c), channel 3
+//   reads the alpha (1 when the image has none, never scaled); then, if squared, the scalar is
+//   squared. ColorParams ignore channel and squared.
 #pragma once
 
 #include <cstddef>

@@ -237,6 +237,65 @@ TEST(TextureTest, DataImagesAreNotDecoded) {
     }
 }
 
+// Texture::scale, channel and squared (glTF's factor x texture and its packed metallic-roughness
+// maps: roughness in G, metallic in B). Tolerance: the rewritten file stores half floats, relative
+// error <= 2^-11 (1/8 of an 8-bit code step), doubled where the value is squared.
+TEST(TextureTest, ScaleChannelAndSquaredRemapTheLookup) {
+  std::string dir = test::make_temp_dir("texture");
+  std::vector<uint8_t> rgba = {10, 100, 200, 50, 150, 250, 0, 128, 0, 0, 0, 255, 255, 255, 255, 0};
+  {  // stored as given: OIIO would otherwise treat the values as premultiplied and divide by alpha
+    OIIO::ImageSpec spec(2, 2, 4, OIIO::TypeDesc::UINT8);
+    spec.attribute("oiio:UnassociatedAlpha", 1);
+    auto out = OIIO::ImageOutput::create(dir + "/rgba.png");
+    ASSERT_TRUE(out && out->open(dir + "/rgba.png", spec)) << OIIO::geterror();
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, rgba.data()));
+    ASSERT_TRUE(out->close());
+  }
+  std::vector<uint8_t> grey = {0, 64, 128, 255};
+  write_png8(dir + "/grey.png", 2, 2, 1, grey);
+  std::vector<Texture> ts;
+  for (int c = -1; c < 4; ++c) {  // 0..4: channel -1, 0, 1, 2, 3 of the RGBA image, scaled
+    Texture t = image_texture(dir + "/rgba.png", true);
+    t.scale = RGB(0.5f, 0.25f, 2.0f);
+    t.channel = int8_t(c);
+    ts.push_back(t);
+  }
+  Texture sq = image_texture(dir + "/rgba.png", true);  // 5: G, squared, scaled by 0.5
+  sq.channel = 1, sq.squared = true, sq.scale = RGB(0.5f);
+  ts.push_back(sq);
+  Texture g = image_texture(dir + "/grey.png", true);  // 6: B of a grey image, alpha (7)
+  g.channel = 2;
+  ts.push_back(g);
+  g.channel = 3;
+  ts.push_back(g);
+  Texture k;  // 8: constant, channel 1 scaled
+  k.type = TextureType::Constant, k.value = RGB(0.2f, 0.4f, 0.6f), k.scale = RGB(2.0f),
+  k.channel = 1;
+  ts.push_back(k);
+  TextureEvaluator ev(scene_with(ts));
+  const RGB scale(0.5f, 0.25f, 2.0f);
+  for (int j = 0; j < 2; ++j)
+    for (int i = 0; i < 2; ++i) {
+      Vec2 uv = texel_centre(i, j, 2, 2);
+      int k4 = (j * 2 + i) * 4;
+      RGB raw(rgba[k4] / 255.0f, rgba[k4 + 1] / 255.0f, rgba[k4 + 2] / 255.0f);
+      float a = rgba[k4 + 3] / 255.0f;
+      auto near = [](float got, float want, float rel) {
+        EXPECT_NEAR(got, want, rel * want + 1e-6f);
+      };
+      RGB col = ev.eval(tex(0), uv, 0);
+      for (int c = 0; c < 3; ++c) near(col[c], raw[c] * scale[c], 5e-4f);
+      near(ev.eval(ftex(0), uv, 0), luminance(raw * scale), 5e-4f);
+      for (int c = 0; c < 3; ++c) near(ev.eval(ftex(1 + c), uv, 0), raw[c] * scale[c], 5e-4f);
+      near(ev.eval(ftex(4), uv, 0), a, 5e-4f);  // alpha is never scaled
+      near(ev.eval(ftex(5), uv, 0), (0.5f * raw.y) * (0.5f * raw.y), 1e-3f);
+      float gv = grey[j * 2 + i] / 255.0f;
+      near(ev.eval(ftex(6), uv, 0), gv, 5e-4f);
+      EXPECT_EQ(ev.eval(ftex(7), uv, 0), 1.0f);  // no alpha channel: opaque
+      EXPECT_FLOAT_EQ(ev.eval(ftex(8), uv, 0), 0.8f);
+    }
+}
+
 TEST(TextureTest, FloatExrTexelCentresAreExact) {
   std::string dir = test::make_temp_dir("texture");
   const int w = 5, h = 3;

@@ -1,0 +1,81 @@
+// What the glTF importer's files share (docs/formats/gltf.md): the loaded model, the scene being
+// filled and the error helpers. Every message starts with the file and a JSON pointer
+// ("/materials/3/pbrMetallicRoughness/metallicRoughnessTexture") and names the feature.
+#pragma once
+
+#include <tiny_gltf.h>
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "engine/formats/scene_files.h"
+#include "engine/mesh_io.h"
+#include "engine/scene.h"
+
+namespace rf::gltf {
+
+using json = nlohmann::json;
+
+// JSON pointer child: "/a" + "b" -> "/a/b" (RFC 6901 escaping of '~' and '/').
+std::string ptr(const std::string& parent, const std::string& key);
+std::string ptr(const std::string& parent, size_t index);
+
+struct Context {
+  std::string file;       // the scene file as given (messages)
+  tinygltf::Model model;  // as tinygltf parsed it (indices unchecked: check before use)
+  json root;              // the same JSON, for extension objects tinygltf keeps as Values
+  SceneFiles* files = nullptr;
+  Scene* scene = nullptr;
+  std::map<int, std::string> data_uri_images;  // image index -> bytes of a data: URI image
+  std::map<int, std::string> image_paths;      // image index -> file OpenImageIO reads
+
+  [[noreturn]] void fail(const std::string& where, const std::string& what) const;
+  void warn(const std::string& where, const std::string& what) const;
+  // The JSON object at a pointer made of keys and indices, or nullptr.
+  const json* at(const std::string& pointer) const;
+  // The extension object `name` of the JSON object at `pointer`, or nullptr.
+  const json* extension(const std::string& pointer, const std::string& name) const;
+};
+
+// The bytes of a buffer view, checked to lie inside its buffer (gltf_accessors.cpp).
+struct ViewBytes {
+  const unsigned char* data = nullptr;
+  size_t size = 0, stride = 0;
+};
+ViewBytes view_bytes(const Context& c, int view, const std::string& where);
+
+// Accessors (gltf_accessors.cpp). Every read checks the accessor, its buffer view and buffer
+// bounds, the stride, the component type, and sparse substitutions before touching a byte.
+// Values of an accessor as floats, `components` per element (normalized integers mapped to
+// [0, 1] or [-1, 1] as the spec says); the accessor's type must have that many components.
+std::vector<float> read_floats(const Context& c, int accessor, int components,
+                               const std::string& where);
+// Vertex indices (SCALAR, unsigned byte/short/int), each checked < vertex_count.
+std::vector<uint32_t> read_indices(const Context& c, int accessor, size_t vertex_count,
+                                   const std::string& where);
+
+// Materials and textures (gltf_materials.cpp): fills scene.materials (one per glTF material, plus
+// the spec's default material at the end when a primitive has none), scene.textures and the
+// emission of each material (nullopt when black).
+struct MaterialMap {
+  std::vector<uint32_t> material;                 // glTF material -> Scene::materials index
+  std::vector<std::optional<Emission>> emission;  // glTF material -> its area-light emission
+  uint32_t default_material = 0;
+  bool uses_texcoord = false;  // some material reads a texture (meshes then need TEXCOORD_0)
+};
+MaterialMap convert_materials(Context& c);
+
+// Embedded images (gltf_images.cpp): the file OpenImageIO reads for image `index` (external
+// files are registered through SceneFiles; data: URI and bufferView images are extracted into
+// the content-addressed cache directory).
+std::string image_file(Context& c, int index, const std::string& where);
+// The cache directory for extracted images: $XDG_CACHE_HOME/rayfarm/gltf-images, or
+// ~/.cache/rayfarm/gltf-images, or $TMPDIR/rayfarm-gltf-images without a home.
+std::string image_cache_dir();
+// RFC 3986 percent-decoding of a relative URI ("my%20image.png" -> "my image.png").
+std::string percent_decode(const std::string& uri);
+
+}  // namespace rf::gltf
