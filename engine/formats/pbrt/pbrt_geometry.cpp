@@ -108,7 +108,18 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
     whole_shape = true;
     return make_pbrt_disk(h, r, ri, phimax, 128);
   }
-  static const char* unsupported[] = {"cylinder", "cone", "paraboloid", "hyperboloid", "curve", "loopsubdiv", "nurbs", "heightfield"};
+  if (type == "loopsubdiv") {
+    // The control mesh, flat: Loop subdivision is not implemented.
+    std::vector<Vec3> p = to_vec3(params.numbers("P", "point3", 3));
+    if (p.empty()) fail(at, d + ": needs \"point3 P\"");
+    MeshData m;
+    m.indices = indices_of(params, p.size(), 3, at, d);
+    m.positions = std::move(p);
+    warn(at, d + ": Loop subdivision is not supported; the control mesh (" + std::to_string(m.indices.size() / 3) +
+                 " triangles, \"levels\" " + std::to_string(params.integer("levels", 3)) + ") is rendered flat");
+    return m;
+  }
+  static const char* unsupported[] = {"cylinder", "cone", "paraboloid", "hyperboloid", "curve", "nurbs", "heightfield"};
   for (const char* u : unsupported)
     if (type == u) fail(at, d + ": shape not supported (known: trianglemesh, plymesh, bilinearmesh, sphere, disk)");
   fail(at, d + ": unknown shape (known: trianglemesh, plymesh, bilinearmesh, sphere, disk)");

@@ -174,6 +174,8 @@ ParamList read_params(Lexer& lex) {
           fail(lex.at(e.line), "parameter " + p.decl() + ": ']' expected before " +
                                    (e.kind == Token::End ? std::string("the end of the file")
                                                          : std::string("'['")));
+        if (e.kind == Token::String && kind != Kind::String && p.type != "spectrum")
+          fail(lex.at(e.line), "parameter " + p.decl() + ": ']' expected before \"" + e.text + "\"");
         add_value(p, kind, e, lex.at(e.line));
       }
     } else if (v.kind == Token::Word || v.kind == Token::String) {

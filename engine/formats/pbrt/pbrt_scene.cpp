@@ -209,15 +209,20 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   } else if (name == "Include" || name == "Import") {
     include(lex, at, name);
   } else if (name == "Camera") {
-    camera(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    camera(type, read_params(lex), at);
   } else if (name == "Film") {
-    film(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    film(type, read_params(lex), at);
   } else if (name == "PixelFilter") {
-    filter(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    filter(type, read_params(lex), at);
   } else if (name == "Sampler") {
-    sampler(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    sampler(type, read_params(lex), at);
   } else if (name == "Integrator") {
-    integrator(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    integrator(type, read_params(lex), at);
   } else if (name == "Accelerator") {
     string_arg(lex, name);
     read_params(lex);  // the acceleration structure does not change the image
@@ -251,11 +256,14 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     if (it == named_materials_.end()) fail(at, "NamedMaterial: unknown material \"" + n + "\"");
     gs.material = it->second;
   } else if (name == "LightSource") {
-    light(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    light(type, read_params(lex), at);
   } else if (name == "AreaLightSource") {
-    area_light(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    area_light(type, read_params(lex), at);
   } else if (name == "Shape") {
-    shape(string_arg(lex, name), read_params(lex), at);
+    std::string type = string_arg(lex, name);
+    shape(type, read_params(lex), at);
   } else if (name == "ObjectBegin") {
     std::string n = string_arg(lex, name);
     if (current_object_ >= 0) fail(at, "ObjectBegin \"" + n + "\": inside another ObjectBegin (nesting is not allowed)");

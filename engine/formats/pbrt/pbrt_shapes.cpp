@@ -8,17 +8,24 @@ namespace rf::pbrt {
 namespace {
 constexpr double kPiD = 3.14159265358979323846;
 
-// Appends the grid's two triangles per cell; vertex (i, j) at base + i * (cols + 1) + j.
-void grid_triangles(MeshData& m, uint32_t base, int rows, int cols, bool flip) {
+// Appends the grid's two triangles per cell (vertex (i, j) at base + i * (cols + 1) + j), leaving
+// out those with two coincident corners (at a sphere's poles, a disk's centre). Returns how many
+// triangles it appended.
+size_t grid_triangles(MeshData& m, uint32_t base, int rows, int cols) {
+  size_t before = m.indices.size();
+  auto add = [&](uint32_t a, uint32_t b, uint32_t c) {
+    const auto& p = m.positions;
+    if (p[a] == p[b] || p[b] == p[c] || p[a] == p[c]) return;
+    m.indices.insert(m.indices.end(), {a, b, c});
+  };
   for (int i = 0; i < rows; ++i)
     for (int j = 0; j < cols; ++j) {
       uint32_t a = base + uint32_t(i * (cols + 1) + j), b = a + 1;
       uint32_t c = a + uint32_t(cols + 1), d = c + 1;
-      if (flip)
-        m.indices.insert(m.indices.end(), {a, c, b, b, c, d});
-      else
-        m.indices.insert(m.indices.end(), {a, b, c, b, d, c});
+      add(a, b, c);
+      add(b, d, c);
     }
+  return (m.indices.size() - before) / 3;
 }
 }  // namespace
 
@@ -46,7 +53,7 @@ MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int
     }
   }
   // Going up in z (v) and round in phi (u): d/dphi x d/dz points outward for (u, v) -> (a, b, c).
-  grid_triangles(m, 0, rows, cols, false);
+  grid_triangles(m, 0, rows, cols);
   return m;
 }
 
@@ -65,8 +72,8 @@ MeshData make_pbrt_disk(float height, float radius, float inner_radius, float ph
     }
   }
   // Outer (row 0) to inner (row 1) is -rho, round is +phi: (outer_j, outer_j+1, inner_j) winds +z.
-  grid_triangles(m, 0, 1, cols, false);
-  return m;  // at the centre of a full disk the inner triangles are degenerate: place_mesh drops them
+  grid_triangles(m, 0, 1, cols);
+  return m;
 }
 
 MeshData make_bilinear_patches(const std::vector<Vec3>& p, const std::vector<uint32_t>& indices,
@@ -102,8 +109,8 @@ MeshData make_bilinear_patches(const std::vector<Vec3>& p, const std::vector<uin
       }
     }
     // (u, v) grid: cross(dp/du, dp/dv) is pbrt's normal; (a, b, c) with b = +u, c = +v matches.
-    grid_triangles(m, base, g, g, false);
-    patch_of_triangle.insert(patch_of_triangle.end(), size_t(2 * g * g), uint32_t(k / 4));
+    size_t added = grid_triangles(m, base, g, g);
+    patch_of_triangle.insert(patch_of_triangle.end(), added, uint32_t(k / 4));
   }
   return m;
 }
