@@ -208,6 +208,14 @@ TEST(PbrtSpectra, BlackbodyAndNamedSpectra) {
   EXPECT_FALSE(pbrt::named_spectrum_rgb("metal-CuZn-eta", false).has_value());
 }
 
+TEST(PbrtSpectra, SpectrumFilesAndInlineSpectra) {
+  Scene s = load_scene(data("spectra.pbrt"));
+  ASSERT_EQ(s.materials.size(), 1u);
+  expect_near(s.materials[0].eta, RGB(0.5f), 1e-4f);  // flat spectra are grey
+  expect_near(s.materials[0].k, RGB(3.0f), 1e-3f);
+  EXPECT_EQ(s.assets, std::vector<std::string>{"inc/flat.spd"});  // shipped with the scene
+}
+
 TEST(PbrtEnvmap, EqualAreaOctahedralSquare) {
   // pbrt-v4's mapping: +z at the centre, -z at the corners, +x at the right edge's middle.
   Vec2 c = pbrt::equal_area_square({0, 0, 1});

@@ -57,6 +57,7 @@ class Builder {
   void warn(const Location& at, const std::string& what);
   void warn_unused(const ParamList& params, const std::string& directive);
   RGB spectrum_value(const Param& p, bool illuminant, const std::string& directive);
+  std::vector<double> read_spd(const Param& p, const std::string& file, const std::string& directive);
 
  private:
   enum class Active { All, Start, End };

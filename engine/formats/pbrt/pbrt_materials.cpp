@@ -2,6 +2,8 @@
 // "Materials", "Textures", "Colour").
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <sstream>
 
 #include "engine/formats/pbrt/pbrt_builder.h"
 #include "engine/formats/pbrt/pbrt_spectra.h"
@@ -26,6 +28,34 @@ std::string lower_ext(const std::string& f) {
 
 }  // namespace
 
+// A spectrum file (pbrt's .spd): whitespace-separated (wavelength nm, value) pairs, '#' comments.
+std::vector<double> Builder::read_spd(const Param& p, const std::string& file, const std::string& d) {
+  const std::string what = d + ": parameter " + p.decl() + " \"" + file + "\"";
+  std::string bytes = files_call(p.at, what, [&] { return files_.read(file, "spectrum file"); });
+  std::vector<double> v;
+  std::istringstream in(bytes);
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    line = line.substr(0, line.find('#'));
+    std::istringstream words(line);
+    std::string w;
+    while (words >> w) {
+      char* end = nullptr;
+      double x = std::strtod(w.c_str(), &end);
+      if (end == w.c_str() || *end != '\0' || !std::isfinite(x))
+        fail(p.at, what + ": line " + std::to_string(line_no) + ": expected a number, got '" + w + "'");
+      v.push_back(x);
+    }
+  }
+  if (v.size() < 4 || v.size() % 2 != 0)
+    fail(p.at, what + ": expected (wavelength, value) pairs, got " + std::to_string(v.size()) + " numbers");
+  for (size_t i = 2; i < v.size(); i += 2)
+    if (!(v[i] > v[i - 2])) fail(p.at, what + ": wavelengths must increase");
+  return v;
+}
+
 RGB Builder::spectrum_value(const Param& p, bool illuminant, const std::string& d) {
   const std::string what = d + ": parameter " + p.decl();
   if (p.type == "rgb" || p.type == "color") {
@@ -46,7 +76,7 @@ RGB Builder::spectrum_value(const Param& p, bool illuminant, const std::string& 
       const std::string& n = p.strings[0];
       if (std::optional<RGB> c = named_spectrum_rgb(n, illuminant)) return *c;
       if (lower_ext(n) == "spd" || n.find('/') != std::string::npos || n.find('.') != std::string::npos)
-        fail(p.at, what + ": spectrum files (\"" + n + "\") are not supported; give the values inline");
+        return sampled_spectrum_rgb(read_spd(p, n, d), illuminant);
       fail(p.at, what + ": unknown named spectrum \"" + n + "\" (known: " + join_names(known_spectrum_names()) + ")");
     }
     if (p.numbers.size() < 4 || p.numbers.size() % 2 != 0)
