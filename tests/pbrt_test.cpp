@@ -191,6 +191,20 @@ TEST(PbrtDirectives, InstancesStayObjectsUntilLoadSceneFlattens) {
   expect_near(s.instances[1].to_world.vector({1, 0, 0}), {0, 0, -2}, 1e-5f);  // Rotate 90 y, Scale 2
 }
 
+TEST(PbrtDirectives, SensorImagingRatioScalesEveryEmitter) {
+  // pbrt-v4's cie1931 sensor multiplies the image by exposure time x ISO / 100 = 0.5 x 400 / 100.
+  std::string dir = test::make_temp_dir("pbrt-iso");
+  test::write_text(dir + "/scene.pbrt",
+                   "Film \"rgb\" \"float iso\" 400\nCamera \"perspective\" \"float shutterclose\" 0.5\n"
+                   "WorldBegin\nLightSource \"point\" \"rgb I\" [1 2 3]\nLightSource \"infinite\" \"rgb L\" [1 1 1]\n"
+                   "AttributeBegin\nAreaLightSource \"diffuse\" \"rgb L\" [4 4 4]\nShape \"disk\"\nAttributeEnd\n");
+  Scene s = load_scene(dir + "/scene.pbrt");
+  expect_near(s.lights.at(0).intensity, {2, 4, 6}, 1e-6f);
+  expect_near(s.environment->scale, {2, 2, 2}, 1e-6f);
+  ASSERT_TRUE(s.meshes.at(0).emission.has_value());
+  expect_near(s.meshes[0].emission->radiance, {8, 8, 8}, 1e-6f);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Colour and maps
 

@@ -63,6 +63,7 @@ class Builder {
   enum class Active { All, Start, End };
 
   void directive(const std::string& name, Lexer& lex, const Location& at);
+  void finish();
   std::string string_arg(Lexer& lex, const std::string& directive);
   std::vector<double> number_args(Lexer& lex, const std::string& directive, size_t n);
   Mat4 look_at(const Location& at, const std::vector<double>& v);
@@ -132,7 +133,8 @@ class Builder {
   std::vector<std::vector<Light>> object_lights_;  // per object, in object space
   int current_object_ = -1;
   Location object_begin_at_;
-  Location cur_at_;  // the directive being read (for messages about its parameters)
+  Location cur_at_;
+  double exposure_time_ = 1, iso_ = 100;  // the sensor's imaging ratio: exposure_time * iso / 100  // the directive being read (for messages about its parameters)
 };
 
 }  // namespace rf::pbrt

@@ -71,9 +71,24 @@ void Builder::run(const std::string& main_bytes) {
       fail(at, "expected a directive, got " + (t.kind == Token::String ? "\"" + t.text + "\"" : "'" + t.text + "'"));
     directive(t.text, lex, at);
   }
+  finish();
   if (current_object_ >= 0) fail(object_begin_at_, "ObjectBegin \"" + scene_.objects[size_t(current_object_)].name + "\" has no ObjectEnd");
   if (!stack_.empty())
     warn(stack_.back().begun_at, "AttributeBegin without a matching AttributeEnd at the end of the scene");
+}
+
+// pbrt-v4's sensor ("cie1931") scales the image by its imaging ratio, exposure time x ISO / 100.
+// Light transport is linear, so scaling every emitter by it gives the same image.
+void Builder::finish() {
+  const float k = float(exposure_time_ * iso_ / 100.0);
+  if (k == 1.0f) return;
+  for (Light& l : scene_.lights) l.intensity = l.intensity * k, l.irradiance = l.irradiance * k;
+  for (Mesh& m : scene_.meshes)
+    if (m.emission) m.emission->radiance = m.emission->radiance * k;
+  for (SceneObject& o : scene_.objects)
+    for (Mesh& m : o.meshes)
+      if (m.emission) m.emission->radiance = m.emission->radiance * k;
+  if (scene_.environment) scene_.environment->scale = scene_.environment->scale * k;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -348,7 +363,9 @@ void Builder::camera(const std::string& type, const ParamList& params, const Loc
   scene_.camera.focus_distance = float(params.number("focaldistance", 1e6));
   if (scene_.camera.lens_radius < 0) fail(at, "Camera: \"float lensradius\" must be at least 0");
   if (!(scene_.camera.focus_distance > 0)) fail(at, "Camera: \"float focaldistance\" must be > 0");
-  params.find("shutteropen"), params.find("shutterclose");  // no motion: the shutter changes nothing
+  // The shutter: no motion blur, but its length is the sensor's exposure time (see finish()).
+  exposure_time_ = params.number("shutterclose", 1) - params.number("shutteropen", 0);
+  if (!(exposure_time_ > 0)) fail(at, "Camera: \"shutterclose\" must be after \"shutteropen\"");
   warn_unused(params, "Camera \"perspective\"");
 }
 
@@ -362,6 +379,12 @@ void Builder::film(const std::string& type, const ParamList& params, const Locat
   scene_.film.width = w;
   scene_.film.height = h;
   params.find("filename");  // the output file is named on the command line
+  iso_ = params.number("iso", 100);
+  if (!(iso_ > 0)) fail(at, "Film: \"float iso\" must be > 0");
+  std::string sensor = params.string("sensor", "cie1931");
+  if (sensor != "cie1931") warn(at, "Film: \"sensor\" \"" + sensor + "\" is not supported; the CIE 1931 observer is used");
+  if (params.number("whitebalance", 0) != 0) warn(at, "Film: \"whitebalance\" is not supported (ignored)");
+  params.find("savefp16"), params.find("diagonal");  // output precision; the realistic camera's
   warn_unused(params, "Film \"" + type + "\"");
 }
 
