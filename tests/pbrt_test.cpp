@@ -279,6 +279,46 @@ TEST(PbrtEnvmap, ImageInfiniteLightIsResampledToLatLong) {
   EXPECT_FLOAT_EQ(map.radiance(normalize(Vec3(0.3f, -1, 0.2f))).x, 0.6f);  // light (+x, -y, -z)
 }
 
+// Reads the first channel of an image's pixels as float.
+std::vector<float> first_channel(const std::string& path) {
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) return {};
+  const OIIO::ImageSpec& spec = in->spec();
+  std::vector<float> px(size_t(spec.width) * spec.height * spec.nchannels);
+  in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, px.data());
+  std::vector<float> out;
+  for (size_t i = 0; i < px.size(); i += size_t(spec.nchannels)) out.push_back(px[i]);
+  return out;
+}
+
+TEST(PbrtTextures, ImageScaleAndInvertAreBakedIntoACopy) {
+  // An 8-bit PNG (sRGB by pbrt-v4's default for .png): texels 255 and 128.
+  std::string dir = test::make_temp_dir("pbrt-tex");
+  unsigned char px[2 * 3] = {255, 255, 255, 128, 128, 128};
+  auto out = OIIO::ImageOutput::create(dir + "/t.png");
+  ASSERT_TRUE(out && out->open(dir + "/t.png", OIIO::ImageSpec(2, 1, 3, OIIO::TypeDesc::UINT8)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px) && out->close());
+  test::write_text(dir + "/scene.pbrt",
+                   "WorldBegin\nTexture \"a\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"float scale\" 0.5\n"
+                   "Texture \"b\" \"spectrum\" \"scale\" \"texture tex\" \"a\" \"float scale\" 0.5\n"
+                   "Texture \"c\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"bool invert\" true\n");
+  Scene s = load_scene(dir + "/scene.pbrt");
+  ASSERT_EQ(s.textures.size(), 3u);
+  EXPECT_EQ(s.assets, std::vector<std::string>{"t.png"});  // the original ships, not the copies
+  const float dark = 0.21586f;  // sRGB 128/255 decoded
+  std::vector<float> a = first_channel(s.textures[0].resolved_path), b = first_channel(s.textures[1].resolved_path),
+                     c = first_channel(s.textures[2].resolved_path);
+  ASSERT_EQ(a.size(), 2u);
+  ASSERT_EQ(b.size(), 2u);
+  ASSERT_EQ(c.size(), 2u);
+  EXPECT_NEAR(a[0], 0.5f, 1e-5f);
+  EXPECT_NEAR(a[1], 0.5f * dark, 1e-4f);
+  EXPECT_NEAR(b[0], 0.25f, 1e-5f);
+  EXPECT_NEAR(b[1], 0.25f * dark, 1e-4f);
+  EXPECT_NEAR(c[0], 0.0f, 1e-5f);
+  EXPECT_NEAR(c[1], 1 - dark, 1e-4f);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Malformed files: each message starts "<file>:<line>: " and says what is wrong.
 

@@ -129,6 +129,7 @@ class Builder {
   std::map<std::string, int> named_materials_;
   int default_material_ = -1;
   std::map<std::string, TexValue> float_textures_, spectrum_textures_;
+  std::map<int32_t, std::pair<float, bool>> image_arith_;  // image texture -> baked (scale, invert)
   std::map<std::string, uint32_t> object_ids_;
   std::vector<std::vector<Light>> object_lights_;  // per object, in object space
   int current_object_ = -1;

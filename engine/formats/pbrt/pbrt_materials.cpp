@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "engine/formats/pbrt/pbrt_builder.h"
+#include "engine/formats/pbrt/pbrt_images.h"
 #include "engine/formats/pbrt/pbrt_spectra.h"
 
 namespace rf::pbrt {
@@ -398,13 +399,18 @@ void Builder::texture(const std::string& name, const std::string& kind, const st
     } else if (enc != "sRGB") {
       warn(at, d + ": \"encoding\" \"" + enc + "\" is not supported; sRGB is used");
     }
-    if (params.boolean("invert", false)) warn(at, d + ": \"invert\" is not supported (ignored)");
+    bool invert = params.boolean("invert", false);
     float sc = float(params.number("scale", 1));
-    if (sc != 1) warn(at, d + ": \"scale\" " + format_number(sc) + " of an image texture is not supported (ignored)");
+    if (invert || sc != 1) {
+      t.resolved_path = files_call(at, d + " \"" + file + "\"", [&] {
+        return bake_image(t.resolved_path, sc, invert, t.is_data, "'" + t.file + "'");
+      });
+    }
     std::string wrap = params.string("wrap", "repeat");
     if (wrap != "repeat") warn(at, d + ": \"wrap\" \"" + wrap + "\" is not supported; repeat is used");
     params.find("filter"), params.find("maxanisotropy");  // lookup filtering: the engine's trilinear
     tv.texture = push_texture(t);
+    image_arith_[tv.texture] = {sc, invert};
   } else if (cls == "checkerboard") {
     if (params.integer("dimension", 2) != 2) warn(at, d + ": 3D checkerboards are not supported; a 2D one is used");
     TexValue a = tex_input(params, "tex1", RGB(1.0f), is_float, d), b = tex_input(params, "tex2", RGB(0.0f), is_float, d);
@@ -427,8 +433,18 @@ void Builder::texture(const std::string& name, const std::string& kind, const st
       c.color_a = c.color_a * s.value.x;
       c.color_b = c.color_b * s.value.x;
       tv.texture = push_texture(c);
+    } else if (is_const(s) && image_arith_.count(a.texture) && !image_arith_[a.texture].second) {
+      // An image times a constant: baked into a scaled copy of the image (pbrt_images.h).
+      Texture c = scene_.textures[size_t(a.texture)];
+      float total = image_arith_[a.texture].first * s.value.x;
+      c.name = name;
+      c.resolved_path = files_call(at, d, [&] {
+        return bake_image(files_.path_of(c.file), total, false, c.is_data, "'" + c.file + "'");
+      });
+      tv.texture = push_texture(c);
+      image_arith_[tv.texture] = {total, false};
     } else {
-      warn(at, d + ": \"scale\" of a texture by a texture or of an image is not supported; the unscaled texture is used");
+      warn(at, d + ": \"scale\" of a texture by a texture is not supported; the unscaled texture is used");
       tv = is_const(a) ? s : a;
     }
   } else if (cls == "mix") {
