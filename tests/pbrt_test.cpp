@@ -191,6 +191,16 @@ TEST(PbrtDirectives, InstancesStayObjectsUntilLoadSceneFlattens) {
   expect_near(s.instances[1].to_world.vector({1, 0, 0}), {0, 0, -2}, 1e-5f);  // Rotate 90 y, Scale 2
 }
 
+TEST(PbrtDirectives, NamedMaterialsMayBeDefinedLater) {
+  Scene s = load_scene(data("forward.pbrt"));
+  ASSERT_EQ(s.meshes.size(), 1u);  // the disk's material is "interface": left out
+  ASSERT_EQ(s.materials.size(), 1u);
+  EXPECT_EQ(s.materials[0].name, "late");
+  EXPECT_EQ(s.materials[0].type, MaterialType::Conductor);
+  EXPECT_EQ(s.meshes[0].material, 0u);
+  EXPECT_TRUE(has_warning(s, "forward.pbrt:7: its material (\"interface\")"));
+}
+
 TEST(PbrtDirectives, SensorImagingRatioScalesEveryEmitter) {
   // pbrt-v4's cie1931 sensor multiplies the image by exposure time x ISO / 100 = 0.5 x 400 / 100.
   std::string dir = test::make_temp_dir("pbrt-iso");
@@ -364,7 +374,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadFile{"unknown_directive.pbrt", 2, "unknown directive 'WorldBgin'"},
         BadFile{"camera_type.pbrt", 1, "Camera \"orthographic\": only the perspective camera"},
         BadFile{"bad_bool.pbrt", 2, "\"bool twosided\": expected true or false, got 'yes'"},
-        BadFile{"unknown_named_material.pbrt", 2, "NamedMaterial: unknown material \"chrome\""},
+        BadFile{"unknown_named_material.pbrt", 3,
+                "Shape \"sphere\": material \"chrome\" (NamedMaterial at "},
         BadFile{"index_range.pbrt", 3, "index 3 out of range (3 vertices)"},
         BadFile{"unknown_spectrum.pbrt", 2, "unknown named spectrum \"metal-CuZn-eta\""}),
     [](const auto& info) {

@@ -28,6 +28,8 @@ struct GraphicsState {
   Mat4 ctm;
   bool reverse_orientation = false;
   int material = -1;  // index into Builder::materials_, -1: pbrt's default (diffuse 0.5)
+  std::string material_name;  // NamedMaterial's name (takes precedence over `material`)
+  Location material_at;       // of that NamedMaterial
   std::optional<AreaLight> area_light;
   Location begun_at;  // of the AttributeBegin that saved this state
 };
@@ -92,7 +94,11 @@ class Builder {
   int define_material(const std::string& name, const std::string& type, const ParamList& params,
                       const Location& at);
   MaterialDef build_material(const std::string& type, const ParamList& params, const std::string& d);
-  uint32_t material_for_shape(const Location& at, const std::string& shape, bool& interface);
+  // The current material's index in Scene::materials; `pending` when it is a NamedMaterial not
+  // defined yet (resolve_pending_materials() sets it once the whole file is read).
+  uint32_t material_for_shape(const Location& at, const std::string& shape, bool& interface, bool& pending);
+  uint32_t use_material(int index, const Location& at, const std::string& shape, bool& interface);
+  void resolve_pending_materials();
   ColorParam color_param(const ParamList& params, const std::string& name, RGB def, const std::string& d);
   FloatParam float_param(const ParamList& params, const std::string& name, float def, const std::string& d);
   FloatParam roughness(const ParamList& params, const std::string& prefix, const std::string& d);
@@ -128,6 +134,14 @@ class Builder {
   std::vector<MaterialDef> materials_;
   std::map<std::string, int> named_materials_;
   int default_material_ = -1;
+  struct PendingMaterial {
+    int object;   // -1: Scene::meshes, else Scene::objects[object].meshes
+    size_t mesh;  // index in that list
+    std::string name;
+    Location material_at, shape_at;
+    std::string shape;
+  };
+  std::vector<PendingMaterial> pending_materials_;
   std::map<std::string, TexValue> float_textures_, spectrum_textures_;
   std::map<int32_t, std::pair<float, bool>> image_arith_;  // image texture -> baked (scale, invert)
   std::map<std::string, uint32_t> object_ids_;

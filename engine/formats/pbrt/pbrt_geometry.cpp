@@ -127,8 +127,8 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
 
 void Builder::shape(const std::string& type, const ParamList& params, const Location& at) {
   const std::string d = "Shape \"" + type + "\"";
-  bool interface = false;
-  uint32_t material = material_for_shape(at, d, interface);
+  bool interface = false, pending = false;
+  uint32_t material = material_for_shape(at, d, interface, pending);
   std::vector<uint32_t> element_of_triangle;
   bool whole = false;
   MeshData data = shape_mesh(type, params, at, element_of_triangle, whole);
@@ -161,7 +161,12 @@ void Builder::shape(const std::string& type, const ParamList& params, const Loca
   } else if (gs_.reverse_orientation) {
     for (size_t t = 0; t + 2 < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
   }
+  std::vector<Mesh>& target = current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
+  size_t first = target.size();
   add_mesh(std::move(data), element_of_triangle, whole, type, at, material);
+  if (pending)
+    for (size_t i = first; i < target.size(); ++i)
+      pending_materials_.push_back({current_object_, i, gs_.material_name, gs_.material_at, at, d});
 }
 
 void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_triangle, bool whole_shape,

@@ -309,8 +309,17 @@ int Builder::define_material(const std::string& name, const std::string& type, c
   return int(materials_.size()) - 1;
 }
 
-uint32_t Builder::material_for_shape(const Location& at, const std::string& shape, bool& interface) {
+uint32_t Builder::material_for_shape(const Location& at, const std::string& shape, bool& interface, bool& pending) {
+  pending = false;
   int idx = gs_.material;
+  if (!gs_.material_name.empty()) {
+    auto it = named_materials_.find(gs_.material_name);
+    if (it == named_materials_.end()) {
+      pending = true;
+      return 0;
+    }
+    idx = it->second;
+  }
   if (idx < 0) {
     if (default_material_ < 0) {
       MaterialDef def;
@@ -322,7 +331,11 @@ uint32_t Builder::material_for_shape(const Location& at, const std::string& shap
     }
     idx = default_material_;
   }
-  MaterialDef& m = materials_[size_t(idx)];
+  return use_material(idx, at, shape, interface);
+}
+
+uint32_t Builder::use_material(int index, const Location& at, const std::string& shape, bool& interface) {
+  MaterialDef& m = materials_[size_t(index)];
   if (!m.error.empty()) fail(at, shape + ": " + m.error + " (the material is defined at " + m.at.str() + ")");
   if (m.interface) {
     interface = true;
@@ -333,6 +346,32 @@ uint32_t Builder::material_for_shape(const Location& at, const std::string& shap
     scene_.materials.push_back(m.material);
   }
   return uint32_t(m.scene_index);
+}
+
+void Builder::resolve_pending_materials() {
+  std::vector<std::pair<int, size_t>> left_out;
+  for (const PendingMaterial& p : pending_materials_) {
+    auto it = named_materials_.find(p.name);
+    if (it == named_materials_.end())
+      fail(p.shape_at, p.shape + ": material \"" + p.name + "\" (NamedMaterial at " + p.material_at.str() +
+                           ") is not defined anywhere in the scene");
+    bool interface = false;
+    uint32_t index = use_material(it->second, p.shape_at, p.shape, interface);
+    std::vector<Mesh>& list = p.object < 0 ? scene_.meshes : scene_.objects[size_t(p.object)].meshes;
+    if (interface) {
+      left_out.push_back({p.object, p.mesh});
+      continue;
+    }
+    list[p.mesh].material = index;
+  }
+  // Shapes whose material turned out to be "interface": left out, last first so indices hold.
+  std::sort(left_out.begin(), left_out.end(), [](auto a, auto b) { return a.second > b.second; });
+  for (auto [object, mesh] : left_out) {
+    std::vector<Mesh>& list = object < 0 ? scene_.meshes : scene_.objects[size_t(object)].meshes;
+    scene_.warnings.push_back(list[mesh].name + ": its material (\"interface\") has no surface; the shape is left out");
+    list.erase(list.begin() + std::ptrdiff_t(mesh));
+  }
+  pending_materials_.clear();
 }
 
 // ------------------------------------------------------------------------------------------

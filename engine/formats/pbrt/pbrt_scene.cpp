@@ -71,6 +71,7 @@ void Builder::run(const std::string& main_bytes) {
       fail(at, "expected a directive, got " + (t.kind == Token::String ? "\"" + t.text + "\"" : "'" + t.text + "'"));
     directive(t.text, lex, at);
   }
+  resolve_pending_materials();
   finish();
   if (current_object_ >= 0) fail(object_begin_at_, "ObjectBegin \"" + scene_.objects[size_t(current_object_)].name + "\" has no ObjectEnd");
   if (!stack_.empty())
@@ -258,6 +259,7 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     std::string type = string_arg(lex, name);
     ParamList params = read_params(lex);
     gs.material = define_material("", type, params, at);
+    gs.material_name.clear();
   } else if (name == "MakeNamedMaterial") {
     std::string n = string_arg(lex, name);
     ParamList params = read_params(lex);
@@ -266,10 +268,9 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
       fail(at, "MakeNamedMaterial \"" + n + "\": needs a \"string type\" parameter");
     named_materials_[n] = define_material(n, t->strings[0], params, at);
   } else if (name == "NamedMaterial") {
-    std::string n = string_arg(lex, name);
-    auto it = named_materials_.find(n);
-    if (it == named_materials_.end()) fail(at, "NamedMaterial: unknown material \"" + n + "\"");
-    gs.material = it->second;
+    // Resolved when a shape uses it: pbrt-v4 allows the definition to come later in the file.
+    gs.material_name = string_arg(lex, name);
+    gs.material_at = at;
   } else if (name == "LightSource") {
     std::string type = string_arg(lex, name);
     light(type, read_params(lex), at);
