@@ -45,8 +45,9 @@ MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int
     for (int j = 0; j <= cols; ++j) {
       double u = double(j) / cols;
       double phi = (j == cols && phimax >= 2 * kPiD) ? 0.0 : u * phimax;
-      Vec3 n(float(std::sin(theta) * std::cos(phi)), float(std::sin(theta) * std::sin(phi)),
-             float(std::cos(theta)));
+      double st = std::sin(theta);
+      if (std::fabs(st) < 1e-9) st = 0;  // the poles exactly, so their triangles are recognised
+      Vec3 n(float(st * std::cos(phi)), float(st * std::sin(phi)), float(std::cos(theta)));
       m.positions.push_back(n * r);
       m.normals.push_back(n);
       m.uvs.push_back({float(u), float(v)});
