@@ -5,6 +5,7 @@
 #include <OpenImageIO/imageio.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -199,6 +200,22 @@ TEST(PbrtDirectives, NamedMaterialsMayBeDefinedLater) {
   EXPECT_EQ(s.materials[0].type, MaterialType::Conductor);
   EXPECT_EQ(s.meshes[0].material, 0u);
   EXPECT_TRUE(has_warning(s, "forward.pbrt:7: its material (\"interface\")"));
+}
+
+TEST(PbrtDirectives, AreaLightPowerIsPerTriangleAsInPbrtV4) {
+  // Triangles of area 0.5 and 1 under "power" 10: pbrt-v4 makes one light per triangle, each of
+  // 10 W, so L = 10 / (pi A): two meshes of radiance 20/pi and 10/pi.
+  std::string dir = test::make_temp_dir("pbrt-power");
+  test::write_text(dir + "/scene.pbrt",
+                   "WorldBegin\nAreaLightSource \"diffuse\" \"rgb L\" [1 1 1] \"float power\" 10\n"
+                   "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0  2 0 0 4 0 0 2 1 0]\n"
+                   "  \"integer indices\" [0 1 2 3 4 5]\n");
+  Scene s = load_scene(dir + "/scene.pbrt");
+  ASSERT_EQ(s.meshes.size(), 2u);
+  std::vector<float> L = {s.meshes[0].emission->radiance.x, s.meshes[1].emission->radiance.x};
+  std::sort(L.begin(), L.end());
+  EXPECT_NEAR(L[0], 10 / M_PI, 1e-4);
+  EXPECT_NEAR(L[1], 20 / M_PI, 1e-4);
 }
 
 TEST(PbrtDirectives, SensorImagingRatioScalesEveryEmitter) {
