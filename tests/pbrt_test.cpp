@@ -9,10 +9,10 @@
 #include <cmath>
 #include <filesystem>
 
+#include "engine/envmap.h"
 #include "engine/formats/importers.h"
 #include "engine/formats/pbrt/pbrt_envmap.h"
 #include "engine/formats/pbrt/pbrt_spectra.h"
-#include "engine/envmap.h"
 #include "engine/local_render.h"
 #include "engine/render.h"
 #include "engine/scene.h"
@@ -123,8 +123,10 @@ TEST(PbrtDirectives, LightsAndAreaLights) {
   expect_near(spot.direction, {0, -1, 0}, 1e-6f);
   EXPECT_FLOAT_EQ(spot.cone_angle_deg, 40);
   EXPECT_FLOAT_EQ(spot.falloff_start_deg, 30);
-  // power: I = power / (2 pi ((1 - cos 30) + (cos 30 - cos 40) / 2)) for a blackbody of luminance 1.
-  double k = 2 * M_PI * ((1 - std::cos(M_PI / 6)) + (std::cos(M_PI / 6) - std::cos(40 * M_PI / 180)) / 2);
+  // power: I = power / (2 pi ((1 - cos 30) + (cos 30 - cos 40) / 2)) for a blackbody of
+  // luminance 1.
+  double k =
+      2 * M_PI * ((1 - std::cos(M_PI / 6)) + (std::cos(M_PI / 6) - std::cos(40 * M_PI / 180)) / 2);
   EXPECT_NEAR(luminance(spot.intensity), 10 / k, 0.02 * 10 / k);  // the CIE fit's luminance: ~1%
   const Light& distant = s.lights[2];
   EXPECT_EQ(distant.type, LightType::Directional);
@@ -189,7 +191,8 @@ TEST(PbrtDirectives, InstancesStayObjectsUntilLoadSceneFlattens) {
   ASSERT_EQ(s.objects.size(), 1u);
   EXPECT_EQ(s.objects[0].name, "post");
   ASSERT_EQ(s.instances.size(), 2u);
-  expect_near(s.instances[1].to_world.vector({1, 0, 0}), {0, 0, -2}, 1e-5f);  // Rotate 90 y, Scale 2
+  expect_near(s.instances[1].to_world.vector({1, 0, 0}), {0, 0, -2},
+              1e-5f);  // Rotate 90 y, Scale 2
 }
 
 TEST(PbrtDirectives, NamedMaterialsMayBeDefinedLater) {
@@ -221,10 +224,13 @@ TEST(PbrtDirectives, AreaLightPowerIsPerTriangleAsInPbrtV4) {
 TEST(PbrtDirectives, SensorImagingRatioScalesEveryEmitter) {
   // pbrt-v4's cie1931 sensor multiplies the image by exposure time x ISO / 100 = 0.5 x 400 / 100.
   std::string dir = test::make_temp_dir("pbrt-iso");
-  test::write_text(dir + "/scene.pbrt",
-                   "Film \"rgb\" \"float iso\" 400\nCamera \"perspective\" \"float shutterclose\" 0.5\n"
-                   "WorldBegin\nLightSource \"point\" \"rgb I\" [1 2 3]\nLightSource \"infinite\" \"rgb L\" [1 1 1]\n"
-                   "AttributeBegin\nAreaLightSource \"diffuse\" \"rgb L\" [4 4 4]\nShape \"disk\"\nAttributeEnd\n");
+  test::write_text(
+      dir + "/scene.pbrt",
+      "Film \"rgb\" \"float iso\" 400\nCamera \"perspective\" \"float shutterclose\" 0.5\n"
+      "WorldBegin\nLightSource \"point\" \"rgb I\" [1 2 3]\nLightSource \"infinite\" \"rgb L\" [1 "
+      "1 1]\n"
+      "AttributeBegin\nAreaLightSource \"diffuse\" \"rgb L\" [4 4 4]\nShape "
+      "\"disk\"\nAttributeEnd\n");
   Scene s = load_scene(dir + "/scene.pbrt");
   expect_near(s.lights.at(0).intensity, {2, 4, 6}, 1e-6f);
   expect_near(s.environment->scale, {2, 2, 2}, 1e-6f);
@@ -242,7 +248,8 @@ TEST(PbrtSpectra, BlackbodyAndNamedSpectra) {
   RGB warm = pbrt::blackbody_rgb(2700);
   EXPECT_GT(warm.x, warm.y);
   EXPECT_GT(warm.y, warm.z);
-  EXPECT_NEAR(luminance(warm), 1.0f, 0.02f);  // normalised to luminance 1 (the fit's Y vs Rec.709's)
+  EXPECT_NEAR(luminance(warm), 1.0f,
+              0.02f);  // normalised to luminance 1 (the fit's Y vs Rec.709's)
   // A flat reflectance spectrum is grey.
   expect_near(pbrt::sampled_spectrum_rgb({400, 0.3, 700, 0.3}, false), RGB(0.3f), 1e-4f);
   EXPECT_EQ(*pbrt::named_spectrum_rgb("metal-Cu-eta", false), conductor_preset("copper")->eta);
@@ -282,16 +289,18 @@ TEST(PbrtEnvmap, ImageInfiniteLightIsResampledToLatLong) {
   for (int y = 0; y < n; ++y)
     for (int x = 0; x < n; ++x) {
       float u = 2 * (x + 0.5f) / n - 1, v = 2 * (y + 0.5f) / n - 1;
-      float value = (std::fabs(u) + std::fabs(v) < 1 ? 1.0f : 0.1f) * (u > 0 ? 2.0f : 1.0f) * (v > 0 ? 1.5f : 1.0f);
+      float value = (std::fabs(u) + std::fabs(v) < 1 ? 1.0f : 0.1f) * (u > 0 ? 2.0f : 1.0f) *
+                    (v > 0 ? 1.5f : 1.0f);
       for (int c = 0; c < 3; ++c) px[(size_t(y) * n + x) * 3 + c] = value;
     }
   std::string dir = test::make_temp_dir("pbrt-env");
   auto out = OIIO::ImageOutput::create(dir + "/sky.exr");
   ASSERT_TRUE(out && out->open(dir + "/sky.exr", OIIO::ImageSpec(n, n, 3, OIIO::TypeDesc::FLOAT)));
   ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, px.data()) && out->close());
-  test::write_text(dir + "/scene.pbrt", "WorldBegin\nAttributeBegin\nRotate -90 1 0 0\n"
-                                        "LightSource \"infinite\" \"string filename\" \"sky.exr\" \"float scale\" 3\n"
-                                        "AttributeEnd\n");
+  test::write_text(dir + "/scene.pbrt",
+                   "WorldBegin\nAttributeBegin\nRotate -90 1 0 0\n"
+                   "LightSource \"infinite\" \"string filename\" \"sky.exr\" \"float scale\" 3\n"
+                   "AttributeEnd\n");
   Scene s = load_scene(dir + "/scene.pbrt");
   ASSERT_TRUE(s.environment.has_value());
   EXPECT_EQ(s.environment->file, "sky.exr");
@@ -325,15 +334,19 @@ TEST(PbrtTextures, ImageScaleAndInvertAreBakedIntoACopy) {
   auto out = OIIO::ImageOutput::create(dir + "/t.png");
   ASSERT_TRUE(out && out->open(dir + "/t.png", OIIO::ImageSpec(2, 1, 3, OIIO::TypeDesc::UINT8)));
   ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px) && out->close());
-  test::write_text(dir + "/scene.pbrt",
-                   "WorldBegin\nTexture \"a\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"float scale\" 0.5\n"
-                   "Texture \"b\" \"spectrum\" \"scale\" \"texture tex\" \"a\" \"float scale\" 0.5\n"
-                   "Texture \"c\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"bool invert\" true\n");
+  test::write_text(
+      dir + "/scene.pbrt",
+      "WorldBegin\nTexture \"a\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"float "
+      "scale\" 0.5\n"
+      "Texture \"b\" \"spectrum\" \"scale\" \"texture tex\" \"a\" \"float scale\" 0.5\n"
+      "Texture \"c\" \"spectrum\" \"imagemap\" \"string filename\" \"t.png\" \"bool invert\" "
+      "true\n");
   Scene s = load_scene(dir + "/scene.pbrt");
   ASSERT_EQ(s.textures.size(), 3u);
   EXPECT_EQ(s.assets, std::vector<std::string>{"t.png"});  // the original ships, not the copies
-  const float dark = 0.21586f;  // sRGB 128/255 decoded
-  std::vector<float> a = first_channel(s.textures[0].resolved_path), b = first_channel(s.textures[1].resolved_path),
+  const float dark = 0.21586f;                             // sRGB 128/255 decoded
+  std::vector<float> a = first_channel(s.textures[0].resolved_path),
+                     b = first_channel(s.textures[1].resolved_path),
                      c = first_channel(s.textures[2].resolved_path);
   ASSERT_EQ(a.size(), 2u);
   ASSERT_EQ(b.size(), 2u);
@@ -405,8 +418,9 @@ TEST(PbrtBadFile, IncludeChainIsNamed) {
     load_scene(data("bad/include_chain.pbrt"));
     FAIL();
   } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("(included from " + data("bad/include_chain.pbrt") + ":3)"),
-              std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find("(included from " + data("bad/include_chain.pbrt") + ":3)"),
+        std::string::npos)
         << e.what();
   }
 }
@@ -437,7 +451,8 @@ TEST(PbrtAgreement, CornellBoxMatchesTheJsonScene) {
   Scene pbrt = load_with(dir + "scene-v4.pbrt", 64, 64, 16, 128, 32, "box");
   Scene json = load_with(dir + "scene.json", 64, 64, 16, 128, 32, "box");
   EXPECT_FLOAT_EQ(pbrt.film.filter.radius, 0.5f);
-  test::Agreement a = test::compare(test::render_stats(pbrt, 32, 1), test::render_stats(json, 32, 1));
+  test::Agreement a =
+      test::compare(test::render_stats(pbrt, 32, 1), test::render_stats(json, 32, 1));
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("cornell pbrt vs json: %s\n", a.message.c_str());
 }
@@ -446,7 +461,8 @@ TEST(PbrtAgreement, CornellBoxImageMeansMatchTheReference) {
   // The converged means at max depth 64 (tests/cornell_test.cpp): (0.1963, 0.1275, 0.0361), each
   // within 1%; 64x64 at 1024 spp puts the render's own standard error below 0.2% of each.
   SceneOverrides ov;
-  ov.width = 64, ov.height = 64, ov.max_depth = 64, ov.spp = 1024, ov.passes = 16, ov.filter = "box";
+  ov.width = 64, ov.height = 64, ov.max_depth = 64, ov.spp = 1024, ov.passes = 16,
+  ov.filter = "box";
   Scene s = load_scene(test::source_dir() + "/scenes/cornell-box/scene-v4.pbrt", ov);
   Renderer r(s);
   LocalRenderResult res = render_local(r, {});
@@ -461,19 +477,24 @@ TEST(PbrtAgreement, CornellBoxImageMeansMatchTheReference) {
     SCOPED_TRACE("channel " + std::to_string(ch));
     EXPECT_LT(se, 0.002 * reference[ch]);
     EXPECT_NEAR(mean[ch], reference[ch], 0.01 * reference[ch]);
-    std::printf("cornell pbrt channel %d: mean %.5f (reference %.4f, se %.5f)\n", ch, mean[ch], reference[ch], se);
+    std::printf("cornell pbrt channel %d: mean %.5f (reference %.4f, se %.5f)\n", ch, mean[ch],
+                reference[ch], se);
   }
 }
 
 // Both at 160x90 (the shipped 1280x720 and 640x360 scaled down), triangle filter of radius 1
 // and max depth 3 (both files'), 32 passes.
-void veach_mis_agreement(uint64_t spp_per_pass, const char* sampler, uint64_t seed_pbrt, uint64_t seed_json) {
+void veach_mis_agreement(uint64_t spp_per_pass, const char* sampler, uint64_t seed_pbrt,
+                         uint64_t seed_json) {
   const std::string dir = test::source_dir() + "/scenes/veach-mis/";
-  Scene pbrt = load_with(dir + "scene-v4.pbrt", 160, 90, 3, 32 * spp_per_pass, 32, "triangle", sampler, seed_pbrt);
-  Scene json = load_with(dir + "scene.json", 160, 90, 3, 32 * spp_per_pass, 32, "triangle", sampler, seed_json);
+  Scene pbrt = load_with(dir + "scene-v4.pbrt", 160, 90, 3, 32 * spp_per_pass, 32, "triangle",
+                         sampler, seed_pbrt);
+  Scene json = load_with(dir + "scene.json", 160, 90, 3, 32 * spp_per_pass, 32, "triangle", sampler,
+                         seed_json);
   EXPECT_FLOAT_EQ(pbrt.film.filter.radius, 1.0f);
   EXPECT_FLOAT_EQ(json.film.filter.radius, 1.0f);
-  test::Agreement a = test::compare(test::render_stats(pbrt, 32, 1), test::render_stats(json, 32, 1));
+  test::Agreement a =
+      test::compare(test::render_stats(pbrt, 32, 1), test::render_stats(json, 32, 1));
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("veach-mis pbrt vs json: %s\n", a.message.c_str());
 }

@@ -27,7 +27,7 @@ struct AreaLight {
 struct GraphicsState {
   Mat4 ctm;
   bool reverse_orientation = false;
-  int material = -1;  // index into Builder::materials_, -1: pbrt's default (diffuse 0.5)
+  int material = -1;          // index into Builder::materials_, -1: pbrt's default (diffuse 0.5)
   std::string material_name;  // NamedMaterial's name (takes precedence over `material`)
   Location material_at;       // of that NamedMaterial
   std::optional<AreaLight> area_light;
@@ -59,7 +59,8 @@ class Builder {
   void warn(const Location& at, const std::string& what);
   void warn_unused(const ParamList& params, const std::string& directive);
   RGB spectrum_value(const Param& p, bool illuminant, const std::string& directive);
-  std::vector<double> read_spd(const Param& p, const std::string& file, const std::string& directive);
+  std::vector<double> read_spd(const Param& p, const std::string& file,
+                               const std::string& directive);
 
  private:
   enum class Active { All, Start, End };
@@ -93,14 +94,18 @@ class Builder {
   // pbrt_materials.cpp
   int define_material(const std::string& name, const std::string& type, const ParamList& params,
                       const Location& at);
-  MaterialDef build_material(const std::string& type, const ParamList& params, const std::string& d);
+  MaterialDef build_material(const std::string& type, const ParamList& params,
+                             const std::string& d);
   // The current material's index in Scene::materials; `pending` when it is a NamedMaterial not
   // defined yet (resolve_pending_materials() sets it once the whole file is read).
-  uint32_t material_for_shape(const Location& at, const std::string& shape, bool& interface, bool& pending);
+  uint32_t material_for_shape(const Location& at, const std::string& shape, bool& interface,
+                              bool& pending);
   uint32_t use_material(int index, const Location& at, const std::string& shape, bool& interface);
   void resolve_pending_materials();
-  ColorParam color_param(const ParamList& params, const std::string& name, RGB def, const std::string& d);
-  FloatParam float_param(const ParamList& params, const std::string& name, float def, const std::string& d);
+  ColorParam color_param(const ParamList& params, const std::string& name, RGB def,
+                         const std::string& d);
+  FloatParam float_param(const ParamList& params, const std::string& name, float def,
+                         const std::string& d);
   FloatParam roughness(const ParamList& params, const std::string& prefix, const std::string& d);
   float ior_value(const ParamList& params, const std::string& name, const std::string& d);
   void texture(const std::string& name, const std::string& kind, const std::string& cls,
@@ -149,7 +154,9 @@ class Builder {
   int current_object_ = -1;
   Location object_begin_at_;
   Location cur_at_;
-  double exposure_time_ = 1, iso_ = 100;  // the sensor's imaging ratio: exposure_time * iso / 100  // the directive being read (for messages about its parameters)
+  double exposure_time_ = 1,
+         iso_ = 100;  // the sensor's imaging ratio: exposure_time * iso / 100  // the directive
+                      // being read (for messages about its parameters)
 };
 
 }  // namespace rf::pbrt

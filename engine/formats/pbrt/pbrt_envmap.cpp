@@ -2,12 +2,12 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <unistd.h>
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <unistd.h>
 #include <vector>
 
 #include "engine/digest.h"
@@ -39,7 +39,9 @@ Vec2 equal_area_square(Vec3 d) {
 
 namespace {
 
-float srgb_decode(float e) { return e <= 0.04045f ? e / 12.92f : std::pow((e + 0.055f) / 1.055f, 2.4f); }
+float srgb_decode(float e) {
+  return e <= 0.04045f ? e / 12.92f : std::pow((e + 0.055f) / 1.055f, 2.4f);
+}
 
 std::vector<RGB> read_square(const std::string& path, const std::string& what, int& n) {
   auto in = OIIO::ImageInput::open(path);
@@ -48,8 +50,9 @@ std::vector<RGB> read_square(const std::string& path, const std::string& what, i
   int w = spec.width, h = spec.height, nc = spec.nchannels;
   if (w <= 0 || h <= 0 || nc <= 0) throw SceneError(what + ": the image has no pixels");
   if (w != h)
-    throw SceneError(what + ": pbrt-v4 image lights are equal-area octahedral maps and must be square, got " +
-                     std::to_string(w) + "x" + std::to_string(h));
+    throw SceneError(
+        what + ": pbrt-v4 image lights are equal-area octahedral maps and must be square, got " +
+        std::to_string(w) + "x" + std::to_string(h));
   std::vector<float> buf(size_t(w) * size_t(h) * size_t(nc));
   if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, buf.data()))
     throw SceneError(what + ": cannot read the image: " + in->geterror());
@@ -86,9 +89,11 @@ std::string octahedral_to_latlong(const std::string& path, const std::string& wh
       RGB sum(0.0f);
       for (int sj = 0; sj < kSub; ++sj)
         for (int si = 0; si < kSub; ++si) {
-          Vec2 uv{(i + (si + 0.5f) / kSub) / float(width), (j + (sj + 0.5f) / kSub) / float(height)};
+          Vec2 uv{(i + (si + 0.5f) / kSub) / float(width),
+                  (j + (sj + 0.5f) / kSub) / float(height)};
           Vec2 st = equal_area_square(EnvironmentMap::uv_to_direction(uv));
-          int x = std::clamp(int(st.x * float(n)), 0, n - 1), y = std::clamp(int(st.y * float(n)), 0, n - 1);
+          int x = std::clamp(int(st.x * float(n)), 0, n - 1),
+              y = std::clamp(int(st.y * float(n)), 0, n - 1);
           sum = sum + square[size_t(y) * size_t(n) + size_t(x)];
         }
       RGB c = sum / float(kSub * kSub);
@@ -101,11 +106,14 @@ std::string octahedral_to_latlong(const std::string& path, const std::string& wh
   fs::path tmp = dir / (out.filename().string() + "." + std::to_string(::getpid()) + ".tmp.exr");
   auto o = OIIO::ImageOutput::create(tmp.string());
   OIIO::ImageSpec spec(width, height, 3, OIIO::TypeDesc::FLOAT);
-  if (!o || !o->open(tmp.string(), spec) || !o->write_image(OIIO::TypeDesc::FLOAT, latlong.data()) || !o->close())
+  if (!o || !o->open(tmp.string(), spec) ||
+      !o->write_image(OIIO::TypeDesc::FLOAT, latlong.data()) || !o->close())
     throw SceneError(what + ": cannot write the converted lat-long map " + tmp.string() + ": " +
                      (o ? o->geterror() : OIIO::geterror()));
   fs::rename(tmp, out, ec);
-  if (ec) throw SceneError(what + ": cannot write the converted lat-long map " + out.string() + ": " + ec.message());
+  if (ec)
+    throw SceneError(what + ": cannot write the converted lat-long map " + out.string() + ": " +
+                     ec.message());
   return out.string();
 }
 

@@ -16,7 +16,8 @@ constexpr double kPiD = 3.14159265358979323846;
 
 std::vector<Vec3> to_vec3(const std::vector<double>& v) {
   std::vector<Vec3> out;
-  for (size_t i = 0; i + 2 < v.size(); i += 3) out.emplace_back(float(v[i]), float(v[i + 1]), float(v[i + 2]));
+  for (size_t i = 0; i + 2 < v.size(); i += 3)
+    out.emplace_back(float(v[i]), float(v[i + 1]), float(v[i + 2]));
   return out;
 }
 
@@ -25,16 +26,18 @@ std::vector<Vec2> uvs_of(const ParamList& params) {
     const Param* p = params.find(name);
     if (!p) continue;
     std::vector<Vec2> out;
-    for (size_t i = 0; i + 1 < p->numbers.size(); i += 2) out.push_back({float(p->numbers[i]), float(p->numbers[i + 1])});
+    for (size_t i = 0; i + 1 < p->numbers.size(); i += 2)
+      out.push_back({float(p->numbers[i]), float(p->numbers[i + 1])});
     if (p->numbers.size() % 2 != 0 || (p->type != "point2" && p->type != "float"))
-      fail(p->at, "parameter " + p->decl() + ": expected \"point2 " + name + "\" with 2 values per vertex");
+      fail(p->at, "parameter " + p->decl() + ": expected \"point2 " + name +
+                      "\" with 2 values per vertex");
     return out;
   }
   return {};
 }
 
-std::vector<uint32_t> indices_of(const ParamList& params, size_t vertices, size_t per, const Location& at,
-                                 const std::string& d) {
+std::vector<uint32_t> indices_of(const ParamList& params, size_t vertices, size_t per,
+                                 const Location& at, const std::string& d) {
   std::vector<double> v = params.numbers("indices", "integer", 1);
   if (v.empty()) {
     if (vertices == per) {
@@ -42,12 +45,13 @@ std::vector<uint32_t> indices_of(const ParamList& params, size_t vertices, size_
       for (size_t i = 0; i < per; ++i) out[i] = uint32_t(i);
       return out;
     }
-    fail(at, d + ": needs \"integer indices\" (there are " + std::to_string(vertices) + " vertices)");
+    fail(at,
+         d + ": needs \"integer indices\" (there are " + std::to_string(vertices) + " vertices)");
   }
   if (v.size() % per != 0)
     fail(params.find("indices")->at, d + ": \"integer indices\" must hold " + std::to_string(per) +
-                                         " indices per " + (per == 3 ? "triangle" : "patch") + ", got " +
-                                         std::to_string(v.size()));
+                                         " indices per " + (per == 3 ? "triangle" : "patch") +
+                                         ", got " + std::to_string(v.size()));
   std::vector<uint32_t> out;
   for (double x : v) {
     if (x < 0 || x >= double(vertices))
@@ -70,9 +74,11 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
     std::vector<Vec3> n = to_vec3(params.numbers("N", "normal3", 3));
     std::vector<Vec2> uv = uvs_of(params);
     if (!n.empty() && n.size() != p.size())
-      fail(at, d + ": \"normal N\" has " + std::to_string(n.size()) + " normals for " + std::to_string(p.size()) + " vertices");
+      fail(at, d + ": \"normal N\" has " + std::to_string(n.size()) + " normals for " +
+                   std::to_string(p.size()) + " vertices");
     if (!uv.empty() && uv.size() != p.size())
-      fail(at, d + ": \"point2 uv\" has " + std::to_string(uv.size()) + " uvs for " + std::to_string(p.size()) + " vertices");
+      fail(at, d + ": \"point2 uv\" has " + std::to_string(uv.size()) + " uvs for " +
+                   std::to_string(p.size()) + " vertices");
     if (type == "trianglemesh") {
       MeshData m;
       m.indices = indices_of(params, p.size(), 3, at, d);
@@ -89,7 +95,8 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
     if (file.empty()) fail(at, d + ": needs \"string filename\"");
     if (file.size() > 3 && file.compare(file.size() - 3, 3, ".gz") == 0)
       fail(at, d + " \"" + file + "\": gzip-compressed PLY files are not supported");
-    return files_call(at, d + " \"" + file + "\"", [&] { return files_.mesh(file, "ply", "filename"); });
+    return files_call(at, d + " \"" + file + "\"",
+                      [&] { return files_.mesh(file, "ply", "filename"); });
   }
   if (type == "sphere") {
     float r = float(params.number("radius", 1));
@@ -115,13 +122,17 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
     MeshData m;
     m.indices = indices_of(params, p.size(), 3, at, d);
     m.positions = std::move(p);
-    warn(at, d + ": Loop subdivision is not supported; the control mesh (" + std::to_string(m.indices.size() / 3) +
-                 " triangles, \"levels\" " + std::to_string(params.integer("levels", 3)) + ") is rendered flat");
+    warn(at, d + ": Loop subdivision is not supported; the control mesh (" +
+                 std::to_string(m.indices.size() / 3) + " triangles, \"levels\" " +
+                 std::to_string(params.integer("levels", 3)) + ") is rendered flat");
     return m;
   }
-  static const char* unsupported[] = {"cylinder", "cone", "paraboloid", "hyperboloid", "curve", "nurbs", "heightfield"};
+  static const char* unsupported[] = {"cylinder", "cone",  "paraboloid", "hyperboloid",
+                                      "curve",    "nurbs", "heightfield"};
   for (const char* u : unsupported)
-    if (type == u) fail(at, d + ": shape not supported (known: trianglemesh, plymesh, bilinearmesh, sphere, disk)");
+    if (type == u)
+      fail(at,
+           d + ": shape not supported (known: trianglemesh, plymesh, bilinearmesh, sphere, disk)");
   fail(at, d + ": unknown shape (known: trianglemesh, plymesh, bilinearmesh, sphere, disk)");
 }
 
@@ -154,14 +165,20 @@ void Builder::shape(const std::string& type, const ParamList& params, const Loca
   if (!data.normals.empty()) {
     for (size_t t = 0; t + 2 < data.indices.size(); t += 3) {
       uint32_t* i = &data.indices[t];
-      if (i[0] >= data.positions.size() || i[1] >= data.positions.size() || i[2] >= data.positions.size()) continue;
-      Vec3 gn = cross(data.positions[i[1]] - data.positions[i[0]], data.positions[i[2]] - data.positions[i[0]]);
-      if (dot(gn, data.normals[i[0]] + data.normals[i[1]] + data.normals[i[2]]) < 0) std::swap(i[1], i[2]);
+      if (i[0] >= data.positions.size() || i[1] >= data.positions.size() ||
+          i[2] >= data.positions.size())
+        continue;
+      Vec3 gn = cross(data.positions[i[1]] - data.positions[i[0]],
+                      data.positions[i[2]] - data.positions[i[0]]);
+      if (dot(gn, data.normals[i[0]] + data.normals[i[1]] + data.normals[i[2]]) < 0)
+        std::swap(i[1], i[2]);
     }
   } else if (gs_.reverse_orientation) {
-    for (size_t t = 0; t + 2 < data.indices.size(); t += 3) std::swap(data.indices[t + 1], data.indices[t + 2]);
+    for (size_t t = 0; t + 2 < data.indices.size(); t += 3)
+      std::swap(data.indices[t + 1], data.indices[t + 2]);
   }
-  std::vector<Mesh>& target = current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
+  std::vector<Mesh>& target =
+      current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
   size_t first = target.size();
   add_mesh(std::move(data), element_of_triangle, whole, type, at, material);
   if (pending)
@@ -169,10 +186,12 @@ void Builder::shape(const std::string& type, const ParamList& params, const Loca
       pending_materials_.push_back({current_object_, i, gs_.material_name, gs_.material_at, at, d});
 }
 
-void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_triangle, bool whole_shape,
-                       const std::string& type, const Location& at, uint32_t material) {
+void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_triangle,
+                       bool whole_shape, const std::string& type, const Location& at,
+                       uint32_t material) {
   const std::string d = "Shape \"" + type + "\"";
-  std::vector<Mesh>& target = current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
+  std::vector<Mesh>& target =
+      current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
   const Mat4& ctm = gs_.ctm;
   auto place = [&](MeshData m, std::optional<Emission> e) {
     Mesh mesh;
@@ -202,13 +221,18 @@ void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_tr
   // for bilinear meshes): L = power / (pi area sides) with that element's world-space area.
   auto tri_area = [&](size_t t) {
     const uint32_t* i = &data.indices[t * 3];
-    if (i[0] >= data.positions.size() || i[1] >= data.positions.size() || i[2] >= data.positions.size()) return 0.0;
-    Vec3 p0 = ctm.point(data.positions[i[0]]), p1 = ctm.point(data.positions[i[1]]), p2 = ctm.point(data.positions[i[2]]);
+    if (i[0] >= data.positions.size() || i[1] >= data.positions.size() ||
+        i[2] >= data.positions.size())
+      return 0.0;
+    Vec3 p0 = ctm.point(data.positions[i[0]]), p1 = ctm.point(data.positions[i[1]]),
+         p2 = ctm.point(data.positions[i[2]]);
     return 0.5 * double(length(cross(p1 - p0, p2 - p0)));
   };
   const size_t tris = data.indices.size() / 3;
   const double sides = a.two_sided ? 2.0 : 1.0;
-  auto radiance_for = [&](double area) { return e.radiance * float(a.power / (kPiD * area * sides)); };
+  auto radiance_for = [&](double area) {
+    return e.radiance * float(a.power / (kPiD * area * sides));
+  };
   if (whole_shape) {
     double area = 0;
     for (size_t t = 0; t < tris; ++t) area += tri_area(t);
@@ -232,9 +256,10 @@ void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_tr
   if (groups.size() > 64) {
     double total = 0;
     for (double x : element_area) total += x;
-    warn(a.at, d + ": \"power\" on a mesh of " + std::to_string(groups.size()) +
-                   " different element areas: the mean element area is used for all (pbrt-v4 gives each "
-                   "triangle its own radiance)");
+    warn(a.at,
+         d + ": \"power\" on a mesh of " + std::to_string(groups.size()) +
+             " different element areas: the mean element area is used for all (pbrt-v4 gives each "
+             "triangle its own radiance)");
     e.radiance = radiance_for(total / double(element_area.size()));
     place(std::move(data), e);
     return;
@@ -244,7 +269,8 @@ void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_tr
     sub.positions = data.positions;
     sub.normals = data.normals;
     sub.uvs = data.uvs;
-    for (size_t t : list) sub.indices.insert(sub.indices.end(), &data.indices[t * 3], &data.indices[t * 3] + 3);
+    for (size_t t : list)
+      sub.indices.insert(sub.indices.end(), &data.indices[t * 3], &data.indices[t * 3] + 3);
     Emission ge = e;
     size_t el = element_of_triangle.empty() ? list[0] : element_of_triangle[list[0]];
     ge.radiance = radiance_for(element_area[el]);

@@ -17,14 +17,15 @@ namespace rf::pbrt {
 
 namespace fs = std::filesystem;
 
-std::string bake_image(const std::string& path, float scale, bool invert, bool data, const std::string& what) {
+std::string bake_image(const std::string& path, float scale, bool invert, bool data,
+                       const std::string& what) {
   std::ifstream f(path, std::ios::binary);
   std::ostringstream bytes;
   bytes << f.rdbuf();
   if (!f) throw SceneError(what + ": cannot read " + path);
   fs::path dir = fs::temp_directory_path() / "rayfarm-pbrt-textures";
-  std::string key = sha256_hex(bytes.str() + "\n" + format_number(scale) + (invert ? " invert" : "") +
-                               (data ? " data" : ""));
+  std::string key = sha256_hex(bytes.str() + "\n" + format_number(scale) +
+                               (invert ? " invert" : "") + (data ? " data" : ""));
   fs::path out = dir / (key + ".exr");
   std::error_code ec;
   if (fs::exists(out, ec)) return out.string();
@@ -50,11 +51,14 @@ std::string bake_image(const std::string& path, float scale, bool invert, bool d
   fs::path tmp = dir / (key + "." + std::to_string(::getpid()) + ".tmp.exr");
   auto o = OIIO::ImageOutput::create(tmp.string());
   OIIO::ImageSpec out_spec(w, h, nc, OIIO::TypeDesc::FLOAT);
-  if (!o || !o->open(tmp.string(), out_spec) || !o->write_image(OIIO::TypeDesc::FLOAT, px.data()) || !o->close())
+  if (!o || !o->open(tmp.string(), out_spec) || !o->write_image(OIIO::TypeDesc::FLOAT, px.data()) ||
+      !o->close())
     throw SceneError(what + ": cannot write the baked texture " + tmp.string() + ": " +
                      (o ? o->geterror() : OIIO::geterror()));
   fs::rename(tmp, out, ec);
-  if (ec) throw SceneError(what + ": cannot write the baked texture " + out.string() + ": " + ec.message());
+  if (ec)
+    throw SceneError(what + ": cannot write the baked texture " + out.string() + ": " +
+                     ec.message());
   return out.string();
 }
 

@@ -11,6 +11,7 @@
 namespace rf::pbrt {
 
 // Returns the baked file's path. Throws SceneError "<what>: ..." when it cannot be read or written.
-std::string bake_image(const std::string& path, float scale, bool invert, bool data, const std::string& what);
+std::string bake_image(const std::string& path, float scale, bool invert, bool data,
+                       const std::string& what);
 
 }  // namespace rf::pbrt

@@ -130,7 +130,8 @@ void add_value(Param& p, Kind kind, const Token& t, const Location& at) {
       return;
     }
     case Kind::String:
-      if (t.kind != Token::String) fail(at, what + ": expected a quoted string, got '" + t.text + "'");
+      if (t.kind != Token::String)
+        fail(at, what + ": expected a quoted string, got '" + t.text + "'");
       p.strings.push_back(t.text);
       return;
     case Kind::Bool:
@@ -156,7 +157,8 @@ ParamList read_params(Lexer& lex) {
     size_t b = a == std::string::npos ? a : decl.text.find_first_of(" \t", a);
     size_t c = b == std::string::npos ? b : decl.text.find_first_not_of(" \t", b);
     size_t d = c == std::string::npos ? c : decl.text.find_first_of(" \t", c);
-    if (c == std::string::npos || (d != std::string::npos && decl.text.find_first_not_of(" \t", d) != std::string::npos))
+    if (c == std::string::npos ||
+        (d != std::string::npos && decl.text.find_first_not_of(" \t", d) != std::string::npos))
       fail(at, "expected a parameter declaration \"type name\", got \"" + decl.text + "\"");
     p.type = decl.text.substr(a, b - a);
     p.name = decl.text.substr(c, d == std::string::npos ? std::string::npos : d - c);
@@ -175,14 +177,16 @@ ParamList read_params(Lexer& lex) {
                                    (e.kind == Token::End ? std::string("the end of the file")
                                                          : std::string("'['")));
         if (e.kind == Token::String && kind != Kind::String && p.type != "spectrum")
-          fail(lex.at(e.line), "parameter " + p.decl() + ": ']' expected before \"" + e.text + "\"");
+          fail(lex.at(e.line),
+               "parameter " + p.decl() + ": ']' expected before \"" + e.text + "\"");
         add_value(p, kind, e, lex.at(e.line));
       }
     } else if (v.kind == Token::Word || v.kind == Token::String) {
       add_value(p, kind, v, lex.at(v.line));
     } else {
-      fail(lex.at(v.line), "parameter " + p.decl() + ": expected a value or '[', got " +
-                               (v.kind == Token::End ? std::string("the end of the file") : "'" + v.text + "'"));
+      fail(lex.at(v.line),
+           "parameter " + p.decl() + ": expected a value or '[', got " +
+               (v.kind == Token::End ? std::string("the end of the file") : "'" + v.text + "'"));
     }
     size_t count = p.numbers.size() + p.strings.size() + p.bools.size();
     if (count == 0) fail(at, "parameter " + p.decl() + ": no values");
@@ -219,7 +223,8 @@ namespace {
 }
 void expect_one(const Param& p) {
   size_t count = p.numbers.size() + p.strings.size() + p.bools.size();
-  if (count != 1) fail(p.at, "parameter " + p.decl() + ": expected 1 value, got " + std::to_string(count));
+  if (count != 1)
+    fail(p.at, "parameter " + p.decl() + ": expected 1 value, got " + std::to_string(count));
 }
 }  // namespace
 
@@ -255,7 +260,8 @@ std::string ParamList::string(const std::string& name, const std::string& def) c
   return p->strings[0];
 }
 
-std::vector<double> ParamList::numbers(const std::string& name, const char* type, size_t group) const {
+std::vector<double> ParamList::numbers(const std::string& name, const char* type,
+                                       size_t group) const {
   const Param* p = find(name);
   if (!p) return {};
   if (p->type != type && !(std::string(type) == "point3" && p->type == "point") &&

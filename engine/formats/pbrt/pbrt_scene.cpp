@@ -27,7 +27,9 @@ Mat4 transpose_of(const std::vector<double>& v) {
 
 constexpr float kPiF = 3.14159265358979f;
 
-Vec3 vec_at(const std::vector<double>& v, size_t i) { return {float(v[i]), float(v[i + 1]), float(v[i + 2])}; }
+Vec3 vec_at(const std::vector<double>& v, size_t i) {
+  return {float(v[i]), float(v[i + 1]), float(v[i + 2])};
+}
 
 }  // namespace
 
@@ -68,14 +70,18 @@ void Builder::run(const std::string& main_bytes) {
     }
     Location at = lex.at(t.line);
     if (t.kind != Token::Word)
-      fail(at, "expected a directive, got " + (t.kind == Token::String ? "\"" + t.text + "\"" : "'" + t.text + "'"));
+      fail(at, "expected a directive, got " +
+                   (t.kind == Token::String ? "\"" + t.text + "\"" : "'" + t.text + "'"));
     directive(t.text, lex, at);
   }
   resolve_pending_materials();
   finish();
-  if (current_object_ >= 0) fail(object_begin_at_, "ObjectBegin \"" + scene_.objects[size_t(current_object_)].name + "\" has no ObjectEnd");
+  if (current_object_ >= 0)
+    fail(object_begin_at_,
+         "ObjectBegin \"" + scene_.objects[size_t(current_object_)].name + "\" has no ObjectEnd");
   if (!stack_.empty())
-    warn(stack_.back().begun_at, "AttributeBegin without a matching AttributeEnd at the end of the scene");
+    warn(stack_.back().begun_at,
+         "AttributeBegin without a matching AttributeEnd at the end of the scene");
 }
 
 // pbrt-v4's sensor ("cie1931") scales the image by its imaging ratio, exposure time x ISO / 100.
@@ -98,8 +104,9 @@ void Builder::finish() {
 std::string Builder::string_arg(Lexer& lex, const std::string& directive) {
   Token t = lex.next();
   if (t.kind != Token::String)
-    fail(lex.at(t.line), directive + ": expected a quoted string, got " +
-                             (t.kind == Token::End ? std::string("the end of the file") : "'" + t.text + "'"));
+    fail(lex.at(t.line),
+         directive + ": expected a quoted string, got " +
+             (t.kind == Token::End ? std::string("the end of the file") : "'" + t.text + "'"));
   return t.text;
 }
 
@@ -116,14 +123,16 @@ std::vector<double> Builder::number_args(Lexer& lex, const std::string& directiv
     if (!bracket && v.size() == n) break;
     if (bracket && lex.peek().kind != Token::Word) {
       Token t = lex.next();
-      fail(lex.at(t.line), directive + ": ']' expected, got " +
-                               (t.kind == Token::End ? std::string("the end of the file") : "'" + t.text + "'"));
+      fail(lex.at(t.line),
+           directive + ": ']' expected, got " +
+               (t.kind == Token::End ? std::string("the end of the file") : "'" + t.text + "'"));
     }
     Token t = lex.next();
     v.push_back(to_number(t, lex.at(t.line), directive));
   }
   if (v.size() != n)
-    fail(at, directive + ": expected " + std::to_string(n) + " numbers, got " + std::to_string(v.size()));
+    fail(at, directive + ": expected " + std::to_string(n) + " numbers, got " +
+                 std::to_string(v.size()));
   return v;
 }
 
@@ -134,7 +143,9 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   GraphicsState& gs = gs_;
   auto concat = [&](const Mat4& m) {
     if (active_ == Active::End) {
-      warn(at, name + ": transform for the shutter's end time only (motion blur is not supported; ignored)");
+      warn(at, name +
+                   ": transform for the shutter's end time only (motion blur is not supported; "
+                   "ignored)");
       return;
     }
     gs.ctm = gs.ctm * m;
@@ -158,7 +169,9 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     Mat4 m = transpose_of(v);
     if (name == "Transform") {
       if (active_ == Active::End) {
-        warn(at, name + ": transform for the shutter's end time only (motion blur is not supported; ignored)");
+        warn(at, name +
+                     ": transform for the shutter's end time only (motion blur is not supported; "
+                     "ignored)");
         return;
       }
       gs.ctm = m;
@@ -179,17 +192,22 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   } else if (name == "ActiveTransform") {
     Token t = lex.next();
     if (t.kind != Token::Word || (t.text != "StartTime" && t.text != "EndTime" && t.text != "All"))
-      fail(lex.at(t.line), "ActiveTransform: expected StartTime, EndTime or All, got '" + t.text + "'");
-    active_ = t.text == "EndTime" ? Active::End : t.text == "StartTime" ? Active::Start : Active::All;
+      fail(lex.at(t.line),
+           "ActiveTransform: expected StartTime, EndTime or All, got '" + t.text + "'");
+    active_ = t.text == "EndTime"     ? Active::End
+              : t.text == "StartTime" ? Active::Start
+                                      : Active::All;
     if (active_ != Active::All)
-      warn(at, "ActiveTransform " + t.text + ": motion blur is not supported; the start-time transform is used");
+      warn(at, "ActiveTransform " + t.text +
+                   ": motion blur is not supported; the start-time transform is used");
   } else if (name == "TransformTimes") {
     number_args(lex, name, 2);
     warn(at, "TransformTimes: motion blur is not supported (ignored)");
   } else if (name == "ReverseOrientation") {
     gs.reverse_orientation = !gs.reverse_orientation;
   } else if (name == "AttributeBegin" || name == "TransformBegin") {
-    if (name == "TransformBegin") transform_stack_.push_back(gs.ctm);
+    if (name == "TransformBegin")
+      transform_stack_.push_back(gs.ctm);
     else {
       stack_.push_back(gs);
       stack_.back().begun_at = at;
@@ -208,7 +226,8 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     std::string target = string_arg(lex, name);
     ParamList params = read_params(lex);
     for (const Param& p : params.items)
-      warn(p.at, "Attribute \"" + target + "\": default parameter " + p.decl() + " is not supported (ignored)");
+      warn(p.at, "Attribute \"" + target + "\": default parameter " + p.decl() +
+                     " is not supported (ignored)");
   } else if (name == "Option") {
     ParamList params = read_params(lex);
     for (const Param& p : params.items)
@@ -249,7 +268,8 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   } else if (name == "MediumInterface") {
     std::string inside = string_arg(lex, name);
     if (lex.peek().kind == Token::String) string_arg(lex, name);
-    if (!inside.empty()) warn(at, "MediumInterface: participating media are not supported (ignored)");
+    if (!inside.empty())
+      warn(at, "MediumInterface: participating media are not supported (ignored)");
   } else if (name == "Texture") {
     std::string tex_name = string_arg(lex, name);
     std::string kind = string_arg(lex, name);
@@ -282,8 +302,10 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     shape(type, read_params(lex), at);
   } else if (name == "ObjectBegin") {
     std::string n = string_arg(lex, name);
-    if (current_object_ >= 0) fail(at, "ObjectBegin \"" + n + "\": inside another ObjectBegin (nesting is not allowed)");
-    if (object_ids_.count(n)) fail(at, "ObjectBegin \"" + n + "\": an object of that name is already defined");
+    if (current_object_ >= 0)
+      fail(at, "ObjectBegin \"" + n + "\": inside another ObjectBegin (nesting is not allowed)");
+    if (object_ids_.count(n))
+      fail(at, "ObjectBegin \"" + n + "\": an object of that name is already defined");
     stack_.push_back(gs);
     stack_.back().begun_at = at;
     object_ids_[n] = uint32_t(scene_.objects.size());
@@ -299,13 +321,15 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     stack_.pop_back();
   } else if (name == "ObjectInstance") {
     std::string n = string_arg(lex, name);
-    if (current_object_ >= 0) fail(at, "ObjectInstance \"" + n + "\": not allowed inside ObjectBegin");
+    if (current_object_ >= 0)
+      fail(at, "ObjectInstance \"" + n + "\": not allowed inside ObjectBegin");
     auto it = object_ids_.find(n);
     if (it == object_ids_.end()) fail(at, "ObjectInstance: unknown object \"" + n + "\"");
     scene_.instances.push_back({it->second, gs.ctm});
     for (Light l : object_lights_[it->second]) {
       l.position = gs.ctm.point(l.position);
-      if (length(gs.ctm.vector(l.direction)) > 0) l.direction = normalize(gs.ctm.vector(l.direction));
+      if (length(gs.ctm.vector(l.direction)) > 0)
+        l.direction = normalize(gs.ctm.vector(l.direction));
       scene_.lights.push_back(l);
     }
   } else {
@@ -319,7 +343,8 @@ Mat4 Builder::look_at(const Location& at, const std::vector<double>& v) {
   if (!(length(up) > 0)) fail(at, "LookAt: the up vector is zero");
   Vec3 dir = normalize(look - eye);
   Vec3 right = cross(normalize(up), dir);  // pbrt's left-handed camera frame
-  if (!(length(right) > 1e-6f)) fail(at, "LookAt: the up vector is parallel to the viewing direction");
+  if (!(length(right) > 1e-6f))
+    fail(at, "LookAt: the up vector is parallel to the viewing direction");
   right = normalize(right);
   Vec3 new_up = cross(dir, right);
   Mat4 world_from_camera;
@@ -335,7 +360,8 @@ void Builder::include(Lexer& lex, const Location& at, const std::string& directi
     fail(at, directive + " \"" + file + "\": gzip-compressed scene files are not supported");
   std::string bytes = files_call(at, directive + " \"" + file + "\"",
                                  [&] { return files_.read(file, "included file"); });
-  if (lexers_.size() > 64) fail(at, directive + " \"" + file + "\": includes nested more than 64 deep (a cycle?)");
+  if (lexers_.size() > 64)
+    fail(at, directive + " \"" + file + "\": includes nested more than 64 deep (a cycle?)");
   std::string shown = files_.path_of(files_.name(file, directive));
   lexers_.push_back(std::make_unique<Lexer>(std::move(bytes), shown,
                                             " (included from " + at.str() + ")" + at.chain));
@@ -358,7 +384,8 @@ void Builder::camera(const std::string& type, const ParamList& params, const Loc
   // pbrt's camera space looks down +z (left-handed: x right, y up); ours looks down -z.
   scene_.camera.camera_to_world = world_from_camera * Mat4::scale({1, 1, -1});
   double fov = params.number("fov", 90);
-  if (!(fov > 0 && fov < 180)) fail(at, "Camera: \"float fov\" must be between 0 and 180 degrees, got " + format_number(fov));
+  if (!(fov > 0 && fov < 180))
+    fail(at, "Camera: \"float fov\" must be between 0 and 180 degrees, got " + format_number(fov));
   scene_.camera.fov_deg = float(fov);
   scene_.camera.lens_radius = float(params.number("lensradius", 0));
   scene_.camera.focus_distance = float(params.number("focaldistance", 1e6));
@@ -383,8 +410,10 @@ void Builder::film(const std::string& type, const ParamList& params, const Locat
   iso_ = params.number("iso", 100);
   if (!(iso_ > 0)) fail(at, "Film: \"float iso\" must be > 0");
   std::string sensor = params.string("sensor", "cie1931");
-  if (sensor != "cie1931") warn(at, "Film: \"sensor\" \"" + sensor + "\" is not supported; the CIE 1931 observer is used");
-  if (params.number("whitebalance", 0) != 0) warn(at, "Film: \"whitebalance\" is not supported (ignored)");
+  if (sensor != "cie1931")
+    warn(at, "Film: \"sensor\" \"" + sensor + "\" is not supported; the CIE 1931 observer is used");
+  if (params.number("whitebalance", 0) != 0)
+    warn(at, "Film: \"whitebalance\" is not supported (ignored)");
   params.find("savefp16"), params.find("diagonal");  // output precision; the realistic camera's
   warn_unused(params, "Film \"" + type + "\"");
 }
@@ -402,24 +431,28 @@ void Builder::filter(const std::string& type, const ParamList& params, const Loc
     def_radius = 1.5f;
     f.sigma = float(params.number("sigma", 0.5));
     if (!(f.sigma > 0)) fail(at, "PixelFilter \"gaussian\": \"float sigma\" must be > 0");
-    warn(at, "PixelFilter \"gaussian\": truncated at the radius rather than shifted to 0 there as in "
-             "pbrt-v4 (a difference of exp(-r^2 / 2 sigma^2) of the peak)");
+    warn(at,
+         "PixelFilter \"gaussian\": truncated at the radius rather than shifted to 0 there as in "
+         "pbrt-v4 (a difference of exp(-r^2 / 2 sigma^2) of the peak)");
   } else {
     warn(at, "PixelFilter \"" + type + "\": not supported; a gaussian of radius 1.5 is used");
     for (const Param& p : params.items) p.used = true;
     scene_.film.filter = {FilterType::Gaussian, 1.5f, 0.5f};
     return;
   }
-  float xr = float(params.number("xradius", def_radius)), yr = float(params.number("yradius", def_radius));
+  float xr = float(params.number("xradius", def_radius)),
+        yr = float(params.number("yradius", def_radius));
   if (!(xr > 0 && yr > 0)) fail(at, "PixelFilter \"" + type + "\": radii must be > 0");
-  if (xr != yr) warn(at, "PixelFilter \"" + type + "\": different x and y radii; their mean is used");
+  if (xr != yr)
+    warn(at, "PixelFilter \"" + type + "\": different x and y radii; their mean is used");
   f.radius = 0.5f * (xr + yr);
   scene_.film.filter = f;
   warn_unused(params, "PixelFilter \"" + type + "\"");
 }
 
 void Builder::sampler(const std::string& type, const ParamList& params, const Location& at) {
-  static const char* known[] = {"independent", "sobol", "zsobol", "paddedsobol", "halton", "pmj02bn", "stratified"};
+  static const char* known[] = {"independent", "sobol",   "zsobol",    "paddedsobol",
+                                "halton",      "pmj02bn", "stratified"};
   bool ok = false;
   for (const char* k : known) ok = ok || type == k;
   if (!ok) warn(at, "Sampler \"" + type + "\": unknown sampler; rayfarm's sobol sampler is used");
@@ -438,10 +471,14 @@ void Builder::sampler(const std::string& type, const ParamList& params, const Lo
 void Builder::integrator(const std::string& type, const ParamList& params, const Location& at) {
   IntegratorSettings& is = scene_.render.integrator;
   std::string ours = "path";
-  if (type == "bdpt") ours = "bdpt";
-  else if (type == "lightpath") ours = "light";
-  else if (type == "ambientocclusion") ours = "ao";
-  else if (type == "sppm") ours = "ppm";
+  if (type == "bdpt")
+    ours = "bdpt";
+  else if (type == "lightpath")
+    ours = "light";
+  else if (type == "ambientocclusion")
+    ours = "ao";
+  else if (type == "sppm")
+    ours = "ppm";
   else if (type != "path" && type != "volpath" && type != "simplepath" && type != "simplevolpath" &&
            type != "randomwalk" && type != "mlt")
     warn(at, "Integrator \"" + type + "\": not supported; the path tracer is used");
@@ -456,7 +493,9 @@ void Builder::integrator(const std::string& type, const ParamList& params, const
     ao.max_distance = d >= 1e30 ? kInf : float(d);
   } else if (ours == "ppm") {
     PpmIntegrator& ppm = is.as<PpmIntegrator>();
-    ppm.photons = std::max(1, params.integer("photonsperiteration", -1) > 0 ? params.integer("photonsperiteration", -1) : ppm.photons);
+    ppm.photons = std::max(1, params.integer("photonsperiteration", -1) > 0
+                                  ? params.integer("photonsperiteration", -1)
+                                  : ppm.photons);
     ppm.radius = float(params.number("radius", 0));
   }
   params.find("lightsampler");  // light selection changes the noise, not the image
@@ -468,8 +507,8 @@ void Builder::integrator(const std::string& type, const ParamList& params, const
 // ------------------------------------------------------------------------------------------
 // Lights.
 
-RGB Builder::light_spectrum(const ParamList& params, const std::string& name, const Location& /*at*/,
-                            const std::string& directive) {
+RGB Builder::light_spectrum(const ParamList& params, const std::string& name,
+                            const Location& /*at*/, const std::string& directive) {
   const Param* p = params.find(name);
   if (!p) return RGB(1.0f);  // the colour space's illuminant: white
   return spectrum_value(*p, true, directive);
@@ -496,8 +535,10 @@ void Builder::light(const std::string& type, const ParamList& params, const Loca
       Vec3 q = to.empty() ? Vec3(0, 0, 1) : Vec3(float(to[0]), float(to[1]), float(to[2]));
       if (!(length(q - p) > 0)) fail(at, d + ": \"from\" and \"to\" coincide");
       l.direction = normalize(ctm.vector(q - p));
-      float cone = float(params.number("coneangle", 30)), delta = float(params.number("conedeltaangle", 5));
-      if (!(cone > 0 && cone <= 90)) fail(at, d + ": \"float coneangle\" must be in (0, 90], got " + format_number(cone));
+      float cone = float(params.number("coneangle", 30)),
+            delta = float(params.number("conedeltaangle", 5));
+      if (!(cone > 0 && cone <= 90))
+        fail(at, d + ": \"float coneangle\" must be in (0, 90], got " + format_number(cone));
       l.cone_angle_deg = cone;
       l.falloff_start_deg = std::clamp(cone - delta, 0.0f, cone);
       if (power > 0) {
@@ -508,7 +549,8 @@ void Builder::light(const std::string& type, const ParamList& params, const Loca
     l.intensity = I * scale;
   } else if (type == "distant") {
     RGB L = light_spectrum(params, "L", at, d);
-    std::vector<double> from = params.numbers("from", "point3", 3), to = params.numbers("to", "point3", 3);
+    std::vector<double> from = params.numbers("from", "point3", 3),
+                        to = params.numbers("to", "point3", 3);
     Vec3 p = from.empty() ? Vec3(0.0f) : Vec3(float(from[0]), float(from[1]), float(from[2]));
     Vec3 q = to.empty() ? Vec3(0, 0, 1) : Vec3(float(to[0]), float(to[1]), float(to[2]));
     if (!(length(ctm.vector(q - p)) > 0)) fail(at, d + ": \"from\" and \"to\" give no direction");
@@ -534,13 +576,15 @@ void Builder::infinite_light(const ParamList& params, const Location& at, float 
   const std::string d = "LightSource \"infinite\"";
   if (current_object_ >= 0) fail(at, d + ": not allowed inside ObjectBegin");
   if (scene_.environment) warn(at, d + ": a second environment light replaces the first");
-  if (params.find("portal")) warn(at, d + ": \"portal\" is not supported (ignored: light arrives from all directions)");
+  if (params.find("portal"))
+    warn(at, d + ": \"portal\" is not supported (ignored: light arrives from all directions)");
   Environment env;
   double e = params.number("illuminance", -1);
   std::string file = params.string("filename", "");
   if (!file.empty()) {
     if (params.has("L")) fail(at, d + ": give either \"L\" or \"filename\", not both");
-    env.file = files_call(at, d + " \"filename\"", [&] { return files_.add(file, "filename", "image"); });
+    env.file =
+        files_call(at, d + " \"filename\"", [&] { return files_.add(file, "filename", "image"); });
     env.resolved_path = files_call(at, d + " \"" + file + "\"", [&] {
       return octahedral_to_latlong(files_.path_of(env.file), "'" + env.file + "'");
     });

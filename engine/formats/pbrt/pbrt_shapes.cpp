@@ -29,7 +29,8 @@ size_t grid_triangles(MeshData& m, uint32_t base, int rows, int cols) {
 }
 }  // namespace
 
-MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int n_theta, int n_phi) {
+MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int n_theta,
+                          int n_phi) {
   double z0 = std::clamp(double(std::min(zmin, zmax)), -double(r), double(r));
   double z1 = std::clamp(double(std::max(zmin, zmax)), -double(r), double(r));
   double theta_zmin = std::acos(std::clamp(z0 / r, -1.0, 1.0));  // larger theta (lower z)
@@ -58,7 +59,8 @@ MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int
   return m;
 }
 
-MeshData make_pbrt_disk(float height, float radius, float inner_radius, float phimax_deg, int n_phi) {
+MeshData make_pbrt_disk(float height, float radius, float inner_radius, float phimax_deg,
+                        int n_phi) {
   double phimax = std::clamp(double(phimax_deg), 0.0, 360.0) * kPiD / 180.0;
   int cols = std::max(1, int(std::ceil(n_phi * phimax / (2 * kPiD))));
   MeshData m;

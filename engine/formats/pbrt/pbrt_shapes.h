@@ -11,11 +11,13 @@ namespace rf::pbrt {
 // pbrt's "sphere": radius r, cut to zmin <= z <= zmax and 0 <= phi <= phimax (degrees).
 // n_theta rows over the full polar range (fewer when cut), n_phi columns over 360 degrees (fewer
 // when cut); smooth normals, uv = (phi / phimax, (theta - theta_zmin) / (theta_zmax - theta_zmin)).
-MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int n_theta, int n_phi);
+MeshData make_pbrt_sphere(float r, float zmin, float zmax, float phimax_deg, int n_theta,
+                          int n_phi);
 
 // pbrt's "disk" in the plane z = height, normal +z: radius, innerradius (an annulus), phimax;
 // uv = (phi / phimax, (radius - rho) / (radius - innerradius)).
-MeshData make_pbrt_disk(float height, float radius, float inner_radius, float phimax_deg, int n_phi);
+MeshData make_pbrt_disk(float height, float radius, float inner_radius, float phimax_deg,
+                        int n_phi);
 
 // pbrt's "bilinearmesh": patches of 4 vertex indices (p00, p10, p01, p11). A planar patch is two
 // triangles (exact); a curved one an n x n grid of the bilinear surface. Normals and uvs are

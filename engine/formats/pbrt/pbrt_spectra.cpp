@@ -28,7 +28,9 @@ Vec3 integrate_xyz(F f) {
   return {float(x), float(y), float(z)};
 }
 
-RGB clamp_negative(RGB c) { return {std::max(0.0f, c.x), std::max(0.0f, c.y), std::max(0.0f, c.z)}; }
+RGB clamp_negative(RGB c) {
+  return {std::max(0.0f, c.x), std::max(0.0f, c.y), std::max(0.0f, c.z)};
+}
 
 }  // namespace
 
@@ -95,18 +97,19 @@ std::optional<RGB> named_spectrum_rgb(const std::string& name, bool illuminant) 
 std::optional<float> named_glass_ior(const std::string& name) {
   // Schott's catalogue n_d (587.56 nm).
   static const std::pair<const char*, float> glasses[] = {
-      {"glass-BK7", 1.5168f},  {"glass-BAF10", 1.6700f}, {"glass-FK51A", 1.4866f},
-      {"glass-LASF9", 1.8503f}, {"glass-F5", 1.6034f},   {"glass-SF5", 1.6727f},
-      {"glass-SF10", 1.7283f}, {"glass-SF11", 1.7847f}};
+      {"glass-BK7", 1.5168f},   {"glass-BAF10", 1.6700f}, {"glass-FK51A", 1.4866f},
+      {"glass-LASF9", 1.8503f}, {"glass-F5", 1.6034f},    {"glass-SF5", 1.6727f},
+      {"glass-SF10", 1.7283f},  {"glass-SF11", 1.7847f}};
   for (auto [n, ior] : glasses)
     if (name == n) return ior;
   return std::nullopt;
 }
 
 std::vector<std::string> known_spectrum_names() {
-  return {"metal-Au-eta", "metal-Au-k", "metal-Ag-eta", "metal-Ag-k", "metal-Cu-eta", "metal-Cu-k",
-          "metal-Al-eta", "metal-Al-k", "glass-BK7", "glass-BAF10", "glass-FK51A", "glass-LASF9",
-          "glass-F5", "glass-SF5", "glass-SF10", "glass-SF11", "stdillum-D65", "stdillum-A"};
+  return {"metal-Au-eta", "metal-Au-k",   "metal-Ag-eta", "metal-Ag-k", "metal-Cu-eta",
+          "metal-Cu-k",   "metal-Al-eta", "metal-Al-k",   "glass-BK7",  "glass-BAF10",
+          "glass-FK51A",  "glass-LASF9",  "glass-F5",     "glass-SF5",  "glass-SF10",
+          "glass-SF11",   "stdillum-D65", "stdillum-A"};
 }
 
 }  // namespace rf::pbrt
