@@ -773,12 +773,15 @@ class MitsubaParser {
       return r;
     }
     if (type == "bumpmap" || type == "normalmap") {
-      std::vector<Node> inner = p.nested({"bsdf", "ref"});
+      std::vector<Node> inner;  // the nested bsdf; the bump or normal texture is dropped
+      for (const Node& c : p.nested({"bsdf", "ref"}))
+        if (c.tag() == "bsdf" || resolve_ref(c).tag() == "bsdf") inner.push_back(c);
       if (inner.size() != 1) fail(n, "'" + type + "' needs one nested bsdf");
       doc_.warn(n, "'" + type + "' is not supported: the nested BSDF is rendered without it");
       p.nested({"texture"});
-      p.find("normalmap");
-      p.find("scale");
+      p.ignore("normalmap");
+      p.ignore("scale");
+      p.finish();
       BsdfResult& in = bsdf(inner[0]);
       in.used = true;
       r = in;
