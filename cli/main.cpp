@@ -1,4 +1,5 @@
 // `rayfarm`: every command of the project in one binary (commands.h lists the groups).
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
@@ -9,6 +10,9 @@
 #include "client/commands.h"
 
 int main(int argc, char** argv) {
+  // Log lines (warnings of the scene importers, progress of services) go to stderr: stdout
+  // carries what scripts read (`submit` prints the job id, `status --json`).
+  spdlog::set_default_logger(spdlog::stderr_color_mt("rayfarm"));
   CLI::App app{"rayfarm: a distributed batch renderer"};
   app.require_subcommand(1);
   rf::cli::SharedOptions shared;

@@ -93,9 +93,11 @@ class Farm {
                              args + " --coordinator " + address());
   }
   std::string submit(const std::string& args) const {
-    test::CommandResult r = test::run_command("cd " + test::source_dir() + " && " +
+    // The job id is stdout alone (run_command adds 2>&1 outside the braces; the importers'
+    // warnings go to stderr).
+    test::CommandResult r = test::run_command("cd " + test::source_dir() + " && { " +
                                               test::rayfarm_binary() + " submit " + args +
-                                              " --coordinator " + address() + " 2>/dev/null");
+                                              " --coordinator " + address() + " 2>/dev/null; }");
     EXPECT_EQ(r.exit_code, 0) << r.output;
     std::string id = r.output;
     while (!id.empty() && (id.back() == '\n' || id.back() == ' ')) id.pop_back();
@@ -181,6 +183,35 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
     for (size_t p = 0; (p = log.find("BVH built", p)) != std::string::npos; ++p) ++builds;
     EXPECT_LE(builds, 2u) << log;
   }
+}
+
+// The importers run at submit and the bundle carries every file a scene references: a pbrt-v4
+// scene with an Include, a PLY mesh and a spectrum file, a glTF with an external image, and a
+// Mitsuba scene with PLY meshes render on a worker (from the bundle alone) to the local image,
+// AOV layers included.
+TEST(Farm, ImportedScenesShipTheirFilesAndRenderWithAovsAsLocally) {
+  Farm farm("farm-formats");
+  const std::string common = " --spp 8 --passes 4 --res 24x16 --integrator path --aov albedo,normal,depth";
+  const std::vector<std::string> scenes = {"tests/data/pbrt/directives.pbrt",
+                                           "tests/data/gltf/textured_external.gltf",
+                                           "scenes/veach-mis/scene.xml"};
+  std::vector<std::string> jobs;
+  for (const std::string& scene : scenes) jobs.push_back(farm.submit(scene + common + " --frames 1"));
+  farm.worker();
+  for (size_t i = 0; i < jobs.size(); ++i) {
+    SCOPED_TRACE(scenes[i] + " job " + jobs[i]);
+    EXPECT_EQ(farm.client("watch " + jobs[i]).exit_code, 0);
+    test::CommandResult r = farm.client("fetch " + jobs[i] + " -o " + farm.dir() + "/out-" + jobs[i]);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    std::string local = farm.local(scenes[i] + common, 1);
+    EXPECT_EQ(read_exr(local).nch, 15);  // RGBA, variance and the AOV layers
+    expect_same_image(fetched(farm, jobs[i], 1), local);
+  }
+  // A bad file is refused at submit, naming the file and line, before any worker sees it.
+  test::write_text(farm.dir() + "/bad.pbrt", "WorldBegin\nShape \"cylinder\"\n");
+  test::CommandResult bad = farm.client("submit " + farm.dir() + "/bad.pbrt");
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("bad.pbrt:2"), std::string::npos) << bad.output;
 }
 
 TEST(Farm, SigkilledWorkerLosesNoWorkAndTheImageStillEqualsTheLocalRender) {

@@ -129,10 +129,13 @@ TEST(GltfTest, PortraitYfovBecomesTheHorizontalFov) {
   EXPECT_EQ(s.film.height, 512);
   // The shorter axis is now horizontal: 2 atan(tan(yfov / 2) * 256 / 512).
   EXPECT_NEAR(s.camera.fov_deg, 2 * std::atan(std::tan(0.25) * 0.5) * kDeg, 1e-4f);
-  // load_scene flattens the instances and applies overrides (the fov stays on the shorter axis).
+  // load_scene keeps the instances (Embree instances) and applies overrides (the fov stays on
+  // the shorter axis).
   SceneOverrides ov;
   ov.width = 32, ov.height = 64;
   Scene f = load_scene(dir + "/portrait.gltf", ov);
+  EXPECT_EQ(f.instances.size(), 2u);
+  flatten_instances(f);
   EXPECT_EQ(f.meshes.size(), 2u);
   EXPECT_EQ(f.film.width, 32);
   EXPECT_NEAR(f.camera.fov_deg, s.camera.fov_deg, 1e-6f);

@@ -389,7 +389,12 @@ TEST(MitsubaXml, PreVersion2NamesAreUpgraded) {
 
 TEST(MitsubaXml, ShapegroupsBecomeInstances) {
   Scene s = load("shapegroup.xml");
-  // load_scene flattens: two instances of a rectangle and a cube.
+  // Two instances of one object (a rectangle and a cube), kept as instances; flattened here to
+  // check the placements.
+  ASSERT_EQ(s.instances.size(), 2u);
+  ASSERT_EQ(s.objects.size(), 1u);
+  EXPECT_EQ(s.objects[0].meshes.size(), 2u);
+  flatten_instances(s);
   ASSERT_EQ(s.meshes.size(), 4u);
   EXPECT_TRUE(s.objects.empty());
   float min_x = 1e9f, max_x = -1e9f;

@@ -161,7 +161,10 @@ TEST(PbrtDirectives, LightsAndAreaLights) {
 TEST(PbrtDirectives, ShapesIncludesAndInstances) {
   Scene s = load_scene(data("directives.pbrt"));
   // Meshes: floor, bilinear patch, PLY quad, (interface sphere left out), area quad, emitting
-  // sphere, the disk in camera space, then 2 instances x 1 half-hemisphere (flattened).
+  // sphere, the disk in camera space, then 2 instances x 1 half-hemisphere (kept as Embree
+  // instances by load_scene; flattened here to check their placement).
+  ASSERT_EQ(s.instances.size(), 2u);
+  flatten_instances(s);
   ASSERT_EQ(s.meshes.size(), 8u);
   EXPECT_EQ(s.meshes[1].triangle_count(), 2u);  // a planar bilinear patch is exact as 2 triangles
   EXPECT_EQ(s.meshes[2].triangle_count(), 2u);  // the PLY's quad, fanned
