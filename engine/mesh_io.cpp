@@ -432,7 +432,7 @@ void read_ply_vertices(PlyReader& r, const PlyElement& e, MeshData& m) {
   for (uint64_t row = 0; row < e.count; ++row) {
     r.set_row(e, row);
     read_ply_row(r, e, -1, val, unused);
-    Vec3 p(float(val[x]), float(val[y]), float(val[z]));
+    Vec3 p{float(val[x]), float(val[y]), float(val[z])};
     if (!is_finite(p)) r.fail("vertex position is not finite");
     m.positions.push_back(p);
     if (has_n) m.normals.emplace_back(float(val[nx]), float(val[ny]), float(val[nz]));

@@ -9,6 +9,7 @@
 #include "engine/local_render.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/harness.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -23,21 +24,7 @@ TEST(CornellBox, ImageMeansMatchReference) {
   ASSERT_EQ(s.render.integrator.max_depth, 64);
   Renderer r(s);
   LocalRenderResult res = render_local(r, {});
-  RGB mean = res.frame.mean_estimate();
-  const double reference[3] = {0.1963, 0.1275, 0.0361};
-  double n = double(s.film.width) * s.film.height;
-  for (int ch = 0; ch < 3; ++ch) {
-    // Pixels are independent: Var(image mean) = sum of pixel variances of the mean / N^2.
-    double var = 0;
-    for (int y = 0; y < s.film.height; ++y)
-      for (int x = 0; x < s.film.width; ++x) var += res.frame.variance_of_mean(x, y)[ch];
-    double se = std::sqrt(var) / n;
-    SCOPED_TRACE("channel " + std::to_string(ch));
-    // The render's own standard error must be below 0.2% so that the 1% check is meaningful:
-    // the references are means of converged renders, themselves good to a few 0.1%.
-    EXPECT_LT(se, 0.002 * reference[ch]);
-    EXPECT_NEAR(mean[ch], reference[ch], 0.01 * reference[ch]);
-  }
+  test::expect_cornell_means(test::image_means(res.frame), 0.002, "Cornell box (JSON)");
 }
 
 }  // namespace

@@ -511,8 +511,7 @@ TEST(GltfTest, CornellBoxAgreesWithTheJsonScene) {
   std::printf("glTF Cornell box: %s\n", ag.message.c_str());
   // The converged box's image means (tests/cornell_test.cpp) within 1% (issue 11): the glTF
   // render's standard error is about 0.2% of each mean, so 1% is 5 standard errors.
-  const double reference[3] = {0.1963, 0.1275, 0.0361};
-  for (int c = 0; c < 3; ++c) EXPECT_NEAR(b.image_mean(c), reference[c], 0.01 * reference[c]) << c;
+  test::expect_cornell_means(test::image_means(b), 0.0025, "Cornell box (glTF)");
 }
 
 }  // namespace

@@ -469,20 +469,7 @@ TEST(PbrtAgreement, CornellBoxImageMeansMatchTheReference) {
   Scene s = load_scene(test::source_dir() + "/scenes/cornell-box/scene-v4.pbrt", ov);
   Renderer r(s);
   LocalRenderResult res = render_local(r, {});
-  RGB mean = res.frame.mean_estimate();
-  const double reference[3] = {0.1963, 0.1275, 0.0361};
-  double n = double(s.film.width) * s.film.height;
-  for (int ch = 0; ch < 3; ++ch) {
-    double var = 0;
-    for (int y = 0; y < s.film.height; ++y)
-      for (int x = 0; x < s.film.width; ++x) var += res.frame.variance_of_mean(x, y)[ch];
-    double se = std::sqrt(var) / n;
-    SCOPED_TRACE("channel " + std::to_string(ch));
-    EXPECT_LT(se, 0.002 * reference[ch]);
-    EXPECT_NEAR(mean[ch], reference[ch], 0.01 * reference[ch]);
-    std::printf("cornell pbrt channel %d: mean %.5f (reference %.4f, se %.5f)\n", ch, mean[ch],
-                reference[ch], se);
-  }
+  test::expect_cornell_means(test::image_means(res.frame), 0.002, "Cornell box (pbrt)");
 }
 
 // Both at 160x90 (the shipped 1280x720 and 640x360 scaled down), triangle filter of radius 1

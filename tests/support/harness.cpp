@@ -8,6 +8,8 @@
 #include <stdexcept>
 
 #include "engine/render.h"
+#include <gtest/gtest.h>
+#include <cstdio>
 
 namespace rf::test {
 
@@ -350,6 +352,36 @@ Agreement compare(const ImageStats& a, const ImageStats& b) {
   }
   r.message = head.str();
   return r;
+}
+
+ImageMeans image_means(const ImageStats& stats) {
+  ImageMeans m;
+  for (int c = 0; c < 3; ++c) m.mean[c] = stats.image_mean(c), m.std_error[c] = stats.image_mean_std_error(c);
+  return m;
+}
+
+ImageMeans image_means(const SampleBuffer& frame) {
+  ImageMeans m;
+  RGB mean = frame.mean_estimate();
+  const double n = double(frame.rect.area());
+  for (int c = 0; c < 3; ++c) {
+    double var = 0;
+    for (int y = frame.rect.y0; y < frame.rect.y1(); ++y)
+      for (int x = frame.rect.x0; x < frame.rect.x1(); ++x) var += frame.variance_of_mean(x, y)[c];
+    m.mean[c] = mean[c];
+    m.std_error[c] = std::sqrt(var) / n;
+  }
+  return m;
+}
+
+void expect_cornell_means(const ImageMeans& m, double max_rel_std_error, const std::string& label) {
+  for (int c = 0; c < 3; ++c) {
+    SCOPED_TRACE(label + ", channel " + std::to_string(c));
+    std::printf("%s image mean, channel %d: %.5f (reference %.4f, standard error %.5f)\n",
+                label.c_str(), c, m.mean[c], kCornellMeans[c], m.std_error[c]);
+    EXPECT_LT(m.std_error[c], max_rel_std_error * kCornellMeans[c]);
+    EXPECT_NEAR(m.mean[c], kCornellMeans[c], 0.01 * kCornellMeans[c]);
+  }
 }
 
 }  // namespace rf::test

@@ -99,6 +99,25 @@ ImageStats render_stats(const Scene& scene, uint32_t passes, int block);
 
 inline constexpr uint32_t kMinPasses = 32;
 
+// A render's per-channel image mean and the standard error of that mean.
+struct ImageMeans {
+  double mean[3] = {0, 0, 0}, std_error[3] = {0, 0, 0};
+};
+// From batch means over passes (valid however pixels correlate within a pass).
+ImageMeans image_means(const ImageStats& stats);
+// From a merged camera-path frame whose pixels are independent: Var(image mean) = the sum of the
+// pixels' variances of the mean / N^2.
+ImageMeans image_means(const SampleBuffer& frame);
+
+// The Cornell box's converged image means at max depth 64 (R, G, B), on which other renderers'
+// converged renders of Bitterli's scene agree (Tungsten's reference too): every format's Cornell
+// box is held to them.
+inline constexpr double kCornellMeans[3] = {0.1963, 0.1275, 0.0361};
+// Expects each channel's mean within 1% of kCornellMeans, and the render's own standard error
+// below max_rel_std_error of the reference so that the 1% check means something (the reference
+// is itself good to a few 0.1%). Prints the figures under `label`.
+void expect_cornell_means(const ImageMeans& m, double max_rel_std_error, const std::string& label);
+
 struct Agreement {
   bool passed = false;
   size_t cells = 0;  // cells t-tested (block x channel, with nonzero variance in either)

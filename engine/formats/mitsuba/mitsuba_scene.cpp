@@ -370,17 +370,11 @@ class MitsubaParser {
       Vec3 dir = target - origin;
       if (!(length(dir) > 0)) fail(op, "@target: must differ from origin");
       dir = normalize(dir);
-      Vec3 left = cross(up, dir);
-      if (!(length(left) > 1e-6f))
+      if (!(length(cross(up, dir)) > 1e-6f))
         fail(op, "@up: must not be zero or parallel to the view direction");
-      left = normalize(left);
-      Vec3 new_up = cross(dir, left);
-      // Mitsuba's look-at frame: +x left, +y up, +z towards the target.
-      Mat4 m;
-      Vec3 cols[4] = {left, new_up, dir, origin};
-      for (int c = 0; c < 4; ++c)
-        for (int i = 0; i < 3; ++i) m.m[i][c] = cols[c][i];
-      return m;
+      // Mitsuba's look-at frame: +x left, +y up, +z towards the target (the engine's right-handed
+      // camera frame with x and z reversed).
+      return Mat4::look_at(origin, target, up) * Mat4::scale({-1, 1, -1});
     }
     fail(op, "unknown transform operation <" + tag +
                  "> (known: translate, rotate, scale, matrix, lookat)");

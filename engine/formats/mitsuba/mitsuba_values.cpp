@@ -1,4 +1,5 @@
 #include "engine/formats/mitsuba/mitsuba_values.h"
+#include "engine/formats/spectrum.h"
 
 #include <cctype>
 #include <cmath>
@@ -67,40 +68,9 @@ const std::vector<std::pair<std::string, std::string>>& conductor_aliases() {
   return aliases;
 }
 
-// g(x; mu, s1, s2): a Gaussian with a different width on either side of its peak.
-double lobe(double x, double mu, double s1, double s2) {
-  double t = (x - mu) / (x < mu ? s1 : s2);
-  return std::exp(-0.5 * t * t);
-}
-
-// CIE 1931 2-degree colour matching functions, Wyman, Sloan and Shirley 2013 (JCGT 2(2)),
-// multi-lobe fit (their equation 2).
-Vec3 cie_xyz(double nm) {
-  double x = 1.056 * lobe(nm, 599.8, 37.9, 31.0) + 0.362 * lobe(nm, 442.0, 16.0, 26.7) -
-             0.065 * lobe(nm, 501.1, 20.4, 26.2);
-  double y = 0.821 * lobe(nm, 568.8, 46.9, 40.5) + 0.286 * lobe(nm, 530.9, 16.3, 31.1);
-  double z = 1.217 * lobe(nm, 437.0, 11.8, 36.0) + 0.681 * lobe(nm, 459.0, 26.0, 13.8);
-  return {float(x), float(y), float(z)};
-}
-
-// XYZ to linear sRGB (IEC 61966-2-1, D65).
-RGB xyz_to_srgb(double X, double Y, double Z) {
-  return {float(3.2404542 * X - 1.5371385 * Y - 0.4985314 * Z),
-          float(-0.9692660 * X + 1.8760108 * Y + 0.0415560 * Z),
-          float(0.0556434 * X - 0.2040259 * Y + 1.0572252 * Z)};
-}
-
-constexpr double kMinNm = 360, kMaxNm = 830;
-
 template <class F>
 RGB integrate_rgb(F&& spectrum) {
-  double X = 0, Y = 0, Z = 0;
-  for (double nm = kMinNm; nm <= kMaxNm; nm += 1) {
-    double v = spectrum(nm);
-    Vec3 c = cie_xyz(nm);
-    X += v * c.x, Y += v * c.y, Z += v * c.z;
-  }
-  return xyz_to_srgb(X, Y, Z);
+  return xyz_to_srgb(integrate_xyz(spectrum));
 }
 
 }  // namespace

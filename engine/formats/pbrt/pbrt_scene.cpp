@@ -342,15 +342,11 @@ Mat4 Builder::look_at(const Location& at, const std::vector<double>& v) {
   if (!(length(look - eye) > 0)) fail(at, "LookAt: the eye and the look-at point coincide");
   if (!(length(up) > 0)) fail(at, "LookAt: the up vector is zero");
   Vec3 dir = normalize(look - eye);
-  Vec3 right = cross(normalize(up), dir);  // pbrt's left-handed camera frame
-  if (!(length(right) > 1e-6f))
+  if (!(length(cross(normalize(up), dir)) > 1e-6f))
     fail(at, "LookAt: the up vector is parallel to the viewing direction");
-  right = normalize(right);
-  Vec3 new_up = cross(dir, right);
-  Mat4 world_from_camera;
-  Vec3 cols[4] = {right, new_up, dir, eye};
-  for (int c = 0; c < 4; ++c)
-    for (int i = 0; i < 3; ++i) world_from_camera.m[i][c] = cols[c][i];
+  // pbrt's left-handed camera frame (+x = up x dir, +y up, +z towards the target): the engine's
+  // right-handed camera frame with x and z reversed.
+  Mat4 world_from_camera = Mat4::look_at(eye, look, normalize(up)) * Mat4::scale({-1, 1, -1});
   return world_from_camera.inverse();
 }
 

@@ -5,8 +5,7 @@
 //   emission is an RGBIlluminantSpectrum (the RGB times the colour space's D65, divided by D65's
 //   luminance), which an sRGB film renders back to the same RGB.
 // - Sampled spectra ("spectrum" [lambda value ...]) and blackbodies go through the CIE 1931
-//   matching functions (the multi-lobe Gaussian fit of Wyman, Sloan and Shirley 2013) to XYZ, then
-//   to linear sRGB. Emission spectra are normalised to luminance Y = 1 first, as pbrt-v4's lights
+//   matching functions to XYZ, then to linear sRGB (engine/formats/spectrum.h). Emission spectra are normalised to luminance Y = 1 first, as pbrt-v4's lights
 //   do (scale /= SpectrumToPhotometric); reflectance spectra are divided per channel by the RGB of
 //   the constant spectrum 1, so a flat spectrum c gives grey (c, c, c).
 // - Named spectra: "metal-{Au,Ag,Cu,Al}-{eta,k}" are the engine's conductor presets (gold, silver,
@@ -21,11 +20,6 @@
 #include "engine/math.h"
 
 namespace rf::pbrt {
-
-// CIE 1931 colour matching functions at wavelength nm (fit, max error about 1% of the peak).
-Vec3 cie_xyz(double nm);
-// Linear sRGB (D65) of CIE XYZ.
-RGB xyz_to_srgb(Vec3 xyz);
 
 // Planck's law at temperature kelvin, normalised to luminance 1, as linear sRGB; negative
 // components (very low or very high temperatures lie outside sRGB) are clamped to 0.
