@@ -1,7 +1,7 @@
 // The shipped Cornell box converges to the per-channel image means of other renderers' converged
 // renders of this scene (256x256, max depth 64): R 0.1963, G 0.1275, B 0.0361 (Tungsten's
-// reference in ../shared agrees). This checks the scene translation, camera, materials, light
-// and path tracer together.
+// reference render, published with the scene, agrees). This checks the scene translation,
+// camera, materials, light and path tracer together.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -18,7 +18,6 @@
 namespace rf::test {
 
 std::string source_dir() { return RAYFARM_SOURCE_DIR; }
-std::string shared_dir() { return std::string(RAYFARM_SOURCE_DIR) + "/../shared"; }
 std::string rayfarm_binary() { return RAYFARM_BINARY; }
 
 std::string make_temp_dir(const std::string& tag) {

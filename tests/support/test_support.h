@@ -7,7 +7,6 @@
 namespace rf::test {
 
 std::string source_dir();                  // the repository root
-std::string shared_dir();                  // ../shared beside the repository (may not exist)
 std::string rayfarm_binary();              // the built CLI
 std::string make_temp_dir(const std::string& tag);  // fresh directory under the build tree's tmp
 
