@@ -1,0 +1,311 @@
+#!/usr/bin/env python3
+"""Time-to-error of rayfarm against Mitsuba 3 on the same scene files (bench/peers.sh runs it in a
+venv that has Mitsuba and numpy; docs/performance.md explains the method and holds the table).
+
+For each scene both renderers read the same Mitsuba XML file (rayfarm through its importer,
+docs/formats/mitsuba.md), at the same resolution, box filter, max depth and samples per pixel.
+Mitsuba's copy of the XML is rewritten only in its sampler and filter.
+
+1. Reference. Each renderer makes R independent long renders (different seeds). Per 16x16 block and
+   per channel, the two renderers' means are compared with their standard errors (from the spread
+   of the R replicates): the scene must mean the same to both (image means within 4 standard
+   errors, and no more 16x16 blocks beyond 3.29 SE than chance allows), or the scene is reported
+   as DIFFERENT and its ratio is not computed. The common reference is the mean of all 2R renders;
+   its own noise (the variance of that mean, estimated per pixel from the replicates) is
+   subtracted from every MSE below, so MSE estimates the render's error alone.
+2. Benchmark. Each renderer renders once per sampler it offers at the benchmark spp, as a whole
+   process timed by wall clock (Mitsuba's includes Python start-up and its JIT compilation, as a
+   user would see it). MSE over pixels and RGB against the reference.
+3. Efficiency ratio = (MSE x time) of Mitsuba's best sampler / (MSE x time) of rayfarm's best.
+   Above 1, rayfarm reaches a given error sooner.
+
+The BDPT row (veach-bidir) renders rayfarm's bdpt for the same wall time Mitsuba's path tracer took
+and reports MSE_Mitsuba / MSE_rayfarm.
+
+References are cached in the work directory keyed by the scene file's bytes and the settings.
+"""
+import argparse
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# name, XML (relative to the repository, or generated), resolution, benchmark spp, reference
+# replicates x spp per renderer, rayfarm integrator, Mitsuba integrator
+SCENES = {
+    'cornell-box': dict(xml='scenes/cornell-box/scene_v3.xml', res=(256, 256), spp=1024,
+                        ref=(8, 1024)),
+    'veach-mis': dict(xml='scenes/veach-mis/scene.xml', res=(320, 180), spp=1024, ref=(8, 1024)),
+    'million': dict(xml=None, res=(256, 256), spp=256, ref=(8, 512)),
+}
+BDPT = dict(xml='scenes/veach-bidir/scene.xml', res=(256, 256), mitsuba_spp=256, ref=(8, 1024))
+
+# rayfarm's configurations: sampler and passes (None: the default, gcd(spp, 16); passes are
+# independent replicates, so a sampler stratifies over spp / passes samples of a pixel).
+RAYFARM_CONFIGS = [('independent', None), ('sobol', None), ('sobol', 4)]
+MITSUBA_SAMPLERS = ['independent', 'multijitter', 'ldsampler']
+
+
+def log(*a):
+    print(*a, file=sys.stderr, flush=True)
+
+
+def read_rgb(path):
+    import mitsuba as mi
+    bmp = mi.Bitmap(path)
+    names = [c for c in bmp.channel_names()] if hasattr(bmp, 'channel_names') else None
+    arr = np.array(bmp, dtype=np.float64)
+    if names and 'R' in names:
+        idx = [names.index(c) for c in ('R', 'G', 'B')]
+        return arr[:, :, idx]
+    return arr[:, :, :3]
+
+
+def mitsuba_xml(src, dst, sampler):
+    """A copy of src whose sensor uses a box filter and the given sampler type."""
+    tree = ET.parse(src)
+    for sensor in tree.getroot().iter('sensor'):
+        for s in sensor.findall('sampler'):
+            s.set('type', sampler)
+        for film in sensor.findall('film'):
+            for rf in film.findall('rfilter'):
+                film.remove(rf)
+            ET.SubElement(film, 'rfilter', {'type': 'box'})
+    tree.write(dst)
+
+
+MITSUBA_SCRIPT = r'''
+import sys, time
+import mitsuba as mi
+mi.set_variant('llvm_ad_rgb')
+xml, scene_dir, out, spp, w, h, seed, integrator = sys.argv[1:9]
+mi.file_resolver().prepend(scene_dir)
+kw = dict(spp=int(spp), resx=int(w), resy=int(h))
+if integrator != '-':
+    kw['integrator'] = integrator
+scene = mi.load_file(xml, **kw)
+img = mi.render(scene, seed=int(seed))
+mi.Bitmap(img).write(out)
+'''
+
+
+class Bench:
+    def __init__(self, args):
+        self.args = args
+        self.work = args.work
+        os.makedirs(self.work, exist_ok=True)
+        self.rayfarm = os.path.join(ROOT, args.build, 'bin', 'rayfarm')
+        self.script = os.path.join(self.work, 'mitsuba_render.py')
+        with open(self.script, 'w') as f:
+            f.write(MITSUBA_SCRIPT)
+
+    def run_rayfarm(self, xml, out, res, spp, sampler, seed, integrator=None, budget=None,
+                    passes=None):
+        cmd = [self.rayfarm, 'render', xml, '-o', out, '--res', '%dx%d' % res, '--spp', str(spp),
+               '--filter', 'box', '--sampler', sampler, '--seed', str(seed), '-q']
+        if integrator:
+            cmd += ['--integrator', integrator]
+        if budget:
+            cmd += ['--time-budget', '%.3f' % budget]
+        if passes:
+            cmd += ['--passes', str(passes)]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        return time.perf_counter() - t0
+
+    def run_mitsuba(self, xml, out, res, spp, sampler, seed, integrator='-'):
+        tmp = os.path.join(self.work, 'mi-%s-%s.xml' % (os.path.basename(os.path.dirname(xml)),
+                                                        sampler))
+        mitsuba_xml(xml, tmp, sampler)
+        cmd = [sys.executable, self.script, tmp, os.path.dirname(os.path.abspath(xml)), out,
+               str(spp), str(res[0]), str(res[1]), str(seed), integrator]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+        return time.perf_counter() - t0
+
+    def replicates(self, renderer, name, xml, res, ref, integrator):
+        """R independent long renders of one renderer, cached: Mitsuba's by the scene file and
+        settings, rayfarm's also by its binary (a changed engine renders its references again)."""
+        reps, spp = ref
+        h = hashlib.sha256()
+        with open(xml, 'rb') as f:
+            h.update(f.read())
+        h.update(repr((res, ref, integrator)).encode())
+        if renderer == 'rayfarm':
+            with open(self.rayfarm, 'rb') as f:
+                h.update(f.read())
+        cache = os.path.join(self.work, 'ref-%s-%s-%s.npy' % (name, renderer, h.hexdigest()[:16]))
+        if os.path.exists(cache):
+            return np.load(cache)
+        imgs = []
+        for r in range(reps):
+            out = os.path.join(self.work, 'ref-%s.exr' % renderer)
+            if renderer == 'rayfarm':
+                t = self.run_rayfarm(xml, out, res, spp, 'independent', 1000 + r, integrator)
+            else:
+                t = self.run_mitsuba(xml, out, res, spp, 'independent', 1000 + r)
+            imgs.append(read_rgb(out))
+            log('  %s %s reference replicate %d/%d: %.1f s' % (name, renderer, r + 1, reps, t))
+        a = np.array(imgs)
+        np.save(cache, a)
+        return a
+
+    def reference(self, name, xml, res, ref, rayfarm_integrator):
+        """(reference image, per-pixel variance of it, agreement report)."""
+        reps = ref[0]
+        a = self.replicates('rayfarm', name, xml, res, ref, rayfarm_integrator)
+        b = self.replicates('mitsuba', name, xml, res, ref, None)
+        report = agreement(a, b)
+        ref_img = np.concatenate([a, b]).mean(axis=0)
+        # Variance of the pooled mean of 2R renders: sum of each renderer's R replicate variances
+        # over (2R)^2.
+        var = (a.var(axis=0, ddof=1) * reps + b.var(axis=0, ddof=1) * reps) / (2 * reps) ** 2
+        return ref_img, var, report
+
+
+def agreement(a, b, block=16):
+    """Block-level and image-mean z statistics of two stacks of replicate renders."""
+    def block_means(x):
+        n, h, w, c = x.shape
+        hb, wb = h // block, w // block
+        x = x[:, :hb * block, :wb * block].reshape(n, hb, block, wb, block, c)
+        return x.mean(axis=(2, 4))
+    rep = {}
+    ba, bb = block_means(a), block_means(b)
+    ma, mb = ba.mean(0), bb.mean(0)
+    se = np.sqrt(ba.var(0, ddof=1) / len(a) + bb.var(0, ddof=1) / len(b))
+    z = np.where(se > 0, (ma - mb) / np.maximum(se, 1e-30), 0.0)
+    rep['blocks'] = int(z.size)
+    rep['blocks_over_3.29'] = int((np.abs(z) > 3.29).sum())
+    ia, ib = a.mean(axis=(1, 2)), b.mean(axis=(1, 2))
+    mean_z = (ia.mean(0) - ib.mean(0)) / np.sqrt(ia.var(0, ddof=1) / len(a) +
+                                                  ib.var(0, ddof=1) / len(b))
+    rep['image_mean_rayfarm'] = [float(v) for v in ia.mean(0)]
+    rep['image_mean_mitsuba'] = [float(v) for v in ib.mean(0)]
+    rep['image_mean_z'] = [float(v) for v in mean_z]
+    # With few replicates the t distribution has heavy tails: allow 1% of blocks plus 3 sigma of
+    # the binomial count at that rate before calling the scenes different.
+    p = 0.01
+    allowed = rep['blocks'] * p + 3 * np.sqrt(rep['blocks'] * p * (1 - p))
+    rep['agree'] = bool(max(abs(v) for v in mean_z) < 4 and rep['blocks_over_3.29'] <= allowed)
+    return rep
+
+
+def mse(img, ref, var):
+    return float(((img - ref) ** 2).mean() - var.mean())
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('scenes', nargs='*', help='subset of: %s, veach-bidir' % ', '.join(SCENES))
+    ap.add_argument('--work', default=os.path.expanduser('~/.cache/rayfarm-bench'))
+    ap.add_argument('--build', default='build')
+    ap.add_argument('--scale', type=float, default=1.0,
+                    help='multiply every spp (0.25 for a quick look; the table uses 1)')
+    args = ap.parse_args()
+    b = Bench(args)
+    names = args.scenes or list(SCENES) + ['veach-bidir']
+    rows, bdpt_rows = [], []
+    for name in names:
+        if name == 'veach-bidir':
+            bdpt_rows.append(bench_bdpt(b, os.path.join(ROOT, BDPT['xml']), args.scale))
+            continue
+        cfg = SCENES[name]
+        xml = cfg['xml']
+        if xml is None:
+            d = os.path.join(args.work, 'million')
+            xml = os.path.join(d, 'scene.xml')
+            if not os.path.exists(xml):
+                subprocess.run([sys.executable, os.path.join(ROOT, 'bench/make_million_scene.py'),
+                                d, '--res', str(cfg['res'][0])], check=True)
+        else:
+            xml = os.path.join(ROOT, xml)
+        spp = max(16, int(cfg['spp'] * args.scale))
+        ref_cfg = (cfg['ref'][0], max(16, int(cfg['ref'][1] * args.scale)))
+        log('%s: reference (%d x %d spp per renderer)' % (name, *ref_cfg))
+        ref, var, report = b.reference(name, xml, cfg['res'], ref_cfg, None)
+        log('  agreement: %s' % json.dumps(report))
+        results = []
+        for s, passes in RAYFARM_CONFIGS:
+            out = os.path.join(args.work, 'bench-rf.exr')
+            t = b.run_rayfarm(xml, out, cfg['res'], spp, s, 7, passes=passes)
+            name_s = s + ('' if passes is None else ', %d passes' % passes)
+            results.append(('rayfarm', name_s, t, mse(read_rgb(out), ref, var)))
+            log('  rayfarm %s: %.2f s, MSE %.4g' % (name_s, t, results[-1][3]))
+        for s in MITSUBA_SAMPLERS:
+            out = os.path.join(args.work, 'bench-mi.exr')
+            t = b.run_mitsuba(xml, out, cfg['res'], spp, s, 7)
+            results.append(('mitsuba', s, t, mse(read_rgb(out), ref, var)))
+            log('  mitsuba %s: %.2f s, MSE %.4g' % (s, t, results[-1][3]))
+        rows.append((name, cfg['res'], spp, report, results))
+
+    px = lambda res: res[0] * res[1]
+    print('| scene | renderer | sampler | time (s) | Msamples/s | MSE | MSE x time |')
+    print('|---|---|---|---:|---:|---:|---:|')
+    for name, res, spp, report, results in rows:
+        for r, s, t, e in results:
+            print('| %s %dx%d %d spp | %s | %s | %.2f | %.2f | %.4g | %.4g |' %
+                  (name, res[0], res[1], spp, r, s, t, px(res) * spp / t / 1e6, e, e * t))
+    print()
+    print('| scene | references agree | image-mean z (R, G, B) | blocks beyond 3.29 SE | '
+          'best rayfarm | best Mitsuba | efficiency ratio |')
+    print('|---|---|---|---|---|---|---:|')
+    for name, res, spp, report, results in rows:
+        best = {}
+        for r, s, t, e in results:
+            if r not in best or e * t < best[r][2] * best[r][1]:
+                best[r] = (s, t, e)
+        ratio = (best['mitsuba'][1] * best['mitsuba'][2]) / (best['rayfarm'][1] * best['rayfarm'][2])
+        print('| %s | %s | %s | %d of %d | %s | %s | %s |' % (
+            name, 'yes' if report['agree'] else 'NO (DIFFERENT)',
+            ', '.join('%.1f' % z for z in report['image_mean_z']),
+            report['blocks_over_3.29'], report['blocks'], best['rayfarm'][0], best['mitsuba'][0],
+            '%.2f' % ratio if report['agree'] else 'n/a'))
+    for r in bdpt_rows:
+        print()
+        print('| veach-bidir %dx%d | references agree | Mitsuba path | rayfarm bdpt (same time) | '
+              'MSE ratio Mitsuba / rayfarm |' % BDPT['res'])
+        print('|---|---|---|---|---:|')
+        print('| | %s | %d spp, %.2f s, MSE %.4g | %d spp, %.2f s, MSE %.4g | %.2f |' % r)
+
+
+def bench_bdpt(b, xml, scale):
+    cfg = BDPT
+    ref_cfg = (cfg['ref'][0], max(16, int(cfg['ref'][1] * scale)))
+    log('veach-bidir: reference (%d x %d spp per renderer; rayfarm bdpt, Mitsuba path)' % ref_cfg)
+    ref, var, report = b.reference('veach-bidir', xml, cfg['res'], ref_cfg, 'bdpt')
+    log('  agreement: %s' % json.dumps(report))
+    spp = max(16, int(cfg['mitsuba_spp'] * scale))
+    out = os.path.join(b.work, 'bench-mi.exr')
+    t_mi = b.run_mitsuba(xml, out, cfg['res'], spp, 'independent', 7)
+    e_mi = mse(read_rgb(out), ref, var)
+    log('  mitsuba path: %d spp %.2f s MSE %.4g' % (spp, t_mi, e_mi))
+    # rayfarm bdpt: many small passes, stopped at Mitsuba's wall time (on a completed pass).
+    out = os.path.join(b.work, 'bench-rf.exr')
+    t_rf = b.run_rayfarm(xml, out, cfg['res'], 4096, 'independent', 7, 'bdpt', budget=t_mi * 0.97,
+                         passes=1024)
+    import mitsuba as mi
+    bmp = mi.Bitmap(out)
+    spp_rf = -1
+    try:
+        md = bmp.metadata()
+        passes = str(md['rayfarm:passes'])
+        first, last = passes.split('-')
+        spp_rf = (int(last) - int(first) + 1) * 4
+    except Exception:
+        pass
+    e_rf = mse(read_rgb(out), ref, var)
+    log('  rayfarm bdpt: %.2f s MSE %.4g' % (t_rf, e_rf))
+    return ('yes' if report['agree'] else 'NO (DIFFERENT)', spp, t_mi, e_mi, spp_rf, t_rf, e_rf,
+            e_mi / e_rf)
+
+
+if __name__ == '__main__':
+    main()
