@@ -1,4 +1,4 @@
-// The Embree 3 scene: one triangle geometry per world-space mesh (geometry id == mesh index),
+// The Embree 3 scene: one triangle geometry (or one exact sphere) per world-space mesh (geometry id == mesh index),
 // one Embree scene per instanced object placed by an Embree instance per Scene::instances entry
 // (geometry id == meshes + instance index), closest-hit and occlusion queries, and the surface
 // interaction rebuilt from a hit with a floating-point error bound for robust ray spawning.
@@ -67,6 +67,7 @@ class Accel {
   std::vector<const Mesh*> surfaces_;         // by surface id
   std::vector<uint32_t> object_first_surface_;  // surface id of each object's first mesh
   std::vector<RTCScene> object_scenes_;       // one per object (nullptr: placed by no instance)
+  std::vector<Mat4> instance_inverse_;        // world to object space, per instance
   RTCDevice device_ = nullptr;
   RTCScene rtc_scene_ = nullptr;
 };

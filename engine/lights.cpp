@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "engine/sampling.h"
+#include "engine/shapes.h"
 
 namespace rf {
 
@@ -41,14 +42,22 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
     if (!m.emission || is_black(m.emission->radiance)) continue;
     double w = selection_weight(m.emission->radiance) * (m.emission->two_sided ? 2.0 : 1.0);
     mesh_first_light_[mi] = uint32_t(tris_.size());
-    for (uint32_t t = 0; t < m.triangle_count(); ++t) {
-      float a = triangle_area(m, t);
-      tris_.push_back({mi, t, a});
+    groups_.push_back({uint32_t(tris_.size()), uint32_t(m.primitive_count())});
+    for (uint32_t t = 0; t < m.primitive_count(); ++t) {
+      float a = m.sphere ? 4 * kPi * sqr(m.sphere->radius) : triangle_area(m, t);
+      Tri tri{mi, t, a, m.sphere ? &*m.sphere : nullptr, {}, {}, {}, {}};
+      if (!m.sphere) {
+        tri.p0 = m.positions[m.indices[3 * t]], tri.p1 = m.positions[m.indices[3 * t + 1]];
+        tri.p2 = m.positions[m.indices[3 * t + 2]];
+        tri.n = normalize(cross(tri.p1 - tri.p0, tri.p2 - tri.p0));
+      }
+      tris_.push_back(tri);
       kinds_.push_back(LightKind::Area);
       power_.push_back(double(kPi) * double(a) * w);
     }
   }
   for (const Light& l : scene.lights) {
+    groups_.push_back({uint32_t(kinds_.size()), 1});
     Punctual q{l.type, l.position, normalize(l.direction), l.intensity, 1.0f, 1.0f};
     switch (l.type) {
       case LightType::Point:
@@ -71,33 +80,65 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
     punctual_.push_back(q);
   }
   if (scene.environment) {
+    groups_.push_back({uint32_t(kinds_.size()), 1});
     env_ = std::make_unique<EnvironmentMap>(*scene.environment);
     kinds_.push_back(LightKind::Environment);
     power_.push_back(double(kPi) * r2 * env_->power_integral());
   }
 
+  // Selection in two steps with the same per-light probability as one power-proportional pick:
+  // a group (a light, or all primitives of an emissive mesh) by its power, then a primitive of
+  // the group by its power within the group.
   const size_t n = kinds_.size();
   double total = 0;
   for (double p : power_) total += p;
-  cdf_.assign(n + 1, 0.0);
   pmf_.resize(n);
-  for (size_t i = 0; i < n; ++i) {
-    double pmf = total > 0 ? power_[i] / total : 1.0 / double(n);
-    pmf_[i] = float(pmf);
-    cdf_[i + 1] = cdf_[i] + pmf;
+  for (size_t i = 0; i < n; ++i) pmf_[i] = float(total > 0 ? power_[i] / total : 1.0 / double(n));
+  cdf_.assign(groups_.size() + 1, 0.0);
+  within_cdf_.assign(n, 1.0);
+  for (size_t g = 0; g < groups_.size(); ++g) {
+    const Group& gr = groups_[g];
+    double gp = 0;
+    for (uint32_t k = 0; k < gr.count; ++k) gp += power_[gr.first + k];
+    cdf_[g + 1] = cdf_[g] + (total > 0 ? gp / total : double(gr.count) / double(n));
+    double acc = 0;
+    for (uint32_t k = 0; k < gr.count; ++k) {
+      acc += gp > 0 ? power_[gr.first + k] / gp : 1.0 / double(gr.count);
+      within_cdf_[gr.first + k] = acc;
+    }
+    within_cdf_[gr.first + gr.count - 1] = 1.0;
   }
-  if (n > 0) cdf_.back() = 1.0;
+  if (!groups_.empty()) cdf_.back() = 1.0;
+}
+
+// The light u_select and u.x pick (see the constructor), with u.x rescaled to [0, 1) within the
+// picked primitive's interval so that (u.x, u.y) stays a stratified 2D sample over the group's
+// surface. ~0 when nothing can be picked.
+size_t LightSet::select(float u_select, float& ux) const {
+  const size_t ng = groups_.size();
+  if (ng == 0) return kNoLight;
+  // First cdf entry > u: the group whose interval [cdf_g, cdf_g+1) holds u.
+  size_t g =
+      size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) - (cdf_.begin() + 1));
+  g = std::min(g, ng - 1);
+  while (cdf_[g + 1] == cdf_[g] && g > 0) --g;  // a zero-width interval cannot be selected
+  const Group& gr = groups_[g];
+  size_t i = gr.first;
+  if (gr.count > 1) {
+    auto begin = within_cdf_.begin() + gr.first, end = begin + gr.count;
+    i = size_t(std::upper_bound(begin, end, double(ux)) - within_cdf_.begin());
+    i = std::min(i, size_t(gr.first + gr.count - 1));
+    while (pmf_[i] == 0 && i > gr.first) --i;
+    double lo = i > gr.first ? within_cdf_[i - 1] : 0.0, hi = within_cdf_[i];
+    ux = hi > lo ? float(std::clamp((double(ux) - lo) / (hi - lo), 0.0, 1.0)) : 0.5f;
+    ux = std::min(ux, 0x1.fffffep-1f);
+  }
+  return pmf_[i] > 0 ? i : kNoLight;
 }
 
 bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const {
-  const size_t n = size();
-  if (n == 0) return false;
-  // First cdf entry > u: the light whose interval [cdf_i, cdf_i+1) holds u.
-  size_t i =
-      size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) - (cdf_.begin() + 1));
-  i = std::min(i, n - 1);
-  while (pmf_[i] == 0 && i > 0) --i;  // a zero-width interval cannot be selected
-  if (pmf_[i] == 0) return false;
+  size_t i = select(u_select, u_point.x);
+  if (i == kNoLight) return false;
   ls = LightSample{};
   ls.light = uint32_t(i);
   bool ok = false;
@@ -119,18 +160,69 @@ bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) con
   return std::isfinite(ls.pdf_solid_angle) && ls.pdf_solid_angle > 0;
 }
 
-// Uniform point on the triangle; pdf_solid_angle set to the area pdf converted to solid angle
-// (without selection).
-bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const {
-  const Mesh& m = scene_.meshes[tri.mesh];
-  Vec3 p0 = m.positions[m.indices[3 * tri.prim]], p1 = m.positions[m.indices[3 * tri.prim + 1]],
-       p2 = m.positions[m.indices[3 * tri.prim + 2]];
+// A uniformly distributed point of an area light's primitive (density 1 / area), its error bound
+// and its unit normal (outward for spheres).
+void LightSet::sample_surface(const Tri& tri, Vec2 u, Vec3& q, Vec3& q_error, Vec3& n) const {
+  if (tri.sphere) {
+    Vec2 uv;
+    sphere_surface_point(*tri.sphere, tri.sphere->center + sample_uniform_sphere(u), q, q_error, n, uv);
+    return;
+  }
   Vec2 b = sample_uniform_triangle(u);
   float b2 = 1.0f - b.x - b.y;
-  ls.p = b.x * p0 + b.y * p1 + b2 * p2;
+  q = b.x * tri.p0 + b.y * tri.p1 + b2 * tri.p2;
   constexpr float g7 = 7 * std::numeric_limits<float>::epsilon() * 0.5f;
-  ls.p_error = g7 * (abs(b.x * p0) + abs(b.y * p1) + abs(b2 * p2));
-  ls.n = normalize(cross(p1 - p0, p2 - p0));
+  q_error = g7 * (abs(b.x * tri.p0) + abs(b.y * tri.p1) + abs(b2 * tri.p2));
+  n = tri.n;
+}
+
+namespace {
+// The cone of directions a sphere subtends from p (pbrt-v4 Sphere::Sample): cos of its half-angle
+// and 1 - cos, with the small-angle form of 1 - cos where it would cancel. False when p is inside
+// (or on) the sphere.
+bool sphere_cone(const SphereShape& s, Vec3 p, float& sin2_max, float& cos_max,
+                 float& one_minus_cos_max) {
+  float dc2 = length_sq(s.center - p), r2 = sqr(s.radius);
+  if (!(dc2 > r2 * 1.0001f)) return false;
+  sin2_max = r2 / dc2;
+  cos_max = safe_sqrt(1.0f - sin2_max);
+  one_minus_cos_max = sin2_max < 0.00068523f ? 0.5f * sin2_max : 1.0f - cos_max;
+  return one_minus_cos_max > 0;
+}
+}  // namespace
+
+// Spheres seen from outside: a direction uniform in the cone the sphere subtends (pbrt-v4), the
+// point where it first meets the sphere computed directly. Otherwise a uniform point of the
+// primitive, its area density converted to solid angle. pdf_solid_angle without selection.
+bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const {
+  const Mesh& m = scene_.meshes[tri.mesh];
+  float sin2_max, cos_max, one_minus_cos_max;
+  if (tri.sphere && sphere_cone(*tri.sphere, p, sin2_max, cos_max, one_minus_cos_max)) {
+    const SphereShape& s = *tri.sphere;
+    float cos_t = (cos_max - 1.0f) * u.x + 1.0f, sin2_t = 1.0f - cos_t * cos_t;
+    if (sin2_max < 0.00068523f) {  // small cone: sin^2 is uniform to first order
+      sin2_t = sin2_max * u.x;
+      cos_t = std::sqrt(1.0f - sin2_t);
+    }
+    // Angle alpha at the centre between the axis back to p and the point hit.
+    float sin_max = std::sqrt(sin2_max);
+    float cos_alpha = sin2_t / sin_max + cos_t * safe_sqrt(1.0f - sin2_t / sin2_max);
+    float sin_alpha = safe_sqrt(1.0f - cos_alpha * cos_alpha);
+    float phi = 2 * kPi * u.y;
+    Frame f = Frame::from_normal(normalize(s.center - p));
+    Vec3 n = f.to_world({sin_alpha * std::cos(phi), sin_alpha * std::sin(phi), -cos_alpha});
+    Vec2 uv;
+    sphere_surface_point(s, s.center + n * s.radius, ls.p, ls.p_error, ls.n, uv);
+    Vec3 d = ls.p - p;
+    float dist2 = length_sq(d);
+    if (!(dist2 > 0)) return false;
+    ls.distance = std::sqrt(dist2);
+    ls.wi = d / ls.distance;
+    ls.radiance = emitted(m, ls.n, -ls.wi);
+    ls.pdf_solid_angle = 1.0f / (2 * kPi * one_minus_cos_max);
+    return true;
+  }
+  sample_surface(tri, u, ls.p, ls.p_error, ls.n);
   Vec3 d = ls.p - p;
   float dist2 = length_sq(d);
   if (!(dist2 > 0) || !(tri.area > 0)) return false;
@@ -175,6 +267,9 @@ float LightSet::pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_li
   if (first == kNoLight) return 0.0f;
   const Tri& tri = tris_[first + prim];
   if (!(tri.area > 0)) return 0.0f;
+  float sin2_max, cos_max, one_minus_cos_max;
+  if (tri.sphere && sphere_cone(*tri.sphere, p, sin2_max, cos_max, one_minus_cos_max))
+    return pmf_[first + prim] / (2 * kPi * one_minus_cos_max);
   Vec3 d = on_light - p;
   float dist2 = length_sq(d);
   float cos_light = std::fabs(dot(n_light, d)) / std::sqrt(dist2);
@@ -211,13 +306,8 @@ Vec3 sample_uniform_cone(Vec2 u, float cos_max) {
 }  // namespace
 
 bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es) const {
-  const size_t n = size();
-  if (n == 0) return false;
-  size_t i =
-      size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) - (cdf_.begin() + 1));
-  i = std::min(i, n - 1);
-  while (pmf_[i] == 0 && i > 0) --i;
-  if (pmf_[i] == 0) return false;
+  size_t i = select(u_select, u_pos.x);
+  if (i == kNoLight) return false;
   es = EmissionSample{};
   es.light = uint32_t(i);
   float pmf = pmf_[i];
@@ -225,14 +315,7 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
     const Tri& tri = tris_[i];
     const Mesh& m = scene_.meshes[tri.mesh];
     if (!(tri.area > 0)) return false;
-    Vec3 p0 = m.positions[m.indices[3 * tri.prim]], p1 = m.positions[m.indices[3 * tri.prim + 1]],
-         p2 = m.positions[m.indices[3 * tri.prim + 2]];
-    Vec2 b = sample_uniform_triangle(u_pos);
-    float b2 = 1.0f - b.x - b.y;
-    es.p = b.x * p0 + b.y * p1 + b2 * p2;
-    constexpr float g7 = 7 * std::numeric_limits<float>::epsilon() * 0.5f;
-    es.p_error = g7 * (abs(b.x * p0) + abs(b.y * p1) + abs(b2 * p2));
-    es.n = normalize(cross(p1 - p0, p2 - p0));
+    sample_surface(tri, u_pos, es.p, es.p_error, es.n);
     // Two-sided emitters pick a side with probability 1/2 (the first half of u_dir.x).
     Vec2 u = u_dir;
     float side_pdf = 1.0f;

@@ -1,10 +1,11 @@
 // Lights and light selection for next-event estimation.
 //
-// Kinds: area lights (every triangle of a mesh with an emission is one light, its point sampled
-// uniformly by area), point, spot and directional lights (Scene::lights; delta distributions),
-// and the environment (Scene::environment, see envmap.h).
+// Kinds: area lights (every triangle of a mesh with an emission is one light, sampled uniformly
+// by area; an emissive exact sphere is one light, sampled from outside uniformly in the cone of
+// directions it subtends, from inside uniformly by area), point, spot and directional lights
+// (Scene::lights; delta distributions), and the environment (Scene::environment, see envmap.h).
 //
-// Numbering (selection_pmf, LightSample::light): area triangles first, mesh by mesh, then
+// Numbering (selection_pmf, LightSample::light): area primitives first, mesh by mesh, then
 // Scene::lights in order, then the environment last.
 //
 // Selection: one light is picked with probability proportional to its power, measured by the
@@ -12,12 +13,18 @@
 // so every light that emits can be chosen). R is the radius of the bounding sphere of the scene's
 // meshes (1 if there are none):
 //   area triangle  Phi = pi * A * w(Le) * (2 if two-sided)      (Lambertian emitter)
+//   sphere         the same with A = 4 pi r^2
 //   point          Phi = 4 pi * w(I)
 //   spot           Phi = 2 pi * w(I) * (1 - (cos_start + cos_end) / 2)   (pbrt-v4 SpotLight::Phi;
 //                  exact, since the smoothstep falloff integrates to half its width in cos)
 //   directional    Phi = pi R^2 * w(E)          (the flux through the scene's bounding disk)
 //   environment    Phi = pi R^2 * integral over the sphere of w(L(w)) dw
 //                      = 4 pi^2 R^2 * (sphere average of w(L))   (pbrt-v4 ImageInfiniteLight::Phi)
+// The pick is made in two steps with the same probabilities: u_select picks a group (an emissive
+// mesh, or one other light) by its power, then the first coordinate of the 2D point sample picks
+// the triangle of the mesh by its power and is rescaled to [0, 1) within that triangle's interval
+// (Mitsuba's sample reuse). So a stratified 2D sample stays stratified over the whole emitting
+// mesh (a quad light's two triangles), where a separate 1D pick per triangle would break it.
 // If every power is 0 (say, only zero-area triangles), lights are picked uniformly.
 #pragma once
 
@@ -124,10 +131,17 @@ class LightSet {
   }
 
  private:
-  struct Tri {
+  struct Tri {  // an area light's primitive: a triangle, or a whole sphere (prim 0)
     uint32_t mesh, prim;
     float area;
+    const SphereShape* sphere;  // nullptr for a triangle
+    Vec3 p0, p1, p2, n;         // a triangle's vertices and unit normal (copied: no index lookup)
   };
+  struct Group {  // what the first selection step picks: one light, or an emissive mesh
+    uint32_t first, count;
+  };
+  size_t select(float u_select, float& ux) const;
+  void sample_surface(const Tri& tri, Vec2 u, Vec3& q, Vec3& q_error, Vec3& n) const;
   struct Punctual {  // point, spot, directional
     LightType type;
     Vec3 position, direction;  // direction: spot axis / direction the light travels
@@ -145,7 +159,9 @@ class LightSet {
   std::unique_ptr<EnvironmentMap> env_;
   std::vector<LightKind> kinds_;
   std::vector<double> power_;
-  std::vector<double> cdf_;  // size()+1, cdf_[0] = 0, cdf_.back() = 1
+  std::vector<Group> groups_;
+  std::vector<double> cdf_;         // over groups: groups_.size()+1, cdf_[0] = 0, back() = 1
+  std::vector<double> within_cdf_;  // per light: cumulative probability within its group
   std::vector<float> pmf_;
   std::vector<uint32_t> mesh_first_light_;  // per mesh: index of its first light triangle or ~0
 };

@@ -28,6 +28,12 @@ inline Vec3 sample_cosine_hemisphere(Vec2 u) {
 }
 inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta * kInvPi; }
 
+// Uniform direction on the unit sphere (z = 1 - 2 u.x); pdf 1 / (4 pi).
+inline Vec3 sample_uniform_sphere(Vec2 u) {
+  float z = 1.0f - 2.0f * u.x, r = safe_sqrt(1.0f - z * z), phi = 2 * kPi * u.y;
+  return {r * std::cos(phi), r * std::sin(phi), z};
+}
+
 // Uniform point on a triangle as barycentrics (b0, b1) (Heitz 2019, area-preserving).
 inline Vec2 sample_uniform_triangle(Vec2 u) {
   float b0, b1;

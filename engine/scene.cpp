@@ -6,6 +6,7 @@
 
 #include "engine/json_reader.h"
 #include "engine/scene.h"
+#include "engine/shapes.h"
 
 namespace rf {
 
@@ -138,6 +139,21 @@ namespace {
 Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::string& object) {
   Mesh w = m;
   w.name = m.name + " (instance " + std::to_string(i) + " of " + object + ")";
+  if (m.sphere) {
+    const SphereShape& s = *m.sphere;
+    SphereShape placed;
+    if (place_sphere(s.center, s.radius, s.axis, inst.to_world, placed)) {
+      w.sphere = placed;
+      return w;
+    }
+    // Not a similarity: the sphere becomes an ellipsoid, a mesh (at the JSON default tessellation).
+    MeshData d = tessellate_sphere(s, 64, 128);
+    w.sphere.reset();
+    w.positions = std::move(d.positions);
+    w.normals = std::move(d.normals);
+    w.uvs = std::move(d.uvs);
+    w.indices = std::move(d.indices);
+  }
   for (Vec3& p : w.positions) p = inst.to_world.point(p);
   for (Vec3& n : w.normals) n = normalize(inst.to_world.normal(n));
   if (inst.to_world.det3() < 0)
@@ -180,15 +196,20 @@ void flatten_instances(Scene& scene) {
   scene.objects.clear();
 }
 
+void mesh_bounds(const Mesh& m, Vec3& lo, Vec3& hi) {
+  if (m.sphere) {
+    lo = vmin(lo, m.sphere->center - Vec3(m.sphere->radius));
+    hi = vmax(hi, m.sphere->center + Vec3(m.sphere->radius));
+  }
+  for (Vec3 q : m.positions) lo = vmin(lo, q), hi = vmax(hi, q);
+}
+
 void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi) {
   lo = Vec3(kInf), hi = Vec3(-kInf);
-  for (const Mesh& m : scene.meshes)
-    for (Vec3 q : m.positions) lo = vmin(lo, q), hi = vmax(hi, q);
+  for (const Mesh& m : scene.meshes) mesh_bounds(m, lo, hi);
   std::vector<std::pair<Vec3, Vec3>> object_box(scene.objects.size(), {Vec3(kInf), Vec3(-kInf)});
   for (size_t o = 0; o < scene.objects.size(); ++o)
-    for (const Mesh& m : scene.objects[o].meshes)
-      for (Vec3 q : m.positions)
-        object_box[o].first = vmin(object_box[o].first, q), object_box[o].second = vmax(object_box[o].second, q);
+    for (const Mesh& m : scene.objects[o].meshes) mesh_bounds(m, object_box[o].first, object_box[o].second);
   for (const Instance& inst : scene.instances) {
     auto [a, b] = object_box.at(inst.object);
     if (a.x > b.x) continue;

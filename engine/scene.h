@@ -77,8 +77,21 @@ struct Emission {
   bool two_sided = false;
 };
 
+// An exact sphere (Embree's sphere primitive; shapes.h has its geometry): world-space centre and
+// radius, and the unit axes of its parametrisation (uv and the pole are those of make_sphere:
+// the pole along axis[1], phi from axis[0] towards -axis[2]). The axes may be left-handed (a
+// mirrored sphere); the outward normal is (p - center) / radius either way.
+struct SphereShape {
+  Vec3 center{0.0f};
+  float radius = 1;
+  Vec3 axis[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+};
+
+// A surface: triangles, or one exact sphere (then positions, normals, uvs and indices are empty
+// and its only primitive is prim 0).
 struct Mesh {
   std::string name;                // for messages: "shapes[3]" or the shape's "name"
+  std::optional<SphereShape> sphere;
   std::vector<Vec3> positions;     // world space
   std::vector<Vec3> normals;       // world space per vertex, empty when flat shaded
   std::vector<Vec2> uvs;           // per vertex, may be empty
@@ -86,6 +99,8 @@ struct Mesh {
   uint32_t material = 0;           // index into Scene::materials
   std::optional<Emission> emission;
   size_t triangle_count() const { return indices.size() / 3; }
+  // Triangles, or 1 for a sphere.
+  size_t primitive_count() const { return sphere ? 1 : triangle_count(); }
 };
 
 struct Camera {
@@ -229,6 +244,8 @@ void flatten_instances(Scene& scene);
 // World-space axis-aligned bounds of the meshes and of every instance's object (the object's
 // box transformed); lo > hi when the scene has no geometry.
 void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi);
+// Grows [lo, hi] by a mesh's bounds (its triangles' vertices, or its sphere's box).
+void mesh_bounds(const Mesh& m, Vec3& lo, Vec3& hi);
 
 // Names and defaults every format maps onto.
 inline constexpr int kMaxResolution = 16384;

@@ -1,6 +1,8 @@
 #include "engine/shapes.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace rf {
 
@@ -65,6 +67,50 @@ MeshData make_disk(int segments) {
   for (int k = 0; k < segments; ++k)
     m.indices.insert(m.indices.end(), {0u, uint32_t(1 + k), uint32_t(1 + (k + 1) % segments)});
   return m;
+}
+
+bool place_sphere(Vec3 c, float r, const Vec3 axes[3], const Mat4& to_world, SphereShape& out) {
+  Vec3 col[3] = {to_world.vector({1, 0, 0}), to_world.vector({0, 1, 0}), to_world.vector({0, 0, 1})};
+  float len[3] = {length(col[0]), length(col[1]), length(col[2])};
+  if (!(len[0] > 0) || !std::isfinite(len[0]) || !(r > 0)) return false;
+  constexpr float tol = 1e-5f;
+  for (int i = 0; i < 3; ++i) {
+    if (std::fabs(len[i] - len[0]) > tol * len[0]) return false;
+    for (int j = i + 1; j < 3; ++j)
+      if (std::fabs(dot(col[i], col[j])) > tol * len[i] * len[j]) return false;
+  }
+  out.center = to_world.point(c);
+  out.radius = r * len[0];
+  for (int i = 0; i < 3; ++i) out.axis[i] = normalize(to_world.vector(axes[i]));
+  return std::isfinite(out.radius) && out.radius > 0 && is_finite(out.center);
+}
+
+MeshData tessellate_sphere(const SphereShape& s, int n_theta, int n_phi) {
+  MeshData m = make_sphere(Vec3(0.0f), 1.0f, n_theta, n_phi);
+  auto place = [&](Vec3 v) { return s.axis[0] * v.x + s.axis[1] * v.y + s.axis[2] * v.z; };
+  for (Vec3& p : m.positions) p = s.center + s.radius * place(p);
+  for (Vec3& n : m.normals) n = normalize(place(n));
+  // Left-handed axes mirror the mesh: keep the outward side the front side.
+  if (dot(cross(s.axis[0], s.axis[1]), s.axis[2]) < 0)
+    for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
+  return m;
+}
+
+void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n, Vec2& uv) {
+  Vec3 d = near - s.center;
+  float len = length(d);
+  n = len > 0 ? d / len : s.axis[1];
+  p = s.center + s.radius * n;
+  // Projecting onto the sphere is a few operations on p (pbrt-v4 Sphere: gamma(5) |p|), and the
+  // centre's addition adds its own rounding.
+  constexpr float eps = std::numeric_limits<float>::epsilon() * 0.5f;
+  constexpr float g5 = 5 * eps / (1 - 5 * eps);
+  p_error = g5 * (abs(p) + abs(s.center) + Vec3(s.radius));
+  Vec3 local(dot(n, s.axis[0]), dot(n, s.axis[1]), dot(n, s.axis[2]));
+  float theta = std::acos(std::clamp(local.y, -1.0f, 1.0f));
+  float phi = std::atan2(-local.z, local.x);
+  if (phi < 0) phi += 2 * kPi;
+  uv = {phi / (2 * kPi), 1.0f - theta / kPi};
 }
 
 }  // namespace rf

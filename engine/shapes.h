@@ -4,6 +4,7 @@
 
 #include "engine/math.h"
 #include "engine/mesh_io.h"
+#include "engine/scene.h"
 
 namespace rf {
 
@@ -16,5 +17,20 @@ MeshData make_cube();
 MeshData make_sphere(Vec3 c, float r, int n_theta, int n_phi);
 // The unit disk in the z = 0 plane, normal +z, as a fan of `segments` triangles.
 MeshData make_disk(int segments);
+
+// Exact spheres (SphereShape, scene.h).
+//
+// The sphere of centre c and radius r placed by to_world with its parametrisation axes `axes`
+// (object space; make_sphere's are x, y, z), when to_world is a similarity (rotation, uniform
+// scale, translation, possibly mirrored: the linear part's columns orthogonal and of equal length
+// within 1e-5 relative). False otherwise: a sheared or unevenly scaled sphere is an ellipsoid and
+// stays a mesh.
+bool place_sphere(Vec3 c, float r, const Vec3 axes[3], const Mat4& to_world, SphereShape& out);
+// The sphere as a UV mesh in world space (n_theta x n_phi as make_sphere, same uvs): for
+// placements that are not similarities.
+MeshData tessellate_sphere(const SphereShape& s, int n_theta, int n_phi);
+// A point near the sphere projected onto it, with its error bound (pbrt-v4's gamma(5) |p|), the
+// outward unit normal and the uv of make_sphere's parametrisation.
+void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n, Vec2& uv);
 
 }  // namespace rf

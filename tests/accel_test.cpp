@@ -7,6 +7,7 @@
 
 #include "engine/sampler.h"
 #include "engine/sampling.h"
+#include "engine/shapes.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -41,6 +42,105 @@ TEST(Accel, SpawnedRaysDoNotHitTheirOwnSurfaceFarFromTheOrigin) {
   }
   EXPECT_GT(hits, 19000);
   EXPECT_EQ(self_hits, 0);
+}
+
+
+// Exact spheres (Embree's sphere primitive): hits at the analytic distance with the outward
+// normal, make_sphere's uv, and rays spawned from either side (reflection outside, transmission
+// inside) never re-hit their own surface at the origin of the next ray, also far from the origin
+// and under an instance.
+SphereShape test_sphere(Vec3 c, float r) {
+  SphereShape s;
+  s.center = c;
+  s.radius = r;
+  return s;
+}
+
+void check_sphere_hits(const Accel& accel, const SphereShape& s, uint64_t seed) {
+  IndependentSampler smp;
+  int hits = 0, self_hits = 0;
+  for (int i = 0; i < 20000; ++i) {
+    smp.start_light_path(seed, 0, 0, uint64_t(i));
+    Vec3 target_n = sample_uniform_sphere(smp.get_2d());
+    Vec3 o = s.center + target_n * (s.radius * 3.0f) + sample_uniform_sphere(smp.get_2d()) * s.radius;
+    Vec3 d = normalize(s.center + target_n * s.radius * 0.5f - o);
+    SurfaceHit hit;
+    ASSERT_TRUE(accel.intersect(Ray{o, d, kInf}, hit)) << i;
+    ++hits;
+    // Analytic nearest root of |o + t d - c| = r.
+    Vec3 oc = o - s.center;
+    double b = dot(oc, d), c = double(dot(oc, oc)) - double(s.radius) * s.radius;
+    double t = -b - std::sqrt(b * b - c);
+    EXPECT_NEAR(hit.t, t, 1e-4 * (t + s.radius)) << i;
+    EXPECT_NEAR(length(hit.p - s.center), s.radius, 1e-5f * (s.radius + length(s.center)));
+    EXPECT_GT(dot(hit.ng, hit.p - s.center), 0.999f * s.radius);
+    EXPECT_LT(dot(hit.ng, d), 0);
+    // Reflected: leaves outwards; transmitted: goes inside and must hit the far side.
+    Frame f = Frame::from_normal(hit.ng);
+    Vec3 out = f.to_world(sample_cosine_hemisphere(smp.get_2d()));
+    SurfaceHit again;
+    if (accel.intersect(accel.spawn(hit, out), again)) ++self_hits;
+    Vec3 in = -f.to_world(sample_cosine_hemisphere(smp.get_2d()));
+    ASSERT_TRUE(accel.intersect(accel.spawn(hit, in), again)) << i;
+    EXPECT_GT(again.t, 1e-3f * s.radius) << i;
+  }
+  EXPECT_EQ(hits, 20000);
+  EXPECT_EQ(self_hits, 0);
+}
+
+TEST(AccelSphere, HitsAreAnalyticAndSpawnedRaysAreRobust) {
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
+  for (SphereShape s : {test_sphere({0.3f, -0.2f, 0.1f}, 0.7f), test_sphere({1e4f, -2e4f, 3e4f}, 50.0f),
+                        test_sphere({2, 0, 0}, 1e-3f)}) {
+    Mesh sphere;
+    sphere.sphere = s;
+    Scene sc = test::make_scene({m}, {sphere}, {0, 0, 0}, {0, 0, -1}, 4, 4, "sphere");
+    Accel accel(sc);
+    check_sphere_hits(accel, s, 5);
+  }
+}
+
+TEST(AccelSphere, UvFollowsTheUvSphereParametrisation) {
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
+  SphereShape s = test_sphere({0.5f, 1, -2}, 2.0f);
+  // Turned axes: the pole along (1, 1, 0) / sqrt 2.
+  Mat4 rot = Mat4::rotate({0, 0, 1}, -45);
+  SphereShape turned;
+  const Vec3 axes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  ASSERT_TRUE(place_sphere(Vec3(0.0f), 2.0f, axes, Mat4::translate(s.center) * rot, turned));
+  Mesh exact, tess;
+  exact.sphere = turned;
+  MeshData d = tessellate_sphere(turned, 64, 128);
+  tess.positions = d.positions, tess.normals = d.normals, tess.uvs = d.uvs, tess.indices = d.indices;
+  Scene a = test::make_scene({m}, {exact}, {0, 0, 0}, {0, 0, -1}, 4, 4, "uv_exact");
+  Scene b = test::make_scene({m}, {tess}, {0, 0, 0}, {0, 0, -1}, 4, 4, "uv_tess");
+  Accel ea(a), eb(b);
+  IndependentSampler smp;
+  for (int i = 0; i < 2000; ++i) {
+    smp.start_light_path(9, 0, 0, uint64_t(i));
+    Vec3 n = sample_uniform_sphere(smp.get_2d());
+    Vec3 o = turned.center + n * 10.0f;
+    SurfaceHit ha, hb;
+    ASSERT_TRUE(ea.intersect(Ray{o, -n, kInf}, ha));
+    ASSERT_TRUE(eb.intersect(Ray{o, -n, kInf}, hb));
+    // The tessellation is within 3e-4 r of the sphere; uvs agree to a fraction of a cell (away
+    // from the seam at u = 0 / 1 and the poles, where u is undefined).
+    if (std::fabs(ha.uv.x - 0.5f) > 0.49f || std::fabs(ha.uv.y - 0.5f) > 0.48f) continue;
+    EXPECT_NEAR(ha.uv.x, hb.uv.x, 2e-3f) << i;
+    EXPECT_NEAR(ha.uv.y, hb.uv.y, 2e-3f) << i;
+  }
+}
+
+TEST(AccelSphere, InstancedSphereHitsLikeThePlacedOne) {
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
+  Mesh unit;
+  unit.sphere = test_sphere({0, 0, 0}, 1.0f);
+  Scene sc = test::make_scene({m}, {}, {0, 0, 0}, {0, 0, -1}, 4, 4, "inst_sphere");
+  sc.objects.push_back({"ball", {unit}});
+  Mat4 xf = Mat4::translate({3, -1, 2}) * Mat4::rotate({1, 2, 3}, 50) * Mat4::scale(Vec3(-0.5f, 0.5f, 0.5f));
+  sc.instances.push_back({0, xf});
+  Accel accel(sc);
+  check_sphere_hits(accel, test_sphere({3, -1, 2}, 0.5f), 7);
 }
 
 }  // namespace

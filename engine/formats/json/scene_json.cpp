@@ -534,7 +534,8 @@ class SceneParser {
     } else if (type == "mesh") {
       data = parse_inline_mesh(j, p);
     } else if (type == "sphere") {
-      data = parse_sphere(j, p);
+      data = parse_sphere(j, p, to_world, mesh);
+      if (mesh.sphere) return mesh;
     } else if (type == "disk") {
       int segments = 128;
       if (const json* v = r_.find(j, "segments")) segments = int(r_.integer(*v, p + ".segments", 3, 1 << 16));
@@ -600,9 +601,10 @@ class SceneParser {
     return Mat4::rotate(axis, angle);
   }
 
-  // Spheres are tessellated (n_theta x n_phi, default 64 x 128) with exact smooth normals; the
-  // default's worst-case distance to the true sphere is r (1 - cos(pi/128)) = 3e-4 r.
-  MeshData parse_sphere(const json& j, const std::string& p) {
+  // Spheres are exact (mesh.sphere) unless "tessellation" is given or the transform is not a
+  // similarity; then they are tessellated (n_theta x n_phi, default 64 x 128) with exact smooth
+  // normals; the default's worst-case distance to the true sphere is r (1 - cos(pi/128)) = 3e-4 r.
+  MeshData parse_sphere(const json& j, const std::string& p, const Mat4& to_world, Mesh& mesh) {
     Vec3 c(0.0f);
     float r = 1;
     int nt = 64, np = 128;
@@ -615,6 +617,13 @@ class SceneParser {
       r_.array(*v, p + ".tessellation", 2);
       nt = int(r_.integer((*v)[0], p + ".tessellation[0]", 3, 1 << 14));
       np = int(r_.integer((*v)[1], p + ".tessellation[1]", 3, 1 << 14));
+    } else {
+      static const Vec3 kAxes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+      SphereShape sphere;
+      if (place_sphere(c, r, kAxes, to_world, sphere)) {
+        mesh.sphere = sphere;
+        return {};
+      }
     }
     return make_sphere(c, r, nt, np);
   }

@@ -938,6 +938,11 @@ class MitsubaParser {
       float r = get_float(p, "radius", 1.0f);
       if (!(r > 0)) fail(*p.find("radius"), "@value: the radius must be > 0");
       data = mitsuba_sphere();
+      // Mitsuba's parametrisation (mitsuba_sphere) as make_sphere's axes; exact under a
+      // similarity, a mesh otherwise.
+      static const Vec3 kAxes[3] = {{1, 0, 0}, {0, 0, -1}, {0, -1, 0}};  // v = theta / pi
+      SphereShape sphere;
+      if (place_sphere(c, r, kAxes, to_world, sphere)) mesh.sphere = sphere;
       to_world = to_world * Mat4::translate(c) * Mat4::scale(Vec3(r));
     } else {
       fail(n, "unsupported shape '" + type +
@@ -996,7 +1001,7 @@ class MitsubaParser {
     }
     for (const Node& m : p.nested({"medium"})) fail(m, "participating media are not supported");
     p.finish();
-    place_mesh(std::move(data), to_world, n.file(), where, mesh);
+    if (!mesh.sphere) place_mesh(std::move(data), to_world, n.file(), where, mesh);
     out.push_back(std::move(mesh));
   }
 

@@ -88,6 +88,9 @@ class Builder {
   void shape(const std::string& type, const ParamList& params, const Location& at);
   MeshData shape_mesh(const std::string& type, const ParamList& params, const Location& at,
                       std::vector<uint32_t>& element_of_triangle, bool& whole_shape);
+  // Radius of the shape being added when it is a whole pbrt sphere (0 otherwise): placed as an
+  // exact sphere when its transform is a similarity and its orientation not reversed.
+  float exact_sphere_radius_ = 0;
   void add_mesh(MeshData data, const std::vector<uint32_t>& element_of_triangle, bool whole_shape,
                 const std::string& type, const Location& at, uint32_t material);
 

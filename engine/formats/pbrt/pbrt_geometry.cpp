@@ -6,6 +6,7 @@
 
 #include "engine/formats/mesh_placement.h"
 #include "engine/formats/pbrt/pbrt_builder.h"
+#include "engine/shapes.h"
 #include "engine/formats/pbrt/pbrt_shapes.h"
 
 namespace rf::pbrt {
@@ -68,6 +69,7 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
                              std::vector<uint32_t>& element_of_triangle, bool& whole_shape) {
   const std::string d = "Shape \"" + type + "\"";
   whole_shape = false;
+  exact_sphere_radius_ = 0;
   if (type == "trianglemesh" || type == "bilinearmesh") {
     std::vector<Vec3> p = to_vec3(params.numbers("P", "point3", 3));
     if (p.empty()) fail(at, d + ": needs \"point3 P\"");
@@ -105,6 +107,7 @@ MeshData Builder::shape_mesh(const std::string& type, const ParamList& params, c
     float phimax = float(params.number("phimax", 360));
     if (!(phimax > 0)) fail(at, d + ": \"float phimax\" must be > 0");
     whole_shape = true;
+    if (zmin <= -r && zmax >= r && phimax >= 360) exact_sphere_radius_ = r;
     return make_pbrt_sphere(r, zmin, zmax, phimax, 64, 128);
   }
   if (type == "disk") {
@@ -193,11 +196,22 @@ void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_tr
   std::vector<Mesh>& target =
       current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
   const Mat4& ctm = gs_.ctm;
+  // pbrt's sphere: pole on +z, u = phi / 2pi from +x towards +y, v = 1 - theta / pi; as axes of
+  // make_sphere's parametrisation (pole on axis 1, phi from axis 0 towards -axis 2).
+  static const Vec3 kPbrtSphereAxes[3] = {{1, 0, 0}, {0, 0, 1}, {0, -1, 0}};
+  SphereShape sphere;
+  bool exact = exact_sphere_radius_ > 0 && !gs_.reverse_orientation &&
+               place_sphere(Vec3(0.0f), exact_sphere_radius_, kPbrtSphereAxes, ctm, sphere);
   auto place = [&](MeshData m, std::optional<Emission> e) {
     Mesh mesh;
     mesh.name = d + " at " + at.str();
     mesh.material = material;
     mesh.emission = e;
+    if (exact) {
+      mesh.sphere = sphere;
+      target.push_back(std::move(mesh));
+      return;
+    }
     place_mesh(std::move(m), ctm, at.str(), d, mesh);
     target.push_back(std::move(mesh));
   };
@@ -236,6 +250,7 @@ void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_tr
   if (whole_shape) {
     double area = 0;
     for (size_t t = 0; t < tris; ++t) area += tri_area(t);
+    if (exact) area = 4 * kPiD * double(sphere.radius) * double(sphere.radius);
     if (area > 0) e.radiance = radiance_for(area);
     place(std::move(data), e);
     return;
