@@ -2,15 +2,27 @@
 #include "engine/integrators/ir.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include "engine/integrators/drivers.h"
 #include "engine/integrators/light_path.h"
 #include "engine/json_reader.h"
+#include "engine/scene_error.h"
 
 namespace rf {
 
 namespace {
+
+constexpr int kMaxVplSamples = 64;
+constexpr int kMaxVplCandidates = 256;
+
+// Reflection-only materials scatter light only to the side of the surface it came from: a VPL on
+// one lights only its own side, a receiver on one is lit only from wo's side.
+bool reflects_only(MaterialType t) {
+  return t == MaterialType::Diffuse || t == MaterialType::Conductor ||
+         t == MaterialType::RoughConductor || t == MaterialType::Plastic;
+}
 
 struct Vpl {
   Bsdf bsdf;       // at the VPL's surface point (textures resolved)
@@ -18,15 +30,37 @@ struct Vpl {
   Vec3 wi;         // unit, towards where the light came from
   RGB power;       // light-path throughput / N, times |wi.ns| / |wi.ng| (shading correction)
   int depth;       // scattering events on the light path, this vertex included (>= 1)
+  Vec3 emit_n;     // ng turned to wi's side: a one-sided VPL lights only that side
+  bool one_sided;  // reflection-only material
+  float weight;    // mean over RGB of power x albedo: what the VPL can send (0: nothing)
+};
+
+// What the candidate loop reads of a VPL with weight, packed.
+struct VplPoint {
+  Vec3 p;
+  float weight;
+  Vec3 emit_n;
+  uint32_t vpl : 31;
+  uint32_t one_sided : 1;
+};
+
+// A slot of Walker's alias table with both of its points inline, so a candidate costs one
+// memory access: the slot's own point with probability prob, else its alias.
+struct AliasSlot {
+  VplPoint own, alias;
+  float prob;
 };
 
 struct VplSet {
   std::vector<Vpl> vpls;
+  std::vector<AliasSlot> alias;  // over the VPLs with weight: each by weight / total_weight
+  double total_weight = 0;
   float clamp_g = kInf;  // b: the bound on G
 };
 
 // Deposits a VPL at every non-delta vertex of a light path.
 struct VplDeposit {
+  const RenderContext& ctx;
   std::vector<Vpl>& out;
   float inv_paths;
   void vertex(const PathVertex& v) {
@@ -34,13 +68,50 @@ struct VplDeposit {
     float cos_g = std::fabs(dot(v.wo, v.hit.ng));
     if (cos_g == 0) return;
     float corr = std::fabs(dot(v.wo, v.bsdf.shading_normal())) / cos_g;
-    out.push_back(Vpl{v.bsdf, v.hit, v.wo, v.beta * (corr * inv_paths), v.depth});
+    RGB power = v.beta * (corr * inv_paths);
+    BsdfParams params = material_params_at(ctx, v.hit, 0);
+    bool one_sided = reflects_only(params.type);
+    // The albedo guess: exact for a diffuse VPL (a black one, e.g. a lamp's housing, is never
+    // picked: it lights nothing); other kinds count as white.
+    RGB albedo = params.type == MaterialType::Diffuse ? params.reflectance : RGB(1.0f);
+    RGB pa = power * albedo;
+    float weight = (pa.x + pa.y + pa.z) / 3;
+    if (!(weight >= 0) || !std::isfinite(weight)) weight = 0;
+    Vec3 emit_n = dot(v.wo, v.hit.ng) > 0 ? v.hit.ng : -v.hit.ng;
+    out.push_back(Vpl{v.bsdf, v.hit, v.wo, power, v.depth, emit_n, one_sided, weight});
   }
   void scattered(const PathVertex&, const BsdfSample&) {}
   void escaped(Vec3, RGB) {}
 };
 
-// The VPLs of one pass: vpl_paths light paths keyed by (seed, frame, pass, path index).
+// Walker's alias table over the points' weights (Vose's construction, deterministic).
+void build_alias(VplSet& set, const std::vector<VplPoint>& points) {
+  const size_t n = points.size();
+  double total = 0;
+  for (const VplPoint& q : points) total += double(q.weight);
+  set.total_weight = total;
+  std::vector<double> scaled(n);
+  std::vector<uint32_t> alias(n), small, large;
+  std::vector<float> prob(n, 1.0f);
+  for (size_t i = 0; i < n; ++i) {
+    alias[i] = uint32_t(i);
+    scaled[i] = double(points[i].weight) * double(n) / total;
+    (scaled[i] < 1 ? small : large).push_back(uint32_t(i));
+  }
+  while (!small.empty() && !large.empty()) {
+    uint32_t s = small.back(), l = large.back();
+    small.pop_back();
+    prob[s] = float(scaled[s]), alias[s] = l;
+    scaled[l] += scaled[s] - 1;
+    if (scaled[l] < 1) large.pop_back(), small.push_back(l);
+  }
+  // Slots left in either list keep probability 1 (rounding leftovers).
+  set.alias.resize(n);
+  for (size_t i = 0; i < n; ++i) set.alias[i] = AliasSlot{points[i], points[alias[i]], prob[i]};
+}
+
+// The VPLs of one pass: vpl_paths light paths keyed by (seed, frame, pass, path index), and the
+// alias table over those that have weight.
 std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderContext& ctx,
                                          uint32_t frame, uint32_t pass, TraceCounters& counters) {
   auto set = std::make_shared<VplSet>();
@@ -53,38 +124,127 @@ std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderCont
   auto trace_one = [&](Sampler& sampler, std::vector<Vpl>& out, TraceCounters& c) {
     EmissionSample es;
     if (!sample_light_path_start(ctx, sampler, es)) return;
-    VplDeposit deposit{out, inv_paths};
+    VplDeposit deposit{ctx, out, inv_paths};
     trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
                                              max_vpl_depth, deposit, c);
   };
   set->vpls = trace_light_paths<Vpl>(ctx, frame, pass, paths, trace_one, counters);
+  std::vector<VplPoint> points;
+  for (uint32_t i = 0; i < uint32_t(set->vpls.size()); ++i) {
+    const Vpl& v = set->vpls[i];
+    if (v.weight > 0) points.push_back(VplPoint{v.hit.p, v.weight, v.emit_n, i, v.one_sided});
+  }
+  if (!points.empty()) build_alias(*set, points);
   return set;
 }
 
-// The VPLs' clamped contribution at a non-delta camera vertex with `depth` scattering events
-// before it: sum over VPLs of depth k <= max_depth - depth - 1 of f_x f_y Phi V min(G, b).
-RGB gather_vpls(const RenderContext& ctx, const VplSet& set, const SurfaceHit& hit,
-                const Bsdf& bsdf, Vec3 wo, int depth, TraceCounters& counters) {
-  const int max_k = ctx.scene.render.integrator.max_depth - depth - 1;
-  const Vec3 ns = bsdf.shading_normal();
-  RGB sum(0.0f);
-  for (const Vpl& v : set.vpls) {
-    if (v.depth > max_k) continue;
-    Vec3 to = v.hit.p - hit.p;
-    float d2 = dot(to, to);
-    if (!(d2 > 0)) continue;
-    Vec3 w = to / std::sqrt(d2);
-    float g = std::fabs(dot(w, ns)) * std::fabs(dot(w, v.hit.ng)) / d2;
-    if (!(g > 0)) continue;
-    RGB fx = bsdf.eval(wo, w);
-    if (is_black(fx)) continue;
-    RGB fy = v.bsdf.eval(v.wi, -w, TransportMode::Importance);
-    if (is_black(fy)) continue;
-    ++counters.rays;
-    if (!ctx.accel.visible(hit, v.hit.p, v.hit.p_error, v.hit.ng)) continue;
-    sum += fx * fy * v.power * std::min(g, set.clamp_g);
+// One VPL's clamped contribution at a non-delta camera vertex: f_x f_y Phi V min(G, b), 0 when
+// the VPL is too deep for max_depth (max_k) or occluded.
+RGB vpl_contribution(const RenderContext& ctx, const VplSet& set, const Vpl& v,
+                     const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo, int max_k,
+                     TraceCounters& counters) {
+  if (v.depth > max_k) return RGB(0.0f);
+  Vec3 to = v.hit.p - hit.p;
+  float d2 = dot(to, to);
+  if (!(d2 > 0)) return RGB(0.0f);
+  Vec3 w = to / std::sqrt(d2);
+  float g = std::fabs(dot(w, bsdf.shading_normal())) * std::fabs(dot(w, v.hit.ng)) / d2;
+  if (!(g > 0)) return RGB(0.0f);
+  RGB fx = bsdf.eval(wo, w);
+  if (is_black(fx)) return RGB(0.0f);
+  RGB fy = v.bsdf.eval(v.wi, -w, TransportMode::Importance);
+  if (is_black(fy)) return RGB(0.0f);
+  ++counters.rays;
+  if (!ctx.accel.visible(hit, v.hit.p, v.hit.p_error, v.hit.ng)) return RGB(0.0f);
+  return fx * fy * v.power * std::min(g, set.clamp_g);
+}
+
+// The receiver of a VPL gather: a shading point, its shading normal turned to wo's side, and
+// whether its BSDF reflects only (then nothing behind that normal lights it).
+struct Receiver {
+  Vec3 p, n;
+  bool one_sided;
+};
+
+// The resampling target per unit weight: min(b, G) with both cosines, 0 where the VPL cannot
+// light the receiver (the receiver behind the VPL's reflecting side, or the VPL behind the
+// receiver's). It sees the shading point; only visibility and the BSDFs' lobes are left out.
+inline float target_g(const VplPoint& q, const Receiver& r, float clamp_g) {
+  Vec3 to = q.p - r.p;
+  float d2 = dot(to, to), de = -dot(to, q.emit_n), dr = dot(to, r.n);
+  if (!(d2 > 0) || (q.one_sided && de <= 0) || (r.one_sided && dr <= 0)) return 0;
+  return std::min(clamp_g, std::fabs(de * dr) / (d2 * d2));
+}
+
+// One VPL picked by resampled importance sampling (Talbot et al. 2005, "Importance resampling for
+// global illumination"): K candidates drawn by weight from the alias table, one of them kept with
+// probability proportional to its target g, its term weighted by
+//   W x (sum_k g_k) / (K x weight_y x g_y)      (W: the total weight).
+// Given the candidates the expectation is the mean of c(x_k) / p(x_k) (p = weight / W), so the
+// estimate is unbiased given the VPLs when the candidates' slots are uniform on [0, 1) over all
+// picks together (see gather_vpls) and g > 0 wherever a VPL can contribute. Candidate k takes its
+// slot from u_slot + k / K (mod 1) and its alias coin from u_coin + k x golden ratio (mod 1), so
+// the coin is independent of the slot. Cost: K table reads and one shadow ray, whatever the
+// number of VPLs.
+RGB resample_vpl(const RenderContext& ctx, const VplSet& set, const SurfaceHit& hit,
+                 const Bsdf& bsdf, Vec3 wo, const Receiver& r, int max_k, int k_count,
+                 double u_slot, double u_coin, float u_pick, TraceCounters& counters) {
+  const VplPoint* cand[kMaxVplCandidates];
+  float g[kMaxVplCandidates];
+  const double n = double(set.alias.size()), step = 1.0 / k_count;
+  float g_sum = 0;
+  for (int k = 0; k < k_count; ++k) {
+    double u = u_slot + k * step, coin = u_coin + k * 0.6180339887498949;
+    size_t slot = std::min(set.alias.size() - 1, size_t((u - std::floor(u)) * n));
+    const AliasSlot& a = set.alias[slot];
+    cand[k] = coin - std::floor(coin) < a.prob ? &a.own : &a.alias;
+    g[k] = target_g(*cand[k], r, set.clamp_g);
+    g_sum += g[k];
   }
-  return sum;
+  if (!(g_sum > 0)) return RGB(0.0f);
+  float t = u_pick * g_sum;
+  int k = 0, last = -1;
+  for (; k < k_count; ++k) {
+    if (g[k] > 0) last = k;
+    if (t < g[k]) break;
+    t -= g[k];
+  }
+  if (k == k_count) k = last;  // rounding: the last candidate with g > 0
+  const VplPoint& q = *cand[k];
+  double scale = set.total_weight * double(g_sum) / (double(k_count) * q.weight * g[k]);
+  return vpl_contribution(ctx, set, set.vpls[q.vpl], hit, bsdf, wo, max_k, counters) * float(scale);
+}
+
+// The VPLs' clamped contribution at a non-delta camera vertex with `depth` scattering events
+// before it: sum over VPLs of depth k <= max_depth - depth - 1 of f_x f_y Phi V min(G, b),
+// estimated as the mean of vpl_samples resampled picks (u: 3 numbers each), or summed over every
+// VPL when vpl_samples is 0. The M picks' K candidates stratify the slots together: pick i's
+// slots start in [i, i + 1) / (M K), so over the M picks each stratum of width 1 / (M K) holds
+// one candidate and the mean of the picks is unbiased.
+RGB gather_vpls(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& set,
+                const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo, int depth, const float* u,
+                TraceCounters& counters) {
+  const int max_k = ctx.scene.render.integrator.max_depth - depth - 1;
+  RGB sum(0.0f);
+  if (max_k < 1) return sum;
+  const int picks = ir.vpl_samples;
+  if (picks == 0) {
+    for (const Vpl& v : set.vpls)
+      sum += vpl_contribution(ctx, set, v, hit, bsdf, wo, max_k, counters);
+    return sum;
+  }
+  if (set.alias.empty()) return sum;
+  Vec3 n = bsdf.shading_normal();
+  if (dot(wo, n) < 0) n = -n;
+  const Receiver r{hit.p, n,
+                   reflects_only(ctx.scene.materials[ctx.accel.mesh(hit.mesh).material].type)};
+  const int k_count = ir.vpl_candidates;
+  for (int i = 0; i < picks; ++i) {
+    double u_slot = (i + double(u[3 * i])) / (double(picks) * k_count);
+    sum += resample_vpl(ctx, set, hit, bsdf, wo, r, max_k, k_count, u_slot, u[3 * i + 1],
+                        u[3 * i + 2], counters);
+  }
+  return sum / float(picks);
 }
 
 // The camera path: `residual` is the weight of the current vertex's non-delta terms (direct
@@ -94,6 +254,8 @@ RGB gather_vpls(const RenderContext& ctx, const VplSet& set, const SurfaceHit& h
 RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& set, Ray ray,
                 Sampler& sampler, TraceCounters& counters) {
   const IntegratorSettings& s = ctx.scene.render.integrator;
+  const int n_u = 3 * ir.vpl_samples;  // the VPL picks' numbers, drawn at every vertex
+  float u_vpl[3 * kMaxVplSamples];
   RGB radiance(0.0f), beta(1.0f);
   float eta_scale = 1, prev_bsdf_pdf = 0, cone_width = 0;
   bool prev_delta = true;
@@ -101,7 +263,7 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
-    if (!ctx.accel.intersect(ray, hit)) break;  // no environment: refused by build_vpls
+    if (!ctx.accel.intersect(ray, hit)) break;  // no environment: refused by check()
     const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
@@ -128,9 +290,10 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
     Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
     float u_light = sampler.get_1d();
     Vec2 u_point = sampler.get_2d();
+    for (int i = 0; i < n_u; ++i) u_vpl[i] = sampler.get_1d();
     if (!bsdf.is_delta() && residual > 0) {
       RGB terms = light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters) +
-                  gather_vpls(ctx, set, hit, bsdf, wo, depth, counters);
+                  gather_vpls(ir, ctx, set, hit, bsdf, wo, depth, u_vpl, counters);
       radiance += beta * terms * residual;
     }
 
@@ -164,7 +327,12 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
 }  // namespace
 
 void IrIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
-  if (const Json* v = r.find(j, "vpl_paths")) vpl_paths = int(r.integer(*v, p + ".vpl_paths", 1, 1 << 24));
+  if (const Json* v = r.find(j, "vpl_paths"))
+    vpl_paths = int(r.integer(*v, p + ".vpl_paths", 1, 1 << 24));
+  if (const Json* v = r.find(j, "vpl_samples"))
+    vpl_samples = int(r.integer(*v, p + ".vpl_samples", 0, kMaxVplSamples));
+  if (const Json* v = r.find(j, "vpl_candidates"))
+    vpl_candidates = int(r.integer(*v, p + ".vpl_candidates", 1, kMaxVplCandidates));
   if (const Json* v = r.find(j, "clamp_distance")) {
     clamp_distance = r.number(*v, p + ".clamp_distance");
     if (clamp_distance < 0)
@@ -173,14 +341,23 @@ void IrIntegrator::parse(const JsonReader& r, const Json& j, const std::string& 
   if (const Json* v = r.find(j, "compensation")) compensation = r.boolean(*v, p + ".compensation");
 }
 
+// "v2": the estimator of issue 12 (resampled VPL picks); buffers of older builds, whose settings
+// text had no version, never merge with these.
 std::string IrIntegrator::settings_text() const {
-  char buf[128];
-  std::snprintf(buf, sizeof buf, ";ir=%d:%.9g:%s", vpl_paths, double(clamp_distance),
-                compensation ? "comp" : "nocomp");
+  char buf[160];
+  std::snprintf(buf, sizeof buf, ";ir=v2:%d:%d:%d:%.9g:%s", vpl_paths, vpl_samples, vpl_candidates,
+                double(clamp_distance), compensation ? "comp" : "nocomp");
   return buf;
 }
 
-void IrIntegrator::check(const Scene& scene) const { require_finite_emitters(scene, kName); }
+void IrIntegrator::check(const Scene& scene) const {
+  require_finite_emitters(scene, kName);
+  if (vpl_samples < 0 || vpl_samples > kMaxVplSamples || vpl_candidates < 1 ||
+      vpl_candidates > kMaxVplCandidates)
+    throw SceneError(scene.path + ": render.integrator: ir's vpl_samples must be in [0, " +
+                     std::to_string(kMaxVplSamples) + "] and vpl_candidates in [1, " +
+                     std::to_string(kMaxVplCandidates) + "]");
+}
 
 SampleBuffer IrIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                   bool parallel) const {
