@@ -47,7 +47,7 @@ SCENES = {
 }
 BDPT = dict(xml='scenes/veach-bidir/scene.xml', res=(256, 256), mitsuba_spp=256, ref=(8, 1024))
 
-# rayfarm's configurations: sampler and passes (None: the default, gcd(spp, 16); passes are
+# rayfarm's configurations: sampler and passes (None: the default, docs/scene-format.md; passes are
 # independent replicates, so a sampler stratifies over spp / passes samples of a pixel).
 RAYFARM_CONFIGS = [('independent', None), ('sobol', None), ('sobol', 4)]
 MITSUBA_SAMPLERS = ['independent', 'multijitter', 'ldsampler']

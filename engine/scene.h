@@ -169,7 +169,7 @@ struct RenderSettings {
   uint32_t passes = 16;       // spp must be a multiple of passes
   uint64_t seed = 0;
   double noise_target = 0;    // relMSE to stop at; 0 = render all passes
-  std::string sampler = "independent";  // or "sobol": Owen-scrambled, scrambled per pass
+  std::string sampler = "sobol";  // or "independent"; sobol: Owen-scrambled, scrambled per pass
   AovSet aovs;                // auxiliary outputs (engine/aov.h, docs/outputs.md)
   uint64_t spp_per_pass() const { return spp / passes; }
 };
@@ -253,7 +253,7 @@ const std::vector<std::string>& known_filters();   // box, triangle, gaussian
 FilterType filter_type(const std::string& name);    // one of known_filters()
 float default_filter_radius(FilterType type);       // box 0.5, triangle 1, gaussian 1.5 pixels
 const std::vector<std::string>& known_samplers();  // independent, sobol
-uint32_t default_passes(uint64_t spp);              // gcd(spp, 16)
+uint32_t default_passes(uint64_t spp);  // gcd(spp, 16), halved down to 4 for >= 64 spp per pass
 
 // Conductors by name: complex IOR (eta, k) averaged over the R, G, B bands of measured data.
 struct ConductorPreset {

@@ -67,7 +67,7 @@ std::string plates_scene(const std::string& strategy, int bsdf_samples, int spp)
     "film": {"resolution": [40, 30]},
     "render": {"integrator": {"type": "direct", "strategy": ")") + strategy +
          R"(", "bsdf_samples": )" + std::to_string(bsdf_samples) + R"(}, "spp": )" +
-         std::to_string(spp) + R"(, "passes": 32, "seed": 9},
+         std::to_string(spp) + R"(, "passes": 32, "seed": 9, "sampler": "independent"},
     "materials": {)" + materials + R"(},
     "shapes": [)" + plates + lights.substr(0, lights.size() - 1) + R"(],
     "lights": [{"type": "point", "position": [2, 4, 2], "intensity": 3}]})";
@@ -79,6 +79,10 @@ TEST(DirectIntegrator, StrategiesAgreeAndMisIsNeverTheWorst) {
   // BSDF samples per camera sample and is compared on 4x4 block means (16 pixels each, much
   // closer to normal). Its relMSE is scaled by 16 to compare strategies per sample (the variance
   // of an average of M samples falls as 1/M).
+  // The independent sampler, not the default Sobol: light sampling is heavy-tailed too on the
+  // sharpest plate, and Sobol makes the typical pass so tight that 32 passes rarely see the tail
+  // (measured: pixel (26,8) at t = 10 after 32 passes, within 0.8 standard errors of MIS after
+  // 256). The strategies are what is tested here; the samplers have their own tests.
   double rel[3];
   test::ImageStats stats[3] = {test::ImageStats(40, 30, 1), test::ImageStats(40, 30, 4),
                                test::ImageStats(40, 30, 1)};

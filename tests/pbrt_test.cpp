@@ -52,7 +52,7 @@ TEST(PbrtDirectives, SettingsCameraAndWarnings) {
   EXPECT_EQ(s.film.filter.type, FilterType::Triangle);
   EXPECT_FLOAT_EQ(s.film.filter.radius, 1.5f);
   EXPECT_EQ(s.render.spp, 24u);
-  EXPECT_EQ(s.render.passes, 8u);  // gcd(24, 16)
+  EXPECT_EQ(s.render.passes, default_passes(24));  // 4
   EXPECT_EQ(s.render.seed, 3u);
   EXPECT_EQ(s.render.sampler, "sobol");
   EXPECT_EQ(s.render.integrator.type(), "bdpt");

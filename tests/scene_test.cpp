@@ -406,12 +406,16 @@ TEST(Settings, DefaultsAndPasses) {
   Scene s = load_json(j);
   EXPECT_EQ(s.render.integrator.type(), "path");
   EXPECT_EQ(s.render.spp, 64u);
-  EXPECT_EQ(s.render.passes, 16u);
+  EXPECT_EQ(s.render.passes, 4u);  // gcd(64, 16) = 16, halved to 4 (16 spp per pass)
+  EXPECT_EQ(s.render.sampler, "sobol");
   EXPECT_EQ(s.film.filter.type, FilterType::Box);
   EXPECT_FLOAT_EQ(s.film.filter.radius, 0.5f);
   j["render"] = json::parse(R"({"spp": 24, "seed": 18446744073709551615, "noise_target": 0.01})");
   s = load_json(j);
-  EXPECT_EQ(s.render.passes, 8u);  // gcd(24, 16)
+  EXPECT_EQ(s.render.passes, 4u);  // gcd(24, 16) = 8, halved to 4
+  for (auto [spp, passes] : {std::pair<uint64_t, uint32_t>{1, 1}, {2, 2}, {16, 4}, {100, 4},
+                             {256, 4}, {512, 8}, {1024, 16}, {4096, 16}, {7, 1}, {1536, 16}})
+    EXPECT_EQ(default_passes(spp), passes) << spp << " spp";
   EXPECT_EQ(s.render.seed, 18446744073709551615ull);
   EXPECT_DOUBLE_EQ(s.render.noise_target, 0.01);
   EXPECT_EQ(s.render.integrator.max_depth, 5);
