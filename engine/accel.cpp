@@ -192,7 +192,7 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
     // Rebuilt from the ray (in the object's space for an instance) and projected onto the sphere.
     Vec3 near = ray.o + ray.d * rh.ray.tfar;
     if (inst) near = instance_inverse_[rh.hit.instID[0] - scene_.meshes.size()].point(near);
-    sphere_surface_point(*m.sphere, near, hit.p, hit.p_error, hit.ng, hit.uv);
+    sphere_surface_point(*m.sphere, near, hit.p, hit.p_error, hit.ng, &hit.uv);
     hit.ns = hit.ng;
     if (inst) {
       transform_hit_point(inst->to_world, hit.p, hit.p_error);

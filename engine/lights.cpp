@@ -164,8 +164,7 @@ bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) con
 // and its unit normal (outward for spheres).
 void LightSet::sample_surface(const Tri& tri, Vec2 u, Vec3& q, Vec3& q_error, Vec3& n) const {
   if (tri.sphere) {
-    Vec2 uv;
-    sphere_surface_point(*tri.sphere, tri.sphere->center + sample_uniform_sphere(u), q, q_error, n, uv);
+    sphere_surface_point(*tri.sphere, tri.sphere->center + sample_uniform_sphere(u), q, q_error, n);
     return;
   }
   Vec2 b = sample_uniform_triangle(u);
@@ -211,8 +210,7 @@ bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) cons
     float phi = 2 * kPi * u.y;
     Frame f = Frame::from_normal(normalize(s.center - p));
     Vec3 n = f.to_world({sin_alpha * std::cos(phi), sin_alpha * std::sin(phi), -cos_alpha});
-    Vec2 uv;
-    sphere_surface_point(s, s.center + n * s.radius, ls.p, ls.p_error, ls.n, uv);
+    sphere_surface_point(s, s.center + n * s.radius, ls.p, ls.p_error, ls.n);
     Vec3 d = ls.p - p;
     float dist2 = length_sq(d);
     if (!(dist2 > 0)) return false;

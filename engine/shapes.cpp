@@ -96,7 +96,8 @@ MeshData tessellate_sphere(const SphereShape& s, int n_theta, int n_phi) {
   return m;
 }
 
-void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n, Vec2& uv) {
+void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n,
+                          Vec2* uv) {
   Vec3 d = near - s.center;
   float len = length(d);
   n = len > 0 ? d / len : s.axis[1];
@@ -106,11 +107,12 @@ void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_erro
   constexpr float eps = std::numeric_limits<float>::epsilon() * 0.5f;
   constexpr float g5 = 5 * eps / (1 - 5 * eps);
   p_error = g5 * (abs(p) + abs(s.center) + Vec3(s.radius));
+  if (!uv) return;
   Vec3 local(dot(n, s.axis[0]), dot(n, s.axis[1]), dot(n, s.axis[2]));
   float theta = std::acos(std::clamp(local.y, -1.0f, 1.0f));
   float phi = std::atan2(-local.z, local.x);
   if (phi < 0) phi += 2 * kPi;
-  uv = {phi / (2 * kPi), 1.0f - theta / kPi};
+  *uv = {phi / (2 * kPi), 1.0f - theta / kPi};
 }
 
 }  // namespace rf

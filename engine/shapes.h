@@ -30,7 +30,9 @@ bool place_sphere(Vec3 c, float r, const Vec3 axes[3], const Mat4& to_world, Sph
 // placements that are not similarities.
 MeshData tessellate_sphere(const SphereShape& s, int n_theta, int n_phi);
 // A point near the sphere projected onto it, with its error bound (pbrt-v4's gamma(5) |p|), the
-// outward unit normal and the uv of make_sphere's parametrisation.
-void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n, Vec2& uv);
+// outward unit normal and, when uv is given, the uv of make_sphere's parametrisation (an acos and
+// an atan2: light samples, which need no uv, pass nullptr).
+void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n,
+                          Vec2* uv = nullptr);
 
 }  // namespace rf
