@@ -47,12 +47,13 @@ struct BsdfParams {
   RGB eta{1.0f};          // conductor complex IOR, real part
   RGB k{0.0f};            // conductor complex IOR, imaginary part
   bool conductor_tint = false;
+  bool separable_masking = false;  // Smith G2 = G1 G1 (microfacet.h)
 };
 
 // The material's constant values (ignores its textures).
 inline BsdfParams constant_params(const Material& m) {
   return {m.type, m.reflectance.value, m.specular.value, m.roughness.value, m.ior, m.eta,
-          m.k,    m.conductor_tint};
+          m.k,    m.conductor_tint, m.separable_masking};
 }
 
 class Bsdf {
@@ -63,7 +64,7 @@ class Bsdf {
     b.ng_ = ng;
     b.frame_ = Frame::from_normal(dot(ns, ng) < 0 ? -ns : ns);
     ConductorFresnel fr{p.eta, p.k, p.specular, p.conductor_tint};
-    TrowbridgeReitz tr{p.alpha, p.alpha};
+    TrowbridgeReitz tr{p.alpha, p.alpha, p.separable_masking};
     bool smooth = TrowbridgeReitz::effectively_smooth(p.alpha);
     switch (p.type) {
       case MaterialType::Diffuse:

@@ -3,7 +3,10 @@
 // Model: normal distribution D(wm) = 1 / (pi ax ay (x^2/ax^2 + y^2/ay^2 + z^2)^2) in the local
 // shading frame (z = macro normal), normalised so that int D(wm) cos(theta_m) dwm = 1.
 // Smith masking Lambda(w) = (sqrt(1 + (ax^2 x^2 + ay^2 y^2) / z^2) - 1) / 2, G1 = 1 / (1 + Lambda),
-// and the height-correlated masking-shadowing G2 = 1 / (1 + Lambda(wo) + Lambda(wi)), as pbrt-v4.
+// and the height-correlated masking-shadowing G2 = 1 / (1 + Lambda(wo) + Lambda(wi)), as pbrt-v4;
+// or, with `separable`, Smith's separable G2 = G1(wo) G1(wi), as Mitsuba 3 (never larger: up to a
+// few percent darker at high roughness and grazing angles; the Mitsuba importer asks for it so
+// that an imported scene renders as Mitsuba renders it).
 // Sampling: the distribution of visible normals D_w(wm) = G1(w) / |cos w| D(wm) max(0, w.wm)
 // (Heitz 2018, "Sampling the GGX Distribution of Visible Normals"), for w on either side (it is
 // mirrored to the upper hemisphere; sampled normals always have z > 0).
@@ -26,6 +29,7 @@ inline constexpr float kSmoothAlpha = 1e-3f;
 
 struct TrowbridgeReitz {
   float alpha_x = 0.1f, alpha_y = 0.1f;
+  bool separable = false;  // G2 = G1 G1 instead of height-correlated
 
   static bool effectively_smooth(float alpha) { return alpha < kSmoothAlpha; }
 
@@ -42,7 +46,9 @@ struct TrowbridgeReitz {
     return 0.5f * (std::sqrt(1 + a2tan2) - 1);
   }
   float G1(Vec3 w) const { return 1 / (1 + lambda(w)); }
-  float G2(Vec3 wo, Vec3 wi) const { return 1 / (1 + lambda(wo) + lambda(wi)); }
+  float G2(Vec3 wo, Vec3 wi) const {
+    return separable ? G1(wo) * G1(wi) : 1 / (1 + lambda(wo) + lambda(wi));
+  }
 
   // G1(w) / |cos w| written without the division, so it stays finite at grazing angles.
   float G1_over_cos(Vec3 w) const {

@@ -68,6 +68,8 @@ struct Material {
   RGB eta{0.143f, 0.374f, 1.442f};  // conductor complex IOR, real part per RGB (default: gold)
   RGB k{3.983f, 2.385f, 1.603f};    // conductor complex IOR, imaginary part per RGB
   bool conductor_tint = false;      // conductor: Schlick Fresnel with F0 = specular instead of eta/k
+  bool separable_masking = false;   // rough conductor/dielectric: Smith G2 = G1 G1 (Mitsuba 3's
+                                    // model) instead of height-correlated; set by the Mitsuba importer
 };
 
 // Emission on a shape makes it an area light. One-sided lights emit on the side the geometric

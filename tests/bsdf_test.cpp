@@ -717,6 +717,29 @@ TEST(Microfacet, DistributionsAreNormalised) {
   }
 }
 
+// Mitsuba's separable Smith masking (the Mitsuba importer's): G1(wo) G1(wi) exactly, never above
+// the height-correlated G2, equal at normal incidence, and a rough conductor's eval scaled by their
+// ratio (its sampling, by visible normals, is the same).
+TEST(Microfacet, SeparableMaskingIsTheProductOfG1) {
+  for (float alpha : {0.05f, 0.25f, 0.8f}) {
+    TrowbridgeReitz hc{alpha, alpha}, sep{alpha, alpha, true};
+    EXPECT_FLOAT_EQ(sep.G2(kZ, kZ), 1.0f);
+    for (float co : {0.95f, 0.5f, 0.1f})
+      for (float ci : {0.9f, 0.3f, 0.05f}) {
+        Vec3 wo = direction(co), wi = normalize(Vec3(-wo.x, 0.3f, ci));
+        EXPECT_FLOAT_EQ(sep.G2(wo, wi), sep.G1(wo) * sep.G1(wi));
+        EXPECT_LE(sep.G2(wo, wi), hc.G2(wo, wi) * (1 + 1e-6f));
+        BsdfParams p = conductor(alpha);
+        Bsdf a = Bsdf::make(p, kZ, kZ);
+        p.separable_masking = true;
+        Bsdf b = Bsdf::make(p, kZ, kZ);
+        RGB fa = a.eval(wo, wi), fb = b.eval(wo, wi);
+        if (fa.x > 0)
+          EXPECT_NEAR(fb.x / fa.x, sep.G2(wo, wi) / hc.G2(wo, wi), 1e-4) << alpha << co << ci;
+      }
+  }
+}
+
 TEST(Microfacet, SmallAlphaIsSmooth) {
   EXPECT_TRUE(Bsdf::make(conductor(5e-4f), kZ, kZ).is_delta());
   EXPECT_FALSE(Bsdf::make(conductor(2e-3f), kZ, kZ).is_delta());

@@ -217,6 +217,7 @@ TEST(MitsubaXml, Bsdfs) {
   expect_vec_near(mat(5).specular.value, RGB(1.0f), 0);
   EXPECT_EQ(mat(6).type, MaterialType::RoughConductor);
   EXPECT_FLOAT_EQ(mat(6).roughness.value, 0.3f);
+  EXPECT_TRUE(mat(6).separable_masking);  // Mitsuba's microfacet model
   expect_vec_near(mat(6).eta, {0.2f, 0.9f, 1.1f}, 1e-6f);
   // A flat spectrum of 3 from 400 to 700 nm: zero outside, where the colour matching functions
   // hold 0.6% of their weight.
@@ -477,6 +478,15 @@ TEST(MitsubaXml, UnusedUnsupportedBsdfIsAWarning) {
 // Agreement (the statistics harness, tests/support/harness.h): per-pixel Welch t tests at level
 // 0.001 with the outlier count within Binomial's 0.999 quantile, and the image means.
 
+// The Mitsuba importer gives rough conductors and dielectrics Mitsuba's separable Smith masking
+// (microfacet.h); a JSON twin of an XML scene gets the same model before the two are compared.
+void use_mitsuba_masking(Scene& s) {
+  for (Material& m : s.materials)
+    if (m.type == MaterialType::RoughConductor || m.type == MaterialType::RoughDielectric ||
+        m.type == MaterialType::Conductor || m.type == MaterialType::Dielectric)
+      m.separable_masking = true;
+}
+
 SceneOverrides harness_overrides(uint32_t passes, uint64_t spp_per_pass, uint64_t seed) {
   SceneOverrides ov;
   ov.passes = passes;
@@ -519,6 +529,7 @@ TEST(MitsubaAgreement, CornellBoxMatchesJsonAndReference) {
   Scene xml = load_scene(test::source_dir() + "/scenes/cornell-box/scene_v3.xml", ov);
   ov.seed = 8;
   Scene json = load_scene(test::source_dir() + "/scenes/cornell-box/scene.json", ov);
+  use_mitsuba_masking(json);
   EXPECT_TRUE(xml.warnings.empty()) << all_warnings(xml);
   test::ImageStats xs = test::render_stats(xml, 32, 1);
   test::Agreement a = test::compare(xs, test::render_stats(json, 32, 1));
@@ -539,6 +550,7 @@ TEST(MitsubaAgreement, VeachMisMatchesJson) {
   Scene xml = load_scene(test::source_dir() + "/scenes/veach-mis/scene.xml", ov);
   ov.seed = 6;
   Scene json = load_scene(test::source_dir() + "/scenes/veach-mis/scene.json", ov);
+  use_mitsuba_masking(json);
   EXPECT_EQ(xml.render.integrator.max_depth, 3);
   EXPECT_EQ(xml.film.filter.type, FilterType::Triangle);
   EXPECT_TRUE(xml.warnings.empty()) << all_warnings(xml);
@@ -556,6 +568,7 @@ TEST(LongMitsubaAgreement, VeachMisMatchesJson) {
   Scene xml = load_scene(test::source_dir() + "/scenes/veach-mis/scene.xml", ov);
   ov.seed = 6;
   Scene json = load_scene(test::source_dir() + "/scenes/veach-mis/scene.json", ov);
+  use_mitsuba_masking(json);
   test::Agreement a =
       test::compare(test::render_stats(xml, 32, 1), test::render_stats(json, 32, 1));
   std::cout << "Veach MIS XML vs JSON: " << a.message << "\n";
@@ -596,6 +609,7 @@ TEST(MitsubaAgreement, MaterialsMatchesJson) {
   Scene xml = load_scene(test::source_dir() + "/scenes/materials/scene.xml", ov);
   ov.seed = 6;
   Scene json = load_scene(test::source_dir() + "/scenes/materials/scene.json", ov);
+  use_mitsuba_masking(json);
   EXPECT_TRUE(xml.warnings.empty()) << all_warnings(xml);
   expect_pixels_and_means_agree(test::render_stats(xml, 32, 1), test::render_stats(json, 32, 1),
                                 "Materials XML vs JSON");
@@ -618,6 +632,7 @@ TEST(MitsubaAgreement, GeneratedSceneXmlMatchesJson) {
   Scene xml = load_scene(dir + "/scene.xml", ov);
   ov.seed = 6;
   Scene json = load_scene(dir + "/scene.json", ov);
+  use_mitsuba_masking(json);
   EXPECT_TRUE(xml.warnings.empty()) << all_warnings(xml);
   size_t triangles = 0;
   for (const Mesh& m : xml.meshes) triangles += m.triangle_count();
@@ -634,6 +649,7 @@ TEST(LongMitsubaAgreement, GeneratedSceneXmlMatchesJson) {
   Scene xml = load_scene(dir + "/scene.xml", ov);
   ov.seed = 6;
   Scene json = load_scene(dir + "/scene.json", ov);
+  use_mitsuba_masking(json);
   test::Agreement a =
       test::compare(test::render_stats(xml, 32, 1), test::render_stats(json, 32, 1));
   std::cout << "Generated scene XML vs JSON: " << a.message << "\n";

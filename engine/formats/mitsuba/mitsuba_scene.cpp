@@ -804,10 +804,12 @@ class MitsubaParser {
                   "different reflection and transmission tints are not supported; both use "
                   "specular_transmittance");
       if (type == "roughdielectric") m.roughness = roughness(p, n);
+      m.separable_masking = true;  // Mitsuba's microfacet model (microfacet.h)
     } else if (type == "conductor" || type == "roughconductor") {
       m.type = type == "conductor" ? MaterialType::Conductor : MaterialType::RoughConductor;
       parse_conductor(p, n, m);
       if (type == "roughconductor") m.roughness = roughness(p, n);
+      m.separable_masking = true;  // Mitsuba's microfacet model (microfacet.h)
       r.one_sided = true;
     } else if (type == "plastic" || type == "roughplastic") {
       m.type = MaterialType::Plastic;
