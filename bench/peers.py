@@ -13,8 +13,9 @@ Mitsuba's copy of the XML is rewritten only in its sampler and filter.
    as DIFFERENT and its ratio is not computed. The common reference is the mean of all 2R renders;
    its own noise (the variance of that mean, estimated per pixel from the replicates) is
    subtracted from every MSE below, so MSE estimates the render's error alone.
-2. Benchmark. Each renderer renders once per sampler it offers at the benchmark spp, as a whole
-   process timed by wall clock (Mitsuba's includes Python start-up and its JIT compilation, as a
+2. Benchmark. Each renderer renders once per sampler it offers at the benchmark spp (several
+   seeds on veach-mis, or --seeds N; times and MSEs averaged), each render a whole process timed
+   by wall clock (Mitsuba's includes Python start-up and its JIT compilation, as a
    user would see it). MSE over pixels and RGB against the reference.
 3. Efficiency ratio = (MSE x time) of Mitsuba's best sampler / (MSE x time) of rayfarm's best.
    Above 1, rayfarm reaches a given error sooner.
@@ -42,7 +43,11 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = {
     'cornell-box': dict(xml='scenes/cornell-box/scene_v3.xml', res=(256, 256), spp=1024,
                         ref=(8, 1024)),
-    'veach-mis': dict(xml='scenes/veach-mis/scene.xml', res=(320, 180), spp=1024, ref=(8, 1024)),
+    # seeds: benchmark renders per configuration, their times and MSEs averaged. veach-mis needs
+    # several: one render's squared error sits mostly in ~10 pixels at the edge of its smallest
+    # light (under a pixel wide), so a single render's MSE varies 2x from seed to seed.
+    'veach-mis': dict(xml='scenes/veach-mis/scene.xml', res=(320, 180), spp=1024, ref=(8, 1024),
+                      seeds=4),
     'million': dict(xml=None, res=(256, 256), spp=256, ref=(8, 512)),
 }
 BDPT = dict(xml='scenes/veach-bidir/scene.xml', res=(256, 256), mitsuba_spp=256, ref=(8, 1024))
@@ -207,6 +212,8 @@ def main():
     ap.add_argument('scenes', nargs='*', help='subset of: %s, veach-bidir' % ', '.join(SCENES))
     ap.add_argument('--work', default=os.path.expanduser('~/.cache/rayfarm-bench'))
     ap.add_argument('--build', default='build')
+    ap.add_argument('--seeds', type=int, default=None,
+                    help='benchmark renders per configuration (default: the scene\'s, 1 or 4)')
     ap.add_argument('--scale', type=float, default=1.0,
                     help='multiply every spp (0.25 for a quick look; the table uses 1)')
     args = ap.parse_args()
@@ -233,17 +240,32 @@ def main():
         ref, var, report = b.reference(name, xml, cfg['res'], ref_cfg, None)
         log('  agreement: %s' % json.dumps(report))
         results = []
+        seeds = [7 + k for k in range(args.seeds or cfg.get('seeds', 1))]
+
+        def averaged(render, out):
+            # Mean time and mean MSE over the seeds' renders.
+            runs = []
+            for seed in seeds:
+                t = render(seed)
+                runs.append((t, mse(read_rgb(out), ref, var)))
+            return (sum(t for t, _ in runs) / len(runs), sum(e for _, e in runs) / len(runs),
+                    [e for _, e in runs])
+
         for s, passes in RAYFARM_CONFIGS:
             out = os.path.join(args.work, 'bench-rf.exr')
-            t = b.run_rayfarm(xml, out, cfg['res'], spp, s, 7, passes=passes)
+            t, e, each = averaged(lambda seed: b.run_rayfarm(xml, out, cfg['res'], spp, s, seed,
+                                                             passes=passes), out)
             name_s = s + ('' if passes is None else ', %d passes' % passes)
-            results.append(('rayfarm', name_s, t, mse(read_rgb(out), ref, var)))
-            log('  rayfarm %s: %.2f s, MSE %.4g' % (name_s, t, results[-1][3]))
+            results.append(('rayfarm', name_s, t, e))
+            log('  rayfarm %s: %.2f s, MSE %.4g (per seed: %s)' %
+                (name_s, t, e, ', '.join('%.4g' % x for x in each)))
         for s in MITSUBA_SAMPLERS:
             out = os.path.join(args.work, 'bench-mi.exr')
-            t = b.run_mitsuba(xml, out, cfg['res'], spp, s, 7)
-            results.append(('mitsuba', s, t, mse(read_rgb(out), ref, var)))
-            log('  mitsuba %s: %.2f s, MSE %.4g' % (s, t, results[-1][3]))
+            t, e, each = averaged(lambda seed: b.run_mitsuba(xml, out, cfg['res'], spp, s, seed),
+                                  out)
+            results.append(('mitsuba', s, t, e))
+            log('  mitsuba %s: %.2f s, MSE %.4g (per seed: %s)' %
+                (s, t, e, ', '.join('%.4g' % x for x in each)))
         rows.append((name, cfg['res'], spp, report, results))
 
     px = lambda res: res[0] * res[1]
