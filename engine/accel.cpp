@@ -33,9 +33,6 @@ void init_ray(RTCRay& r, Vec3 o, Vec3 d, float tmax) {
   r.flags = 0;
 }
 
-}  // namespace
-
-namespace {
 // std::nextafter(v, +inf) and (v, -inf) for finite v by stepping the bit pattern (pbrt-v4's
 // NextFloatUp/Down): the same values, without the library call's checks (2% of a path render).
 inline float next_float_up(float v) {

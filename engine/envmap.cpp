@@ -5,6 +5,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "engine/sampling.h"
+
 namespace rf {
 
 namespace {
@@ -115,8 +117,7 @@ float EnvironmentMap::pdf(Vec3 dir_world) const {
 bool EnvironmentMap::sample(Vec2 u, Vec3& dir_world, RGB& radiance_out, float& pdf_out) const {
   if (power_integral_ <= 0) return false;
   if (is_constant()) {
-    float z = 1.0f - 2.0f * u.x, r = safe_sqrt(1.0f - z * z), phi = 2.0f * kPi * u.y;
-    dir_world = Vec3(r * std::cos(phi), r * std::sin(phi), z);
+    dir_world = sample_uniform_sphere(u);
     radiance_out = constant_;
     pdf_out = 0.25f * kInvPi;
     return true;

@@ -346,8 +346,7 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
     es.n = l.direction;
     float pdf_dir;
     if (l.type == LightType::Point) {
-      float z = 1.0f - 2.0f * u_dir.x, r = safe_sqrt(1.0f - z * z), phi = 2 * kPi * u_dir.y;
-      es.dir = {r * std::cos(phi), r * std::sin(phi), z};
+      es.dir = sample_uniform_sphere(u_dir);
       pdf_dir = 1.0f / (4 * kPi);
     } else {
       es.dir = Frame::from_normal(l.direction)

@@ -156,8 +156,8 @@ Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::st
       w.sphere = placed;
       return w;
     }
-    // Not a similarity: the sphere becomes an ellipsoid, a mesh (at the JSON default tessellation).
-    MeshData d = tessellate_sphere(s, 64, 128);
+    // Not a similarity: the sphere becomes an ellipsoid, a mesh (at the default tessellation).
+    MeshData d = tessellate_sphere(s, kSphereThetaSteps, kSpherePhiSteps);
     w.sphere.reset();
     w.positions = std::move(d.positions);
     w.normals = std::move(d.normals);

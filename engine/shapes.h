@@ -29,6 +29,9 @@ bool place_sphere(Vec3 c, float r, const Vec3 axes[3], const Mat4& to_world, Sph
 // The sphere as a UV mesh in world space (n_theta x n_phi as make_sphere, same uvs): for
 // placements that are not similarities.
 MeshData tessellate_sphere(const SphereShape& s, int n_theta, int n_phi);
+// The default tessellation of a sphere that cannot stay exact (n_theta x n_phi): its worst-case
+// distance to the true sphere is r (1 - cos(pi / 128)) = 3e-4 r.
+inline constexpr int kSphereThetaSteps = 64, kSpherePhiSteps = 128;
 // A point near the sphere projected onto it, with its error bound (pbrt-v4's gamma(5) |p|), the
 // outward unit normal and, when uv is given, the uv of make_sphere's parametrisation (an acos and
 // an atan2: light samples, which need no uv, pass nullptr).

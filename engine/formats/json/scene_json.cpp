@@ -607,7 +607,7 @@ class SceneParser {
   MeshData parse_sphere(const json& j, const std::string& p, const Mat4& to_world, Mesh& mesh) {
     Vec3 c(0.0f);
     float r = 1;
-    int nt = 64, np = 128;
+    int nt = kSphereThetaSteps, np = kSpherePhiSteps;
     if (const json* v = r_.find(j, "center")) c = r_.vec3(*v, p + ".center");
     if (const json* v = r_.find(j, "radius")) {
       r = r_.number(*v, p + ".radius");
