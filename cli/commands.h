@@ -37,7 +37,7 @@ struct SharedOptions {
 
 // The scene overrides `render` and `submit` share (--spp, --passes, --integrator, ...).
 struct OverrideArgs {
-  std::string res, integrator, filter, sampler;
+  std::string res, integrator, filter, sampler, light_selection;
   std::optional<uint64_t> spp, seed;
   std::optional<uint32_t> passes;
   std::optional<int> max_depth;

@@ -26,6 +26,8 @@ void add_override_options(CLI::App& cmd, OverrideArgs& a) {
   cmd.add_option("--max-depth", a.max_depth, "max scattering events");
   cmd.add_option("--filter", a.filter, "pixel filter (box, triangle, gaussian)");
   cmd.add_option("--sampler", a.sampler, "sampler (independent, sobol)");
+  cmd.add_option("--light-selection", a.light_selection,
+                 "light selection for next-event estimation (auto, power, bvh)");
   cmd.add_option("--noise-target", a.noise_target, "stop when relMSE <= this");
   cmd.add_option("--aov", a.aovs,
                  "auxiliary outputs, comma-separated: albedo, normal, depth (docs/outputs.md)");
@@ -41,6 +43,7 @@ SceneOverrides overrides_of(const OverrideArgs& a) {
   if (!a.integrator.empty()) ov.integrator = a.integrator;
   if (!a.filter.empty()) ov.filter = a.filter;
   if (!a.sampler.empty()) ov.sampler = a.sampler;
+  if (!a.light_selection.empty()) ov.light_selection = a.light_selection;
   if (a.aovs) ov.aovs = *a.aovs;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
   return ov;

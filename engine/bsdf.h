@@ -124,6 +124,14 @@ class Bsdf {
   bool is_delta() const {
     return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kDelta; }, lobe_);
   }
+  // Whether the lobe can transmit (light from below the surface can leave above it).
+  bool transmits() const {
+    return std::holds_alternative<DielectricBxdf>(lobe_) ||
+           std::holds_alternative<ThinDielectricBxdf>(lobe_) ||
+           std::holds_alternative<RoughDielectricBxdf>(lobe_);
+  }
+  // The geometric normal.
+  Vec3 geometric_normal() const { return ng_; }
   // The shading normal, turned to ng's side (for the cosine |dot(wi, ns)|).
   Vec3 shading_normal() const { return frame_.n; }
 

@@ -109,6 +109,69 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
     within_cdf_[gr.first + gr.count - 1] = 1.0;
   }
   if (!groups_.empty()) cdf_.back() = 1.0;
+  build_bvh(scene.render.light_selection);
+}
+
+void LightSet::build_bvh(const std::string& mode) {
+  std::vector<LightBounds> bounds(kinds_.size());
+  size_t positioned = 0;
+  double positioned_share = 0;
+  for (size_t i = 0; i < kinds_.size(); ++i) {
+    LightBounds& b = bounds[i];
+    float phi = float(power_[i]);
+    if (i < tris_.size()) {
+      const Tri& t = tris_[i];
+      const Mesh& m = scene_.meshes[t.mesh];
+      if (t.sphere) {
+        b.lo = t.sphere->center - Vec3(t.sphere->radius);
+        b.hi = t.sphere->center + Vec3(t.sphere->radius);
+        b.cos_theta_o = -1.0f;  // normals in every direction
+      } else {
+        b.lo = vmin(t.p0, vmin(t.p1, t.p2));
+        b.hi = vmax(t.p0, vmax(t.p1, t.p2));
+        b.w = t.n;
+        b.cos_theta_o = 1.0f;
+        b.two_sided = m.emission->two_sided;
+      }
+      b.cos_theta_e = 0.0f;  // Lambertian: a hemisphere about the normal
+    } else if (i < tris_.size() + punctual_.size()) {
+      const Punctual& q = punctual_[i - tris_.size()];
+      if (q.type == LightType::Directional) continue;
+      b.lo = b.hi = q.position;
+      if (q.type == LightType::Point) {
+        b.cos_theta_o = -1.0f;
+        b.cos_theta_e = 0.0f;
+      } else {  // spot: normals within the full-strength cone, light up to the cone's edge
+        b.w = q.direction;
+        b.cos_theta_o = q.cos_falloff_start;
+        b.cos_theta_e = std::cos(std::max(0.0f, std::acos(std::clamp(q.cos_falloff_end, -1.0f, 1.0f)) -
+                                                    std::acos(std::clamp(q.cos_falloff_start, -1.0f, 1.0f))));
+      }
+    } else {
+      continue;  // the environment
+    }
+    if (!(phi > 0) || !std::isfinite(phi)) continue;
+    b.phi = phi;
+    ++positioned;
+    positioned_share += pmf_[i];
+  }
+  bool use = mode == "bvh" || (mode == "auto" && positioned > kAutoBvhLights);
+  if (!use || positioned == 0) return;
+  bvh_ = LightBvh(bounds);
+  bvh_share_ = float(std::min(1.0, positioned_share));
+  // Every positioned light with power is in the tree; the rest of the unit is the infinite ones'.
+  infinite_cdf_.assign(1, 0.0);
+  double acc = 0, inf_total = 0;
+  for (size_t i = 0; i < kinds_.size(); ++i)
+    if (kinds_[i] == LightKind::Directional || kinds_[i] == LightKind::Environment) inf_total += pmf_[i];
+  for (size_t i = 0; i < kinds_.size(); ++i) {
+    if (kinds_[i] != LightKind::Directional && kinds_[i] != LightKind::Environment) continue;
+    infinite_.push_back(uint32_t(i));
+    acc += inf_total > 0 ? pmf_[i] / inf_total : 0.0;
+    infinite_cdf_.push_back(acc);
+  }
+  if (!infinite_.empty()) infinite_cdf_.back() = 1.0;
+  if (infinite_.empty()) bvh_share_ = 1.0f;
 }
 
 // The light u_select and u.x pick (see the constructor), with u.x rescaled to [0, 1) within the
@@ -136,9 +199,39 @@ size_t LightSet::select(float u_select, float& ux) const {
   return pmf_[i] > 0 ? i : kNoLight;
 }
 
-bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const {
+bool LightSet::sample_by_power(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const {
   size_t i = select(u_select, u_point.x);
   if (i == kNoLight) return false;
+  return sample_selected(i, pmf_[i], p, u_point, ls);
+}
+
+bool LightSet::sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls) const {
+  if (!uses_bvh()) return sample_by_power(p, u_select, u_point, ls);
+  if (u_select < bvh_share_) {
+    uint32_t i;
+    float pmf;
+    float u = std::min(u_select / bvh_share_, 0x1.fffffep-1f);
+    if (!bvh_.sample(p, n, u, i, pmf)) return false;
+    return sample_selected(i, bvh_share_ * pmf, p, u_point, ls);
+  }
+  if (infinite_.empty()) return false;
+  double u = (double(u_select) - bvh_share_) / (1.0 - bvh_share_);
+  size_t k = size_t(std::upper_bound(infinite_cdf_.begin() + 1, infinite_cdf_.end(), u) -
+                    (infinite_cdf_.begin() + 1));
+  k = std::min(k, infinite_.size() - 1);
+  size_t i = infinite_[k];
+  return pmf_[i] > 0 && sample_selected(i, pmf_[i], p, u_point, ls);
+}
+
+float LightSet::selection_pmf_at(size_t light, Vec3 p, Vec3 n) const {
+  if (light >= size()) return 0.0f;
+  if (!uses_bvh()) return pmf_[light];
+  LightKind k = kinds_[light];
+  if (k == LightKind::Directional || k == LightKind::Environment) return pmf_[light];
+  return bvh_share_ * bvh_.pmf(p, n, uint32_t(light));
+}
+
+bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const {
   ls = LightSample{};
   ls.light = uint32_t(i);
   bool ok = false;
@@ -156,7 +249,7 @@ bool LightSet::sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) con
     ls.n = -ls.wi;
   }
   if (!ok || is_black(ls.radiance)) return false;
-  ls.pdf_solid_angle = pmf_[i] * pdf_direction;
+  ls.pdf_solid_angle = pmf * pdf_direction;
   return std::isfinite(ls.pdf_solid_angle) && ls.pdf_solid_angle > 0;
 }
 
@@ -258,21 +351,23 @@ bool LightSet::sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const
   return falloff > 0;
 }
 
-float LightSet::pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light,
+float LightSet::pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Vec3 on_light,
                                 Vec3 n_light) const {
   // Surface ids past the world meshes are instanced meshes, never lights (prepare_instances).
   uint32_t first = mesh < mesh_first_light_.size() ? mesh_first_light_[mesh] : kNoLight;
   if (first == kNoLight) return 0.0f;
   const Tri& tri = tris_[first + prim];
   if (!(tri.area > 0)) return 0.0f;
+  float pmf = uses_bvh() ? bvh_share_ * bvh_.pmf(p, n, first + prim) : pmf_[first + prim];
+  if (!(pmf > 0)) return 0.0f;
   float sin2_max, cos_max, one_minus_cos_max;
   if (tri.sphere && sphere_cone(*tri.sphere, p, sin2_max, cos_max, one_minus_cos_max))
-    return pmf_[first + prim] / (2 * kPi * one_minus_cos_max);
+    return pmf / (2 * kPi * one_minus_cos_max);
   Vec3 d = on_light - p;
   float dist2 = length_sq(d);
   float cos_light = std::fabs(dot(n_light, d)) / std::sqrt(dist2);
   if (!(cos_light > 0)) return 0.0f;
-  return pmf_[first + prim] / tri.area * dist2 / cos_light;
+  return pmf / tri.area * dist2 / cos_light;
 }
 
 RGB LightSet::environment_radiance(Vec3 dir_world) const {

@@ -26,6 +26,15 @@
 // (Mitsuba's sample reuse). So a stratified 2D sample stays stratified over the whole emitting
 // mesh (a quad light's two triangles), where a separate 1D pick per triangle would break it.
 // If every power is 0 (say, only zero-area triangles), lights are picked uniformly.
+//
+// Selection that sees the shading point (RenderSettings::light_selection, "bvh", or "auto" with
+// more than kAutoBvhLights lights that have a position): a light BVH (light_bvh.h) over the area
+// primitives, point and spot lights picks one by an importance bound at the shading point; the
+// infinite lights (directional, environment) keep their power share. The set of all BVH lights is
+// chosen with the sum of their power pmfs, so pdf_environment() is the same in both modes. With
+// the BVH the two-step reuse of u_point.x does not apply: each primitive is its own light.
+// Light tracing, BDPT's light subpaths and its s = 1 connections stay power-based
+// (sample_by_power, pdf_emission), whose MIS weights need a pmf that does not depend on a point.
 #pragma once
 
 #include <cstdint>
@@ -34,6 +43,7 @@
 
 #include "engine/accel.h"
 #include "engine/envmap.h"
+#include "engine/light_bvh.h"
 #include "engine/scene.h"
 
 namespace rf {
@@ -83,9 +93,19 @@ class LightSet {
   size_t scene_light_index(size_t k) const { return tris_.size() + k; }
   size_t environment_index() const { return tris_.size() + punctual_.size(); }
 
+  // More lights with a position than this make "auto" selection use the BVH.
+  static constexpr size_t kAutoBvhLights = 8;
+
   // Samples a light point as seen from p; false when nothing can be sampled (pdf 0, outside a
-  // spot's cone, a one-sided emitter seen from behind).
-  bool sample(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const;
+  // spot's cone, a one-sided emitter seen from behind). n: the unit normal of the hemisphere
+  // light can arrive from at p (a surface that only reflects, turned to the side of the outgoing
+  // direction), or zero; only the BVH selection uses it.
+  bool sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls) const;
+  // The same with selection by power alone, whatever the mode (BDPT's s = 1 connections).
+  bool sample_by_power(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const;
+  // True when sample() picks lights with the BVH.
+  bool uses_bvh() const { return !bvh_.empty(); }
+  const LightBvh& bvh() const { return bvh_; }
   // Samples Scene::lights[k] (point, spot, directional) as seen from p, without selection: the
   // estimator f * radiance * |cos| is then exact for that light (Whitted's "delta lights exactly").
   bool sample_delta_light(size_t k, Vec3 p, LightSample& ls) const;
@@ -96,9 +116,12 @@ class LightSet {
   // position and are not sampled (light tracing refuses such scenes). False when the picked light
   // cannot emit.
   bool sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es) const;
-  // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from p, as
+  // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from (p, n), as
   // sample() would, including selection; 0 when that triangle is not a light.
-  float pdf_solid_angle(Vec3 p, uint32_t mesh, uint32_t prim, Vec3 on_light, Vec3 n_light) const;
+  float pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Vec3 on_light,
+                        Vec3 n_light) const;
+  // The probability that sample() picks `light` from (p, n).
+  float selection_pmf_at(size_t light, Vec3 p, Vec3 n) const;
   // Light index of triangle prim of mesh, or ~0u when that triangle is not a light.
   uint32_t area_light_index(uint32_t mesh, uint32_t prim) const;
   // The densities with which sample_emission() starts a light path at a point of `light` (normal
@@ -107,7 +130,8 @@ class LightSet {
   // probability), pdf_dir the solid-angle density of dir (0 outside a spot's cone or behind a
   // one-sided emitter). Both 0 for directional and environment lights, which never start paths.
   void pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos, float& pdf_dir) const;
-  // Probability of selecting each light (sums to 1 over size() lights).
+  // Probability of selecting each light by power (sums to 1 over size() lights): sample_by_power,
+  // sample_emission, and sample() without the BVH.
   float selection_pmf(size_t light) const { return pmf_[light]; }
   // The power (Phi above) the selection is proportional to.
   double selection_power(size_t light) const { return power_[light]; }
@@ -141,6 +165,9 @@ class LightSet {
     uint32_t first, count;
   };
   size_t select(float u_select, float& ux) const;
+  // Point sampling of light i once it is selected with probability pmf.
+  bool sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const;
+  void build_bvh(const std::string& mode);
   void sample_surface(const Tri& tri, Vec2 u, Vec3& q, Vec3& q_error, Vec3& n) const;
   struct Punctual {  // point, spot, directional
     LightType type;
@@ -164,6 +191,12 @@ class LightSet {
   std::vector<double> within_cdf_;  // per light: cumulative probability within its group
   std::vector<float> pmf_;
   std::vector<uint32_t> mesh_first_light_;  // per mesh: index of its first light triangle or ~0
+  // BVH selection (uses_bvh()): the tree over lights with a position, the probability of
+  // choosing among them, and the infinite lights with their cumulative power share.
+  LightBvh bvh_;
+  float bvh_share_ = 0;
+  std::vector<uint32_t> infinite_;
+  std::vector<double> infinite_cdf_;  // infinite_.size() + 1 entries, within the infinite lights
 };
 
 }  // namespace rf

@@ -124,6 +124,11 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   if (o.sampler && !contains_name(known_samplers(), *o.sampler))
     flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join_names(known_samplers()) + ")");
   if (o.sampler) rs.sampler = *o.sampler;
+  if (o.light_selection && *o.light_selection != "auto" && *o.light_selection != "power" &&
+      *o.light_selection != "bvh")
+    flag_fail("--light-selection", "unknown light selection '" + *o.light_selection +
+                                       "' (known: auto, power, bvh)");
+  if (o.light_selection) rs.light_selection = *o.light_selection;
   if (o.aovs) {
     try {
       rs.aovs = parse_aovs(*o.aovs);

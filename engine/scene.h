@@ -172,6 +172,10 @@ struct RenderSettings {
   uint64_t seed = 0;
   double noise_target = 0;    // relMSE to stop at; 0 = render all passes
   std::string sampler = "sobol";  // or "independent"; sobol: Owen-scrambled, scrambled per pass
+  // Light selection for next-event estimation (lights.h): "power", "bvh" (a light BVH that sees
+  // the shading point), or "auto" (the BVH when more than LightSet::kAutoBvhLights lights have a
+  // position).
+  std::string light_selection = "auto";
   AovSet aovs;                // auxiliary outputs (engine/aov.h, docs/outputs.md)
   uint64_t spp_per_pass() const { return spp / passes; }
 };
@@ -218,6 +222,7 @@ struct SceneOverrides {
   std::optional<double> noise_target;
   std::optional<std::string> sampler;
   std::optional<std::string> aovs;  // comma-separated AOV names, "" for none
+  std::optional<std::string> light_selection;  // auto, power, bvh
 };
 
 // Reads a scene file and every file it references, applies the overrides and validates the

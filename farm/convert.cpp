@@ -17,6 +17,7 @@ SceneOverrides to_scene_overrides(const pb::RenderOverrides& o) {
   if (o.has_noise_target()) s.noise_target = o.noise_target();
   if (o.has_sampler()) s.sampler = o.sampler();
   if (o.has_aovs()) s.aovs = o.aovs();
+  if (o.has_light_selection()) s.light_selection = o.light_selection();
   return s;
 }
 
@@ -33,6 +34,7 @@ pb::RenderOverrides to_wire_overrides(const SceneOverrides& s) {
   if (s.noise_target) o.set_noise_target(*s.noise_target);
   if (s.sampler) o.set_sampler(*s.sampler);
   if (s.aovs) o.set_aovs(*s.aovs);
+  if (s.light_selection) o.set_light_selection(*s.light_selection);
   return o;
 }
 

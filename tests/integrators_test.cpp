@@ -132,7 +132,7 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
     }
     LightSample ls;
     float ul = sampler.get_1d();
-    if (ctx.lights.sample(hit.p, ul, sampler.get_2d(), ls) && light_visible(ctx, hit, ls)) {
+    if (ctx.lights.sample(hit.p, Vec3(0.0f), ul, sampler.get_2d(), ls) && light_visible(ctx, hit, ls)) {
       float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
       radiance += beta * bsdf.eval(wo, ls.wi) * ls.radiance *
                   (std::fabs(dot(ls.wi, ns)) * w / ls.pdf_solid_angle);
@@ -145,7 +145,7 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
         RGB le = LightSet::emitted(ctx.accel.mesh(lh.mesh), lh.ng, -bs.wi);
         float w = bs.is_delta ? 1.0f
                               : power_heuristic(bs.pdf_solid_angle,
-                                                ctx.lights.pdf_solid_angle(hit.p, lh.mesh, lh.prim, lh.p, lh.ng));
+                                                ctx.lights.pdf_solid_angle(hit.p, Vec3(0.0f), lh.mesh, lh.prim, lh.p, lh.ng));
         radiance += beta * bs.f * le * (std::fabs(dot(bs.wi, ns)) * w / bs.pdf_solid_angle);
       }
     }

@@ -139,7 +139,7 @@ void chi_square_directions(const LightSet& lights, Vec3 p, const SphereGrid& gri
     smp.start_light_path(seed, 0, 0, uint64_t(i));
     LightSample ls;
     float u = smp.get_1d();
-    if (lights.sample(p, u, smp.get_2d(), ls))
+    if (lights.sample(p, Vec3(0.0f), u, smp.get_2d(), ls))
       observed[grid.cell(ls.wi)] += 1;
     else
       observed.back() += 1;
@@ -181,7 +181,7 @@ TEST(LightsChiSquare, AreaLightDirectionsFollowPdf) {
     SurfaceHit hit;
     if (!accel.intersect(Ray{p0, d, kInf}, hit)) return 0.0;
     if (is_black(LightSet::emitted(s.meshes[hit.mesh], hit.ng, -d))) return 0.0;
-    return lights.pdf_solid_angle(p0, hit.mesh, hit.prim, hit.p, hit.ng);
+    return lights.pdf_solid_angle(p0, Vec3(0.0f), hit.mesh, hit.prim, hit.p, hit.ng);
   };
   std::vector<double> prob = grid.integrate(pdf, 6);
   // The failure cell's expectation is the facing-away light's selection probability.
@@ -231,14 +231,14 @@ TEST(LightsChiSquare, SphereLightDirectionsFollowPdf) {
     smp.start_light_path(52, 0, 0, uint64_t(i));
     LightSample ls;
     float u = smp.get_1d();
-    if (!lights.sample(p0, u, smp.get_2d(), ls)) continue;
+    if (!lights.sample(p0, Vec3(0.0f), u, smp.get_2d(), ls)) continue;
     ASSERT_EQ(ls.light, 0u);
     SurfaceHit hit;
     ASSERT_TRUE(accel.intersect(Ray{p0, ls.wi, kInf}, hit)) << i;
     ASSERT_EQ(hit.mesh, 0u);
     EXPECT_NEAR(hit.t, ls.distance, 1e-4f * ls.distance) << i;
     EXPECT_NEAR(length(ls.p - ball.sphere->center), ball.sphere->radius, 1e-5f) << i;
-    float pdf_eval = lights.pdf_solid_angle(p0, hit.mesh, hit.prim, hit.p, hit.ng);
+    float pdf_eval = lights.pdf_solid_angle(p0, Vec3(0.0f), hit.mesh, hit.prim, hit.p, hit.ng);
     EXPECT_NEAR(pdf_eval, ls.pdf_solid_angle, 1e-5f * ls.pdf_solid_angle) << i;
   }
 }
@@ -266,7 +266,7 @@ TEST(Lights, SphereLightIrradianceOutsideAndInside) {
       smp.start_light_path(inside ? 61 : 62, 0, 0, uint64_t(i));
       LightSample ls;
       float u = smp.get_1d();
-      if (!l.sample(x, u, smp.get_2d(), ls)) continue;
+      if (!l.sample(x, Vec3(0.0f), u, smp.get_2d(), ls)) continue;
       float w = std::max(0.0f, dot(n, ls.wi)) / ls.pdf_solid_angle;
       for (int c = 0; c < 3; ++c) sum[c] += double(ls.radiance[c]) * w;
     }
@@ -344,7 +344,7 @@ TEST(Lights, EnvironmentSamplingEstimatesIrradiance) {
     smp.start_light_path(51, 0, 0, uint64_t(k));
     LightSample ls;
     float u = smp.get_1d();
-    if (!lights.sample(Vec3(0.0f), u, smp.get_2d(), ls)) continue;
+    if (!lights.sample(Vec3(0.0f), Vec3(0.0f), u, smp.get_2d(), ls)) continue;
     RGB c = ls.radiance * (std::max(0.0f, dot(n, ls.wi)) / ls.pdf_solid_angle);
     for (int ch = 0; ch < 3; ++ch) sum[ch] += c[ch], sum2[ch] += double(c[ch]) * c[ch];
   }
@@ -515,7 +515,7 @@ TEST(Lights, SelectionFollowsDocumentedPowersOverAllKinds) {
   EXPECT_EQ(l.kind(l.environment_index()), LightKind::Environment);
 }
 
-// sample() picks a group (an emissive mesh or one other light) for u_select in its cdf interval,
+// sample_by_power() picks a group (an emissive mesh or one other light) for u_select in its cdf interval,
 // then a triangle of the mesh for u_point.x in its interval within the group. With M stratified
 // u_select and u_point.x the base-2 radical inverse of the same index (whose every run of
 // consecutive indices is spread over [0, 1) with discrepancy O(log n / n)), every light is picked
@@ -532,7 +532,7 @@ TEST(Lights, SampleSelectsByPmf) {
   for (int k = 0; k < M; ++k) {
     LightSample ls;
     float ux = float(reverse_bits32(uint32_t(k)) >> 8) * 0x1p-24f;
-    ASSERT_TRUE(l.sample(p, (k + 0.5f) / M, {ux, 0.61f}, ls)) << k;
+    ASSERT_TRUE(l.sample_by_power(p, (k + 0.5f) / M, {ux, 0.61f}, ls)) << k;
     ++count[ls.light];
     EXPECT_EQ(ls.is_delta,
               l.kind(ls.light) != LightKind::Area && l.kind(ls.light) != LightKind::Environment);
@@ -563,7 +563,7 @@ TEST(Lights, PdfEnvironmentEqualsSamplePdf) {
     smp.start_light_path(71, 0, 0, uint64_t(k));
     float u = float(cdf_lo + (1 - cdf_lo) * smp.get_1d());  // inside the environment's interval
     LightSample ls;
-    if (!l.sample(p, u, smp.get_2d(), ls) || ls.light != l.environment_index()) continue;
+    if (!l.sample(p, Vec3(0.0f), u, smp.get_2d(), ls) || ls.light != l.environment_index()) continue;
     ++checked;
     EXPECT_NEAR(l.pdf_environment(ls.wi), ls.pdf_solid_angle, 1e-6f * ls.pdf_solid_angle);
     EXPECT_EQ(l.environment_radiance(ls.wi), ls.radiance);
@@ -584,7 +584,7 @@ TEST(Lights, PdfEnvironmentEqualsSamplePdf) {
 // radiance * |cos| / pdf (pdf is the selection probability, 1 here).
 RGB nee_irradiance(const LightSet& l, Vec3 x, Vec3 n) {
   LightSample ls;
-  if (!l.sample(x, 0.5f, {0.5f, 0.5f}, ls)) return RGB(0.0f);
+  if (!l.sample(x, Vec3(0.0f), 0.5f, {0.5f, 0.5f}, ls)) return RGB(0.0f);
   EXPECT_TRUE(ls.is_delta);
   EXPECT_EQ(ls.pdf_solid_angle, 1.0f);
   return ls.radiance * (std::max(0.0f, dot(n, ls.wi)) / ls.pdf_solid_angle);
@@ -645,7 +645,7 @@ TEST(Lights, PointIrradianceIsInverseSquareCosine) {
     float cosine = std::max(0.0f, dot(c.n, d) / std::sqrt(r2));
     expect_rgb_near(nee_irradiance(l, c.x, c.n), point.intensity * (cosine / r2), 1e-5f, "point");
     LightSample ls;
-    ASSERT_TRUE(l.sample(c.x, 0.1f, {0.2f, 0.3f}, ls));
+    ASSERT_TRUE(l.sample(c.x, Vec3(0.0f), 0.1f, {0.2f, 0.3f}, ls));
     EXPECT_FALSE(ls.is_infinite);
     EXPECT_EQ(ls.p, point.position);
     EXPECT_NEAR(ls.distance, std::sqrt(r2), 1e-5f * std::sqrt(r2));
@@ -670,7 +670,7 @@ TEST(Lights, DirectionalIrradiance) {
   }
   LightSample ls;
   Vec3 p{0.3f, 0.2f, -0.1f};
-  ASSERT_TRUE(l.sample(p, 0.5f, {0.5f, 0.5f}, ls));
+  ASSERT_TRUE(l.sample(p, Vec3(0.0f), 0.5f, {0.5f, 0.5f}, ls));
   EXPECT_TRUE(ls.is_infinite);
   EXPECT_NEAR(length(ls.wi + sun.direction), 0.0f, 1e-6f);
   EXPECT_NEAR(length(ls.p - (p - sun.direction * (2 * std::sqrt(3.0f)))), 0.0f, 1e-5f);
@@ -687,7 +687,7 @@ TEST(Lights, LightsWithoutPowerAreNeverReturned) {
   LightSet l(s);
   EXPECT_EQ(l.selection_pmf(0), 1.0f);
   LightSample ls;
-  EXPECT_FALSE(l.sample({0, 0, 0}, 0.5f, {0.5f, 0.5f}, ls));
+  EXPECT_FALSE(l.sample({0, 0, 0}, Vec3(0.0f), 0.5f, {0.5f, 0.5f}, ls));
   EXPECT_TRUE(LightSet(scene_of({}, "empty")).empty());
 }
 
@@ -720,14 +720,14 @@ TEST(Lights, SampledPdfEqualsPdfQuery) {
   for (int i = 0; i < 2000; ++i) {
     smp.start_light_path(1, 0, 0, uint64_t(i));
     LightSample ls;
-    if (!lights.sample(p, smp.get_1d(), smp.get_2d(), ls)) continue;
+    if (!lights.sample(p, Vec3(0.0f), smp.get_1d(), smp.get_2d(), ls)) continue;
     // Find which triangle the sample lies on by tracing towards it.
     SurfaceHit hit;
     ASSERT_TRUE(accel.intersect(Ray{p, ls.wi, kInf}, hit));
     if (std::fabs(hit.t - ls.distance) > 1e-3f * ls.distance) continue;  // occluded by the sphere itself
     // A sample on a triangle's edge may be hit on its neighbour, whose normal (so pdf) differs.
     if (std::fabs(dot(hit.ng, ls.n)) < 1 - 1e-5f) continue;
-    float q = lights.pdf_solid_angle(p, hit.mesh, hit.prim, hit.p, hit.ng);
+    float q = lights.pdf_solid_angle(p, Vec3(0.0f), hit.mesh, hit.prim, hit.p, hit.ng);
     EXPECT_NEAR(q, ls.pdf_solid_angle, 1e-3f * ls.pdf_solid_angle);
     ++checked;
   }

@@ -274,7 +274,7 @@ struct Tracer {
       float u_select = sampler.get_1d();
       Vec2 u_point = sampler.get_2d();
       LightSample ls;
-      if (!connectible(pt) || !ctx.lights.sample(pt.hit.p, u_select, u_point, ls)) return RGB(0.0f);
+      if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_select, u_point, ls)) return RGB(0.0f);
       sampled.kind = VertexKind::Light;
       sampled.light = ls.light;
       sampled.infinite = ls.is_infinite;

@@ -41,7 +41,7 @@ bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightS
 RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
                      float u_light, Vec2 u_point, TraceCounters& counters) {
   LightSample ls;
-  if (!ctx.lights.sample(hit.p, u_light, u_point, ls)) return RGB(0.0f);
+  if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls)) return RGB(0.0f);
   RGB f = bsdf.eval(wo, ls.wi);
   if (is_black(f)) return RGB(0.0f);
   ++counters.rays;

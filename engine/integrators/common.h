@@ -77,6 +77,15 @@ BsdfParams material_params_at(const RenderContext& ctx, const SurfaceHit& hit, f
 Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
 // Whether a light sample is visible from a hit (a ray to infinity for infinite lights).
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);
+
+// The receiver normal light selection may use at a surface with this BSDF and outgoing direction
+// wo (LightSet::sample): the geometric normal on wo's side when the BSDF only reflects (light
+// from the other side contributes nothing), zero when it transmits.
+inline Vec3 receiver_normal(const Bsdf& bsdf, Vec3 wo) {
+  if (bsdf.transmits()) return Vec3(0.0f);
+  Vec3 ng = bsdf.geometric_normal();
+  return dot(wo, ng) >= 0 ? ng : -ng;
+}
 // Next-event estimation at a non-delta vertex: one light sample, weighted by the power heuristic
 // against BSDF sampling (1 for delta lights); f * Le * |cos| * w / pdf, or 0 when occluded.
 RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,

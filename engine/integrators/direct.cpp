@@ -40,7 +40,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
     float u = sampler.get_1d();
     Vec2 up = sampler.get_2d();
     LightSample ls;
-    if (!ctx.lights.sample(hit.p, u, up, ls)) continue;
+    if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u, up, ls)) continue;
     if (n_light == 0 && !ls.is_delta) continue;  // "bsdf" strategy: only delta lights here
     RGB f = bsdf.eval(wo, ls.wi);
     if (is_black(f)) continue;
@@ -70,7 +70,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
     if (ctx.accel.intersect(r, light_hit)) {
       le = LightSet::emitted(ctx.accel.mesh(light_hit.mesh), light_hit.ng, -bs.wi);
       if (is_black(le)) continue;
-      light_pdf = ctx.lights.pdf_solid_angle(hit.p, light_hit.mesh, light_hit.prim, light_hit.p,
+      light_pdf = ctx.lights.pdf_solid_angle(hit.p, receiver_normal(bsdf, wo), light_hit.mesh, light_hit.prim, light_hit.p,
                                              light_hit.ng);
     } else {
       le = ctx.lights.environment_radiance(bs.wi);

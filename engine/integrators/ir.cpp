@@ -259,7 +259,7 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
   RGB radiance(0.0f), beta(1.0f);
   float eta_scale = 1, prev_bsdf_pdf = 0, cone_width = 0;
   bool prev_delta = true;
-  Vec3 prev_p = ray.o, prev_ns(0.0f);
+  Vec3 prev_p = ray.o, prev_ns(0.0f), prev_n(0.0f);  // prev_n: receiver normal (light selection)
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
@@ -273,7 +273,7 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
       if (prev_delta) {
         radiance += beta * le;
       } else {
-        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, hit.mesh, hit.prim, hit.p, hit.ng);
+        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
         radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
       }
     }
@@ -312,6 +312,7 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
     prev_delta = bs.is_delta;
     prev_p = hit.p;
     prev_ns = bsdf.shading_normal();
+    prev_n = receiver_normal(bsdf, wo);
     ray = ctx.accel.spawn(hit, bs.wi);
 
     float u_rr = sampler.get_1d();

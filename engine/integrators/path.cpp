@@ -13,7 +13,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
   float eta_scale = 1;
   float prev_bsdf_pdf = 0;
   bool prev_delta = true;  // the camera ray counts as "specular": emission is taken unweighted
-  Vec3 prev_p = ray.o;
+  Vec3 prev_p = ray.o, prev_n(0.0f);  // the last vertex and its receiver normal (light selection)
   float cone_width = 0;  // ray-cone width at the current hit, for texture filtering
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
@@ -35,7 +35,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
       if (prev_delta) {
         radiance += beta * le;
       } else {
-        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, hit.mesh, hit.prim, hit.p, hit.ng);
+        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
         radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
       }
     }
@@ -61,6 +61,7 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
     prev_bsdf_pdf = bs.pdf_solid_angle;
     prev_delta = bs.is_delta;
     prev_p = hit.p;
+    prev_n = receiver_normal(bsdf, wo);
     ray = ctx.accel.spawn(hit, bs.wi);
 
     float u_rr = sampler.get_1d();

@@ -93,7 +93,7 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
   RGB radiance(0.0f), beta(1.0f);
   float eta_scale = 1, prev_bsdf_pdf = 0, cone_width = 0;
   bool prev_delta = true;
-  Vec3 prev_p = ray.o;
+  Vec3 prev_p = ray.o, prev_n(0.0f);  // prev_n: receiver normal (light selection)
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
@@ -107,7 +107,7 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
       if (prev_delta) {
         radiance += beta * le;
       } else {
-        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, hit.mesh, hit.prim, hit.p, hit.ng);
+        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
         radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
       }
     }
@@ -131,6 +131,7 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
     prev_bsdf_pdf = bs.pdf_solid_angle;
     prev_delta = bs.is_delta;
     prev_p = hit.p;
+    prev_n = receiver_normal(bsdf, wo);
     ray = ctx.accel.spawn(hit, bs.wi);
 
     float u_rr = sampler.get_1d();

@@ -106,17 +106,18 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // not show (geometry, a sampling routine, the mapping of random numbers), i.e. with every golden
 // BASE bump that changes images, so that a buffer of an older build never merges with a newer one
 // (a farm mid-upgrade, a partial .rfb kept from last week). 2: exact spheres, cone-sampled sphere
-// lights, two-step light selection (issue 12).
-constexpr int kEstimatorVersion = 2;
+// lights, two-step light selection (issue 12). 3: the light BVH; "auto" uses it with many lights.
+constexpr int kEstimatorVersion = 3;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
-  char buf[256];
+  char buf[320];
   std::snprintf(buf, sizeof buf,
-                "estimator=%d;max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g:%g;sampler=%s",
+                "estimator=%d;max_depth=%d;rr_min_depth=%d;spp_per_pass=%llu;filter=%s:%g:%g;sampler=%s;"
+                "lights=%s",
                 kEstimatorVersion, i.max_depth, i.rr_min_depth, (unsigned long long)s.render.spp_per_pass(),
                 filter_name(s.film.filter.type), double(s.film.filter.radius),
-                double(s.film.filter.sigma), s.render.sampler.c_str());
+                double(s.film.filter.sigma), s.render.sampler.c_str(), s.render.light_selection.c_str());
   return buf + std::visit([](const auto& integrator) { return integrator.settings_text(); },
                           i.method);
 }

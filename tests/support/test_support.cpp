@@ -79,3 +79,16 @@ Scene make_scene(std::vector<Material> materials, std::vector<Mesh> meshes, Vec3
 }
 
 }  // namespace rf::test
+
+namespace rf::test {
+
+Mesh make_quad(Vec3 origin, Vec3 e1, Vec3 e2, uint32_t material) {
+  Mesh m;
+  m.name = "quad";
+  m.material = material;
+  m.positions = {origin, origin + e1, origin + e1 + e2, origin + e2};
+  m.indices = {0, 1, 2, 0, 2, 3};
+  return m;
+}
+
+}  // namespace rf::test

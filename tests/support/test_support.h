@@ -30,6 +30,10 @@ namespace rf::test {
 // outward right-hand winding, 2*n_theta*n_phi - 2*n_phi triangles.
 Mesh make_uv_sphere(Vec3 center, float radius, int n_theta, int n_phi, uint32_t material);
 
+// The parallelogram origin, origin + e1, origin + e1 + e2, origin + e2 as two triangles; its
+// right-hand normal is cross(e1, e2).
+Mesh make_quad(Vec3 origin, Vec3 e1, Vec3 e2, uint32_t material);
+
 // A minimal valid scene around the given meshes: pinhole camera at eye looking at target,
 // resolution w x h, path tracer, box filter. The digest is set from `tag`.
 Scene make_scene(std::vector<Material> materials, std::vector<Mesh> meshes, Vec3 eye,

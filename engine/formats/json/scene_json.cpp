@@ -175,7 +175,8 @@ class SceneParser {
 
   void parse_render(const json& j) {
     const std::string p = "render";
-    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target", "sampler", "aovs"});
+    r_.check_keys(j, p, {"integrator", "spp", "passes", "seed", "noise_target", "sampler",
+                          "light_selection", "aovs"});
     RenderSettings& rs = scene_.render;
     if (const json* i = r_.find(j, "integrator"))
       rf::parse_integrator(r_, *i, "render.integrator", rs.integrator);
@@ -193,6 +194,12 @@ class SceneParser {
       rs.sampler = r_.string(*v, "render.sampler");
       if (!contains_name(known_samplers(), rs.sampler))
         r_.fail("render.sampler", "unknown sampler '" + rs.sampler + "' (known: " + join_names(known_samplers()) + ")");
+    }
+    if (const json* v = r_.find(j, "light_selection")) {
+      rs.light_selection = r_.string(*v, "render.light_selection");
+      if (rs.light_selection != "auto" && rs.light_selection != "power" && rs.light_selection != "bvh")
+        r_.fail("render.light_selection",
+                "unknown light selection '" + rs.light_selection + "' (known: auto, power, bvh)");
     }
     if (const json* v = r_.find(j, "aovs")) {
       std::string list;
