@@ -13,11 +13,10 @@ Materials, identical in both files (docs/formats/mitsuba.md, "Benchmark scenes")
 - diffuse walls, floor and spheres: rayfarm "diffuse" = Mitsuba "twosided" "diffuse";
 - rough gold: rayfarm "rough_conductor" (GGX alpha 0.15, RGB eta/k of rayfarm's gold preset) =
   Mitsuba "twosided" "roughconductor" (ggx, alpha 0.15, the same rgb eta/k);
-- blue plastic: rayfarm "plastic" (GGX alpha 0.1, ior 1.5; rayfarm's plastic is Mitsuba's
-  nonlinear one) = Mitsuba "twosided" "roughplastic" (ggx, alpha 0.1, int_ior 1.5, ext_ior 1,
-  nonlinear true). Mitsuba's roughplastic weighs the diffuse base with precomputed rough
-  transmittance tables where rayfarm uses the smooth Fresnel terms, so Mitsuba's image of these
-  spheres differs slightly (docs/formats/mitsuba.md, "Benchmark scenes");
+- silver mirror: rayfarm "conductor" (RGB eta/k below) = Mitsuba "twosided" "conductor" (the same
+  rgb eta/k). (A rough plastic was here: Mitsuba's roughplastic weighs its diffuse base with
+  precomputed rough transmittance tables where rayfarm uses the smooth Fresnel terms, so the two
+  images differed and the benchmark could not compare them.)
 - glass: rayfarm "dielectric" ior 1.5 = Mitsuba "dielectric" int_ior 1.5, ext_ior 1;
 - the light: a one-sided area light facing down.
 """
@@ -30,6 +29,8 @@ import struct
 ROOM_LIGHT = (15.0, 13.0, 10.0)
 GOLD_ETA = (0.143, 0.374, 1.442)
 GOLD_K = (3.983, 2.385, 1.603)
+SILVER_ETA = (0.155, 0.117, 0.138)
+SILVER_K = (4.83, 3.12, 2.15)
 
 
 def write_ply(path, positions, indices, normals=None):
@@ -121,7 +122,7 @@ def build(triangles):
     meshes['light'] = quad((-0.25, 1.98, -0.25), (0.25, 1.98, -0.25), (0.25, 1.98, 0.25),
                            (-0.25, 1.98, 0.25)) + (None,)  # normal -y: emits down
     meshes['floor_grid'] = displaced_grid(grid_n) + (None,)
-    groups = {'spheres_gold': [], 'spheres_plastic': [], 'spheres_glass': [], 'spheres_diffuse': []}
+    groups = {'spheres_gold': [], 'spheres_silver': [], 'spheres_glass': [], 'spheres_diffuse': []}
     names = list(groups)
     r = 0.15
     top = 0.05 + 0.04 * 1.5
@@ -140,7 +141,7 @@ def build(triangles):
 
 
 MATERIAL_OF = {'walls_white': 'white', 'wall_red': 'red', 'wall_green': 'green', 'light': 'black',
-               'floor_grid': 'white', 'spheres_gold': 'gold', 'spheres_plastic': 'plastic',
+               'floor_grid': 'white', 'spheres_gold': 'gold', 'spheres_silver': 'silver',
                'spheres_glass': 'glass', 'spheres_diffuse': 'white'}
 
 
@@ -151,7 +152,7 @@ def json_scene(res, mesh_names):
         'green': {'type': 'diffuse', 'reflectance': [0.14, 0.45, 0.091]},
         'black': {'type': 'diffuse', 'reflectance': [0, 0, 0]},
         'gold': {'type': 'rough_conductor', 'roughness': 0.15, 'eta': list(GOLD_ETA), 'k': list(GOLD_K)},
-        'plastic': {'type': 'plastic', 'reflectance': [0.1, 0.2, 0.6], 'ior': 1.5, 'roughness': 0.1},
+        'silver': {'type': 'conductor', 'eta': list(SILVER_ETA), 'k': list(SILVER_K)},
         'glass': {'type': 'dielectric', 'ior': 1.5},
     }
     shapes = []
@@ -178,7 +179,8 @@ def xml_scene(res, mesh_names):
              '<!-- Written by bench/make_million_scene.py; the same scene as scene.json. -->',
              '<scene version="3.0.0">',
              '\t<default name="spp" value="64"/>',
-             '\t<default name="res" value="%d"/>' % res,
+             '\t<default name="resx" value="%d"/>' % res,
+             '\t<default name="resy" value="%d"/>' % res,
              '\t<integrator type="path">',
              '\t\t<integer name="max_depth" value="9"/>',
              '\t</integrator>',
@@ -192,8 +194,8 @@ def xml_scene(res, mesh_names):
              '\t\t\t<integer name="sample_count" value="$spp"/>',
              '\t\t</sampler>',
              '\t\t<film type="hdrfilm">',
-             '\t\t\t<integer name="width" value="$res"/>',
-             '\t\t\t<integer name="height" value="$res"/>',
+             '\t\t\t<integer name="width" value="$resx"/>',
+             '\t\t\t<integer name="height" value="$resy"/>',
              '\t\t\t<rfilter type="tent">',
              '\t\t\t\t<float name="radius" value="1"/>',
              '\t\t\t</rfilter>',
@@ -211,11 +213,9 @@ def xml_scene(res, mesh_names):
               '\t\t\t<string name="distribution" value="ggx"/>', '\t\t\t<float name="alpha" value="0.15"/>',
               '\t\t\t<rgb name="eta" value="%s"/>' % rgb(GOLD_ETA), '\t\t\t<rgb name="k" value="%s"/>' % rgb(GOLD_K),
               '\t\t</bsdf>', '\t</bsdf>']
-    lines += ['\t<bsdf type="twosided" id="plastic">', '\t\t<bsdf type="roughplastic">',
-              '\t\t\t<string name="distribution" value="ggx"/>', '\t\t\t<float name="alpha" value="0.1"/>',
-              '\t\t\t<float name="int_ior" value="1.5"/>', '\t\t\t<float name="ext_ior" value="1"/>',
-              '\t\t\t<boolean name="nonlinear" value="true"/>',
-              '\t\t\t<rgb name="diffuse_reflectance" value="0.1, 0.2, 0.6"/>', '\t\t</bsdf>', '\t</bsdf>']
+    lines += ['\t<bsdf type="twosided" id="silver">', '\t\t<bsdf type="conductor">',
+              '\t\t\t<rgb name="eta" value="%s"/>' % rgb(SILVER_ETA),
+              '\t\t\t<rgb name="k" value="%s"/>' % rgb(SILVER_K), '\t\t</bsdf>', '\t</bsdf>']
     lines += ['\t<bsdf type="dielectric" id="glass">', '\t\t<float name="int_ior" value="1.5"/>',
               '\t\t<float name="ext_ior" value="1"/>', '\t</bsdf>']
     for name in mesh_names:

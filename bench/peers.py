@@ -54,7 +54,7 @@ BDPT = dict(xml='scenes/veach-bidir/scene.xml', res=(256, 256), mitsuba_spp=256,
 
 # rayfarm's configurations: sampler and passes (None: the default, docs/scene-format.md; passes are
 # independent replicates, so a sampler stratifies over spp / passes samples of a pixel).
-RAYFARM_CONFIGS = [('independent', None), ('sobol', None), ('sobol', 4)]
+RAYFARM_CONFIGS = [('independent', None), ('sobol', None), ('sobol', 4), ('sobol-sequence', None)]
 MITSUBA_SAMPLERS = ['independent', 'multijitter', 'ldsampler']
 
 

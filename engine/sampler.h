@@ -6,7 +6,10 @@
 // - IndependentSampler: hashed uniform numbers.
 // - SobolSampler: padded, shuffled, Owen-scrambled 2D Sobol (pbrt-v4's PaddedSobolSampler with
 //   Burley 2020, "Practical Hash-based Owen Scrambling"). See the class.
-// - Sampler: the tag-and-switch front the integrators use (RenderSettings::sampler).
+// - Sampler: the tag-and-switch front the integrators use (RenderSettings::sampler). Its
+//   SobolSequence kind ("sobol-sequence") keys the Sobol scrambles without the pass and gives
+//   pass p the sample indices p * spp_per_pass + i: one scrambled sequence per pixel, each pass a
+//   block of it (docs/design.md, "Passes, seeds and determinism").
 #pragma once
 
 #include <array>
@@ -195,13 +198,18 @@ class SobolSampler {
 // has no pixel to stratify over, and its index already spreads it over the pass.
 class Sampler {
  public:
-  enum class Kind : uint8_t { Independent, Sobol };
-  explicit Sampler(Kind kind = Kind::Independent) : kind_(kind) {}
+  enum class Kind : uint8_t { Independent, Sobol, SobolSequence };
+  // spp_per_pass: only SobolSequence uses it (pass p draws sample indices p * spp_per_pass + i).
+  explicit Sampler(Kind kind = Kind::Independent, uint64_t spp_per_pass = 0)
+      : kind_(kind), spp_per_pass_(spp_per_pass) {}
 
   void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
-    sobol_active_ = kind_ == Kind::Sobol;
-    if (sobol_active_)
+    sobol_active_ = kind_ != Kind::Independent;
+    if (kind_ == Kind::SobolSequence)  // one scrambled sequence per pixel; a pass is a block of it
+      sobol_.start_camera_sample(seed, frame, kSequencePass, px, py,
+                                 uint64_t(pass) * spp_per_pass_ + sample_index);
+    else if (sobol_active_)
       sobol_.start_camera_sample(seed, frame, pass, px, py, sample_index);
     else
       independent_.start_camera_sample(seed, frame, pass, px, py, sample_index);
@@ -215,7 +223,10 @@ class Sampler {
   Kind kind() const { return kind_; }
 
  private:
+  // The pass key of SobolSequence's scrambles: one for all passes, apart from Sobol's passes.
+  static constexpr uint32_t kSequencePass = 0xffffffffu;
   Kind kind_;
+  uint64_t spp_per_pass_;
   bool sobol_active_ = false;
   IndependentSampler independent_;
   SobolSampler sobol_;
@@ -225,11 +236,15 @@ class Sampler {
 inline Sampler::Kind kind_from_name(const std::string& name) {
   if (name == "independent") return Sampler::Kind::Independent;
   if (name == "sobol") return Sampler::Kind::Sobol;
-  throw std::invalid_argument("unknown sampler '" + name + "' (expected independent or sobol)");
+  if (name == "sobol-sequence") return Sampler::Kind::SobolSequence;
+  throw std::invalid_argument("unknown sampler '" + name +
+                              "' (expected independent, sobol or sobol-sequence)");
 }
 
 inline const char* kind_name(Sampler::Kind kind) {
-  return kind == Sampler::Kind::Sobol ? "sobol" : "independent";
+  return kind == Sampler::Kind::Sobol           ? "sobol"
+         : kind == Sampler::Kind::SobolSequence ? "sobol-sequence"
+                                                : "independent";
 }
 
 }  // namespace rf

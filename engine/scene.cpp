@@ -31,7 +31,7 @@ float default_filter_radius(FilterType t) {
 }
 
 const std::vector<std::string>& known_samplers() {
-  static const std::vector<std::string> names = {"independent", "sobol"};
+  static const std::vector<std::string> names = {"independent", "sobol", "sobol-sequence"};
   return names;
 }
 

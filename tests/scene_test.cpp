@@ -828,7 +828,7 @@ const std::vector<BadScene>& bad_scenes() {
        }),
        "render.integrator", "light_samples and bsdf_samples cannot both be 0"},
       {"UnknownSampler", edit([](json& j) { j["render"]["sampler"] = "halton"; }),
-       "render.sampler", "unknown sampler 'halton' (known: independent, sobol)"},
+       "render.sampler", "unknown sampler 'halton' (known: independent, sobol, sobol-sequence)"},
       {"SphereNegativeRadius", with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"),
        "shapes[0].radius", "must be > 0"},
       // A referenced file may not lead outside the scene's directory, a symbolic link included.

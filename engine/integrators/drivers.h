@@ -100,7 +100,7 @@ inline void light_path_aovs(const RenderContext& ctx, const TaskKey& task, bool 
   auto rows = [&](int y_begin, int y_end) {
     double t0 = thread_cpu_seconds();
     TraceCounters counters;
-    Sampler sampler(kind);
+    Sampler sampler(kind, ctx.scene.render.spp_per_pass());
     for (int y = y_begin; y < y_end; ++y)
       for (int x = buf.rect.x0; x < buf.rect.x1(); ++x)
         for (uint64_t s = 0; s < spp; ++s) {
@@ -141,7 +141,7 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
     double t0 = driver_detail::thread_cpu_seconds();
     TraceCounters counters;
     uint64_t nonfinite = 0;
-    Sampler sampler(kind);
+    Sampler sampler(kind, ctx.scene.render.spp_per_pass());
     SplatTarget target{splats, w, h, &ctx.scene.film.filter};
     for (int y = y_begin; y < y_end; ++y)
       for (int x = rect.x0; x < rect.x1(); ++x)
