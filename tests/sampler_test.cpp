@@ -278,6 +278,19 @@ TEST(SamplerTest, SobolIntegratesASmoothBumpFarBetterThanIndependent) {
 // estimate of a discontinuous integrand, x y^2 + [x + y < 0.7] (integral 1/6 + 0.245), is within
 // 4 standard errors of the truth (a correct sampler fails < 1e-4 of the time per case), in
 // several slots and pixels.
+// The spp-sample estimate of x y^2 + [x + y < 0.7] by pixel (px, 7)'s samples in `pass`, drawn
+// from dimension slot `slot`.
+double bump_estimate(Sampler& s, uint64_t seed, uint32_t pass, int px, int slot, int spp) {
+  double est = 0;
+  for (int i = 0; i < spp; ++i) {
+    s.start_camera_sample(seed, 0, pass, px, 7, uint64_t(i));
+    for (int d = 0; d < slot; ++d) s.get_1d();
+    Vec2 u = s.get_2d();
+    est += double(u.x) * u.y * u.y + (u.x + u.y < 0.7f ? 1.0 : 0.0);
+  }
+  return est / spp;
+}
+
 TEST(SamplerTest, SobolIsUnbiasedOverPasses) {
   const double exact = 1.0 / 6.0 + 0.245;
   Sampler s(Sampler::Kind::Sobol);
@@ -286,14 +299,7 @@ TEST(SamplerTest, SobolIsUnbiasedOverPasses) {
       const int passes = 256, spp = 16;
       double sum = 0, sum_sq = 0;
       for (uint32_t pass = 0; pass < passes; ++pass) {
-        double est = 0;
-        for (int i = 0; i < spp; ++i) {
-          s.start_camera_sample(5, 0, pass, px, 7, uint64_t(i));
-          for (int d = 0; d < slot; ++d) s.get_1d();
-          Vec2 u = s.get_2d();
-          est += double(u.x) * u.y * u.y + (u.x + u.y < 0.7f ? 1.0 : 0.0);
-        }
-        est /= spp;
+        double est = bump_estimate(s, 5, pass, px, slot, spp);
         sum += est;
         sum_sq += est * est;
       }
@@ -385,14 +391,7 @@ TEST(SamplerTest, SobolSequenceEveryPassIsUnbiased) {
     const int seeds = 256;
     double sum = 0, sum_sq = 0;
     for (int seed = 0; seed < seeds; ++seed) {
-      double est = 0;
-      for (int i = 0; i < spp; ++i) {
-        s.start_camera_sample(uint64_t(seed), 0, 3, 11, 7, uint64_t(i));
-        for (int d = 0; d < slot; ++d) s.get_1d();
-        Vec2 u = s.get_2d();
-        est += double(u.x) * u.y * u.y + (u.x + u.y < 0.7f ? 1.0 : 0.0);
-      }
-      est /= spp;
+      double est = bump_estimate(s, uint64_t(seed), 3, 11, slot, spp);
       sum += est;
       sum_sq += est * est;
     }
