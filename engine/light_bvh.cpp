@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <numeric>
 
 namespace rf {
 
@@ -240,9 +239,9 @@ uint32_t LightBvh::build(std::vector<Item>& items, size_t begin, size_t end, int
   return index;
 }
 
-double LightBvh::first_child_probability(const Node& node, uint32_t index, Vec3 p, Vec3 n) const {
+double LightBvh::first_child_probability(uint32_t index, Vec3 p, Vec3 n) const {
   float i0 = nodes_[index + 1].bounds.importance(p, n);
-  float i1 = nodes_[node.second_child].bounds.importance(p, n);
+  float i1 = nodes_[nodes_[index].second_child].bounds.importance(p, n);
   if (!(i0 > 0) && !(i1 > 0)) return -1.0;
   return double(i0) / (double(i0) + double(i1));
 }
@@ -254,7 +253,7 @@ bool LightBvh::sample(Vec3 p, Vec3 n, float u, uint32_t& light, float& pmf) cons
   uint32_t index = 0;
   while (!nodes_[index].leaf) {
     const Node& node = nodes_[index];
-    double p0 = first_child_probability(node, index, p, n);
+    double p0 = first_child_probability(index, p, n);
     if (p0 < 0) return false;
     if (uu < p0) {
       uu = uu / p0;
@@ -280,7 +279,7 @@ float LightBvh::pmf(Vec3 p, Vec3 n, uint32_t light) const {
   uint32_t index = 0;
   while (!nodes_[index].leaf) {
     const Node& node = nodes_[index];
-    double p0 = first_child_probability(node, index, p, n);
+    double p0 = first_child_probability(index, p, n);
     if (p0 < 0) return 0.0f;
     if (trail & 1) {
       prob *= 1.0 - p0;

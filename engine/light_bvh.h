@@ -69,9 +69,9 @@ class LightBvh {
     uint32_t light;
   };
   uint32_t build(std::vector<Item>& items, size_t begin, size_t end, int depth);
-  // Probability of taking the first child of interior node `node` from (p, n); < 0 when neither
+  // Probability of taking the first child of interior node `index` from (p, n); < 0 when neither
   // child can contribute.
-  double first_child_probability(const Node& node, uint32_t index, Vec3 p, Vec3 n) const;
+  double first_child_probability(uint32_t index, Vec3 p, Vec3 n) const;
 
   std::vector<Node> nodes_;
   std::vector<uint64_t> trail_;     // per light: bit k = 1 when the path from the root takes the

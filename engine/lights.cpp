@@ -24,6 +24,9 @@ float smooth_step(float x, float a, float b) {
 }
 
 float cos_deg(float deg) { return std::cos(deg * kPi / 180.0f); }
+
+// Directional and environment lights: no position, so not in the light BVH.
+bool is_infinite(LightKind k) { return k == LightKind::Directional || k == LightKind::Environment; }
 }  // namespace
 
 LightSet::LightSet(const Scene& scene) : scene_(scene) {
@@ -163,10 +166,8 @@ void LightSet::build_bvh(const std::string& mode) {
   infinite_cdf_.assign(1, 0.0);
   double acc = 0, inf_total = 0;
   for (size_t i = 0; i < kinds_.size(); ++i)
-    if (kinds_[i] == LightKind::Directional || kinds_[i] == LightKind::Environment) inf_total += pmf_[i];
-  for (size_t i = 0; i < kinds_.size(); ++i) {
-    if (kinds_[i] != LightKind::Directional && kinds_[i] != LightKind::Environment) continue;
-    infinite_.push_back(uint32_t(i));
+    if (is_infinite(kinds_[i])) infinite_.push_back(uint32_t(i)), inf_total += pmf_[i];
+  for (uint32_t i : infinite_) {
     acc += inf_total > 0 ? pmf_[i] / inf_total : 0.0;
     infinite_cdf_.push_back(acc);
   }
@@ -226,8 +227,7 @@ bool LightSet::sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample&
 float LightSet::selection_pmf_at(size_t light, Vec3 p, Vec3 n) const {
   if (light >= size()) return 0.0f;
   if (!uses_bvh()) return pmf_[light];
-  LightKind k = kinds_[light];
-  if (k == LightKind::Directional || k == LightKind::Environment) return pmf_[light];
+  if (is_infinite(kinds_[light])) return pmf_[light];
   return bvh_share_ * bvh_.pmf(p, n, uint32_t(light));
 }
 
@@ -358,7 +358,7 @@ float LightSet::pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Ve
   if (first == kNoLight) return 0.0f;
   const Tri& tri = tris_[first + prim];
   if (!(tri.area > 0)) return 0.0f;
-  float pmf = uses_bvh() ? bvh_share_ * bvh_.pmf(p, n, first + prim) : pmf_[first + prim];
+  float pmf = selection_pmf_at(first + prim, p, n);
   if (!(pmf > 0)) return 0.0f;
   float sin2_max, cos_max, one_minus_cos_max;
   if (tri.sphere && sphere_cone(*tri.sphere, p, sin2_max, cos_max, one_minus_cos_max))

@@ -214,7 +214,9 @@ TEST(LightBvh, LightSetSampledPdfEqualsPdfQuery) {
 // by quadrature over every light, against next-event estimates with power selection and with the
 // BVH. Each estimate is the mean of N independent samples; it must lie within 4.5 standard
 // errors (a two-sided 4.5 sigma band fails a correct estimator about once in 150000 per check).
-// The BVH's standard error must also be smaller: that is what it is for.
+// The BVH's standard error must also be smaller: that is what it is for. Measured relative
+// standard errors: BVH 0.15% to 0.28%, power 0.7% to 1.1%; so a bias in the BVH's estimate above
+// about 1.3% of the irradiance (4.5 SE + 0.1%) fails, and above about 5% for power selection.
 TEST(LightBvh, IrradianceAgreesWithPowerSelectionAndHasLessVariance) {
   Scene sp = many_lights_scene("power"), sb = many_lights_scene("bvh");
   LightSet power(sp), bvh(sb);
@@ -258,6 +260,8 @@ TEST(LightBvh, IrradianceAgreesWithPowerSelectionAndHasLessVariance) {
       }
       double mean = sum / N, var = std::max(0.0, sum2 / N - mean * mean);
       se[which] = std::sqrt(var / N);
+      std::printf("%s at (%g, %g): mean %.5g, exact %.5g, relative standard error %.3g\n",
+                  which ? "bvh" : "power", p.x, p.z, mean, exact, se[which] / exact);
       EXPECT_NEAR(mean, exact, 4.5 * se[which] + 1e-3 * exact)
           << (which ? "bvh" : "power") << " at " << p.x << "," << p.z;
       ++which;
@@ -276,7 +280,10 @@ namespace {
 
 // The path tracer on the shipped many-light scene (scenes/many-lights) with the BVH and with power
 // selection estimates the same image (the harness's per-pixel t tests over 32 passes and image
-// means within 1%), and the BVH's relMSE per pass is lower.
+// means within 1%), and the BVH's relMSE per pass is lower. The image means' combined standard
+// error is about 0.6%, so the 1% check sees an image-mean bias of about 1% and up: scaling the
+// BVH's light-sample weights by 5% (a 1.7% image-mean bias, as next-event estimation carries about
+// a third of the image) fails it, checked once.
 TEST(LightBvh, PathTracerAgreesWithPowerSelection) {
   test::ImageStats stats[2] = {test::ImageStats(48, 27, 1), test::ImageStats(48, 27, 1)};
   double rel[2];

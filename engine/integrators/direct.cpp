@@ -29,6 +29,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
   RGB radiance = LightSet::emitted(ctx.accel.mesh(hit.mesh), hit.ng, wo);
   Bsdf bsdf = bsdf_at(ctx, hit, ctx.pixel_spread * hit.t);
   Vec3 ns = bsdf.shading_normal();
+  const Vec3 n_receiver = receiver_normal(bsdf, wo);  // light selection (LightSet::sample)
 
   // Light sampling: area lights and the environment MIS-weighted, delta lights always.
   // With the "bsdf" strategy one light sample still serves the delta lights, if any.
@@ -40,7 +41,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
     float u = sampler.get_1d();
     Vec2 up = sampler.get_2d();
     LightSample ls;
-    if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u, up, ls)) continue;
+    if (!ctx.lights.sample(hit.p, n_receiver, u, up, ls)) continue;
     if (n_light == 0 && !ls.is_delta) continue;  // "bsdf" strategy: only delta lights here
     RGB f = bsdf.eval(wo, ls.wi);
     if (is_black(f)) continue;
@@ -70,8 +71,8 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
     if (ctx.accel.intersect(r, light_hit)) {
       le = LightSet::emitted(ctx.accel.mesh(light_hit.mesh), light_hit.ng, -bs.wi);
       if (is_black(le)) continue;
-      light_pdf = ctx.lights.pdf_solid_angle(hit.p, receiver_normal(bsdf, wo), light_hit.mesh, light_hit.prim, light_hit.p,
-                                             light_hit.ng);
+      light_pdf = ctx.lights.pdf_solid_angle(hit.p, n_receiver, light_hit.mesh, light_hit.prim,
+                                             light_hit.p, light_hit.ng);
     } else {
       le = ctx.lights.environment_radiance(bs.wi);
       if (is_black(le)) continue;
