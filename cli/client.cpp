@@ -1,6 +1,7 @@
 // The farm's client commands: submit, status, watch, fetch, cancel, health (cli/farm.h runs them).
 #include "cli/commands.h"
 #include "client/commands.h"
+#include "farm/auth.h"
 
 namespace rf::cli {
 
@@ -8,6 +9,8 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   auto add_addr = [&](CLI::App* c) {
     c->add_option("--coordinator", shared.coordinator,
                   "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
+    c->add_option("--token-file", shared.token_file,
+                  "file holding the token (default: $RAYFARM_TOKEN_FILE, else $RAYFARM_TOKEN)");
   };
   struct Args {
     OverrideArgs overrides;
@@ -19,32 +22,36 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   };
   auto a = std::make_shared<Args>();
   const std::string& addr = shared.coordinator;
+  // Read when the command runs, after parsing, so a bad token file is reported as such.
+  auto ep = [&shared] { return Endpoint{shared.coordinator, client_token(shared.token_file)}; };
 
   auto* submit = app.add_subcommand("submit", "submit a job; prints its id");
   add_addr(submit);
-  submit->add_option("scene", a->submit.scene, "scene file, or a per-frame pattern (shot.####.json)")
+  submit
+      ->add_option("scene", a->submit.scene, "scene file, or a per-frame pattern (shot.####.json)")
       ->required();
   add_override_options(*submit, a->overrides);
-  submit->add_option("--frames", a->submit.frames, "frames, Open Job Description syntax (1-10:2,15)");
+  submit->add_option("--frames", a->submit.frames,
+                     "frames, Open Job Description syntax (1-10:2,15)");
   submit->add_option("--priority", a->submit.priority, "higher runs first");
   submit->add_option("--name", a->submit.name, "job name (default: the scene's file name)");
   submit->add_option("--tile-size", a->submit.tile_size, "tile size in pixels")
       ->check(CLI::PositiveNumber);
-  out.push_back({submit, [a, &addr] {
+  out.push_back({submit, [a, ep] {
                    a->submit.overrides = overrides_of(a->overrides);
-                   return cmd_submit(addr, a->submit);
+                   return cmd_submit(ep(), a->submit);
                  }});
 
   auto* status = app.add_subcommand("status", "all jobs (or one), one line each");
   add_addr(status);
   status->add_option("job", a->job, "one job");
   status->add_flag("--json", a->json, "machine-readable");
-  out.push_back({status, [a, &addr] { return cmd_status(addr, a->job, a->json); }});
+  out.push_back({status, [a, ep] { return cmd_status(ep(), a->job, a->json); }});
 
   auto* watch = app.add_subcommand("watch", "follow a job until it ends (exit 0: completed)");
   add_addr(watch);
   watch->add_option("job", a->job, "job id")->required();
-  out.push_back({watch, [a, &addr] { return cmd_watch(addr, a->job); }});
+  out.push_back({watch, [a, ep] { return cmd_watch(ep(), a->job); }});
 
   auto* fetch = app.add_subcommand("fetch", "write a job's frames (EXR + PNG), also mid-job");
   add_addr(fetch);
@@ -52,17 +59,18 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   fetch->add_option("-o,--output", a->fetch_dir, "output directory")->required();
   fetch->add_option("--frame", a->fetch_frame, "only this frame");
   fetch->add_option("--exposure", a->fetch_exposure, "PNG exposure in stops");
-  out.push_back({fetch, [a, &addr] {
-                   return cmd_fetch(addr, a->job, a->fetch_dir, a->fetch_frame, a->fetch_exposure);
+  out.push_back({fetch, [a, ep] {
+                   return cmd_fetch(ep(), a->job, a->fetch_dir, a->fetch_frame, a->fetch_exposure);
                  }});
 
   auto* cancel = app.add_subcommand("cancel", "cancel a job");
   add_addr(cancel);
   cancel->add_option("job", a->job, "job id")->required();
-  out.push_back({cancel, [a, &addr] { return cmd_cancel(addr, a->job); }});
+  out.push_back({cancel, [a, ep] { return cmd_cancel(ep(), a->job); }});
 
   auto* health = app.add_subcommand("health", "check a coordinator's gRPC health service");
-  add_addr(health);
+  health->add_option("--coordinator", shared.coordinator,
+                     "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
   health->add_option("address", a->health_addr, "HOST:PORT (default: as --coordinator)");
   health->add_flag("--services", a->services, "also list its services (server reflection)");
   out.push_back({health, [a, &addr] {

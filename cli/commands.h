@@ -1,7 +1,7 @@
 // The rayfarm command line: main.cpp builds the app and runs the one command given; each command
 // group registers its subcommands from its own file:
 //   local.cpp     render, merge, compare, bench  (one machine, no server)
-//   services.cpp  coordinator, worker            (the farm's long-running processes)
+//   services.cpp  coordinator, worker, token     (the farm's long-running processes, tokens)
 //   client.cpp    submit, status, watch, fetch, cancel, health  (talking to a coordinator)
 #pragma once
 
@@ -33,6 +33,7 @@ struct Command {
 struct SharedOptions {
   int threads = 0;  // 0: all cores
   std::string coordinator;
+  std::string token_file;  // the token shown to the coordinator (farm/auth.h client_token)
 };
 
 // The scene overrides `render` and `submit` share (--spp, --passes, --integrator, ...).

@@ -2,7 +2,10 @@
 #include "cli/commands.h"
 #include "client/commands.h"
 #include "coordinator/service.h"
+#include "farm/auth.h"
 #include "worker/worker.h"
+
+#include <cstdio>
 
 namespace rf::cli {
 
@@ -16,6 +19,9 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       ->check(CLI::PositiveNumber);
   coord->add_option("--window", co->window_frames, "frames open at once per job")
       ->check(CLI::PositiveNumber);
+  coord->add_option("--token-file", co->token_file,
+                    "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
+                    "on SIGHUP (without it: loopback only, no authentication)");
   out.push_back({coord, [co] { return run_coordinator(*co); }, true});
 
   auto wo = std::make_shared<WorkerOptions>();
@@ -23,18 +29,53 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   worker->add_option("--coordinator", shared.coordinator,
                      "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
   worker->add_option("--cache-dir", wo->cache_dir, "blob cache (default ~/.cache/rayfarm)");
-  worker->add_option("--drain-seconds", wo->drain_seconds,
-                     "on SIGTERM, finish the task in flight if done within this, else hand it back");
+  worker->add_option(
+      "--drain-seconds", wo->drain_seconds,
+      "on SIGTERM, finish the task in flight if done within this, else hand it back");
   worker->add_flag("--exit-when-idle", wo->exit_when_idle,
                    "exit once the coordinator has no queued or leased work left");
   worker->add_option("--max-tasks", wo->max_tasks, "exit after this many tasks");
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)");
+  worker->add_option("--token-file", shared.token_file,
+                     "file holding a worker token (default: $RAYFARM_TOKEN_FILE, else "
+                     "$RAYFARM_TOKEN)");
   out.push_back({worker,
                  [wo, &shared] {
                    wo->coordinator = shared.coordinator;
+                   wo->token = client_token(shared.token_file);
                    return run_worker(*wo);
                  },
                  true});
+
+  struct TokenArgs {
+    std::string role = "client", tenant = "default", expires;
+  };
+  auto ta = std::make_shared<TokenArgs>();
+  auto* token = app.add_subcommand("token", "make tokens for a coordinator's --token-file");
+  token->require_subcommand(1);
+  auto* token_new = token->add_subcommand(
+      "new", "print a new token (line 1) and the token-file line that accepts it (line 2)");
+  token_new->add_option("--role", ta->role, "client, worker or admin")
+      ->check(CLI::IsMember({"client", "worker", "admin"}));
+  token_new->add_option("--tenant", ta->tenant, "whose jobs a client token sees");
+  token_new->add_option("--expires", ta->expires, "expiry, UTC: YYYY-MM-DD[THH:MM:SSZ]");
+  out.push_back({token_new, [ta] {
+                   std::optional<int64_t> expires;
+                   if (!ta->expires.empty()) {
+                     expires = parse_utc_time(ta->expires);
+                     if (!expires)
+                       throw UsageError("--expires '" + ta->expires +
+                                        "' is not YYYY-MM-DD or YYYY-MM-DDTHH:MM:SSZ");
+                   }
+                   std::string t = new_token(), line;
+                   try {
+                     line = token_file_line(t, *parse_role(ta->role), ta->tenant, expires);
+                   } catch (const std::invalid_argument& e) {
+                     throw UsageError(std::string("--tenant: ") + e.what());
+                   }
+                   std::printf("%s\n%s\n", t.c_str(), line.c_str());
+                   return 0;
+                 }});
 }
 
 }  // namespace rf::cli

@@ -40,8 +40,8 @@ std::string default_coordinator() {
 
 namespace {
 
-std::unique_ptr<pb::JobService::Stub> job_stub(const std::string& addr) {
-  return pb::JobService::NewStub(coordinator_channel(addr));
+std::unique_ptr<pb::JobService::Stub> job_stub(const Endpoint& ep) {
+  return pb::JobService::NewStub(coordinator_channel(ep.address, ep.token));
 }
 
 const char* code_name(grpc::StatusCode c) {
@@ -54,6 +54,10 @@ const char* code_name(grpc::StatusCode c) {
       return "DEADLINE_EXCEEDED";
     case grpc::StatusCode::NOT_FOUND:
       return "NOT_FOUND";
+    case grpc::StatusCode::UNAUTHENTICATED:
+      return "UNAUTHENTICATED";
+    case grpc::StatusCode::PERMISSION_DENIED:
+      return "PERMISSION_DENIED";
     case grpc::StatusCode::FAILED_PRECONDITION:
       return "FAILED_PRECONDITION";
     case grpc::StatusCode::RESOURCE_EXHAUSTED:
@@ -168,11 +172,12 @@ std::string upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const fs
 
 }  // namespace
 
-int cmd_submit(const std::string& addr, const SubmitArgs& a) {
+int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
+  const std::string& addr = ep.address;
   JobSpec spec = job_spec(a);
   pb::MissingBlobsRequest missing_req;
   for (const BundleEntry& f : spec.files) missing_req.add_sha256(f.sha256);
-  auto stub = job_stub(addr);
+  auto stub = job_stub(ep);
   pb::MissingBlobsResponse missing;
   {
     grpc::ClientContext ctx;
@@ -200,6 +205,7 @@ nlohmann::json to_json(const pb::JobStatus& j) {
                       {"stopped_on_target", f.stopped_on_target()}});
   return {{"job_id", j.job_id()},
           {"name", j.name()},
+          {"tenant", j.tenant()},
           {"state", state_name(j.state())},
           {"error", j.error()},
           {"core_seconds", j.core_seconds()},
@@ -234,8 +240,9 @@ std::string job_line(const pb::JobStatus& j) {
 
 }  // namespace
 
-int cmd_status(const std::string& addr, const std::string& job, bool json) {
-  auto stub = job_stub(addr);
+int cmd_status(const Endpoint& ep, const std::string& job, bool json) {
+  const std::string& addr = ep.address;
+  auto stub = job_stub(ep);
   std::vector<pb::JobStatus> jobs;
   grpc::ClientContext ctx;
   set_deadline(ctx, 30);
@@ -263,8 +270,9 @@ int cmd_status(const std::string& addr, const std::string& job, bool json) {
   return 0;
 }
 
-int cmd_watch(const std::string& addr, const std::string& job) {
-  auto stub = job_stub(addr);
+int cmd_watch(const Endpoint& ep, const std::string& job) {
+  const std::string& addr = ep.address;
+  auto stub = job_stub(ep);
   std::map<uint32_t, std::string> last;
   std::mt19937 rng(std::random_device{}());
   for (int attempt = 0;; ++attempt) {
@@ -315,9 +323,10 @@ int cmd_watch(const std::string& addr, const std::string& job) {
   }
 }
 
-int cmd_fetch(const std::string& addr, const std::string& job, const std::string& out_dir,
+int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out_dir,
               std::optional<uint32_t> only_frame, float exposure) {
-  auto stub = job_stub(addr);
+  const std::string& addr = ep.address;
+  auto stub = job_stub(ep);
   pb::JobStatus status;
   {
     grpc::ClientContext ctx;
@@ -367,8 +376,9 @@ int cmd_fetch(const std::string& addr, const std::string& job, const std::string
   return 0;
 }
 
-int cmd_cancel(const std::string& addr, const std::string& job) {
-  auto stub = job_stub(addr);
+int cmd_cancel(const Endpoint& ep, const std::string& job) {
+  const std::string& addr = ep.address;
+  auto stub = job_stub(ep);
   grpc::ClientContext ctx;
   set_deadline(ctx, 30);
   pb::JobRef ref;

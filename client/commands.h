@@ -19,6 +19,12 @@ struct FarmError : std::runtime_error {
 // $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
 std::string default_coordinator();
 
+// A coordinator and the token to show it (farm/auth.h client_token; "" for none).
+struct Endpoint {
+  std::string address;
+  std::string token;
+};
+
 struct SubmitArgs {
   std::string scene;   // a file, or a per-frame pattern ("shot.####.json")
   std::string frames;  // Open Job Description range; empty: the scene's frame
@@ -28,13 +34,13 @@ struct SubmitArgs {
   int tile_size = 0;  // 0: the coordinator's default
 };
 
-int cmd_submit(const std::string& addr, const SubmitArgs& args);  // prints the job id
-int cmd_status(const std::string& addr, const std::string& job, bool json);
-int cmd_watch(const std::string& addr,
+int cmd_submit(const Endpoint& ep, const SubmitArgs& args);  // prints the job id
+int cmd_status(const Endpoint& ep, const std::string& job, bool json);
+int cmd_watch(const Endpoint& ep,
               const std::string& job);  // 0 completed, 1 failed, 3 cancelled
-int cmd_fetch(const std::string& addr, const std::string& job, const std::string& out_dir,
+int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out_dir,
               std::optional<uint32_t> frame, float exposure);
-int cmd_cancel(const std::string& addr, const std::string& job);
+int cmd_cancel(const Endpoint& ep, const std::string& job);
 int cmd_health(const std::string& addr, bool list_services);
 
 }  // namespace rf

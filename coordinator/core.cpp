@@ -9,11 +9,11 @@
 #include <filesystem>
 
 #include "coordinator/checkpoint.h"
-#include "engine/digest.h"
 #include "engine/buffer_file.h"
+#include "engine/digest.h"
 #include "engine/frame_accumulator.h"
-#include "engine/work_units.h"
 #include "engine/render.h"
+#include "engine/work_units.h"
 #include "farm/convert.h"
 #include "farm/frame_range.h"
 
@@ -24,6 +24,12 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr int kDefaultTileSize = 128;  // big enough that per-task costs stay small
+
+// A client-supplied string as it may appear in a message or a log line: at most 64 bytes.
+std::string clip(const std::string& s) {
+  if (s.size() <= 64) return s;
+  return s.substr(0, 48) + "...(" + std::to_string(s.size()) + " bytes)";
+}
 
 [[noreturn]] void refuse(ErrorCode code, const std::string& message) {
   throw CoordinatorError(code, message);
@@ -53,6 +59,7 @@ struct FramePlan {
   bool splats = false;
   uint32_t passes = 0;
   double noise_target = 0;
+  uint64_t spp_per_pass = 0;
 };
 
 FramePlan plan_frame(const Scene& scene, uint32_t frame, int tile_size) {
@@ -61,9 +68,12 @@ FramePlan plan_frame(const Scene& scene, uint32_t frame, int tile_size) {
   } catch (const std::exception& e) {
     refuse(ErrorCode::InvalidArgument, e.what());
   }
-  return {frame_header(scene, frame, PassSet{}), work_units(scene, tile_size),
-          integrator_splats(scene.render.integrator.method), scene.render.passes,
-          scene.render.noise_target};
+  return {frame_header(scene, frame, PassSet{}),
+          work_units(scene, tile_size),
+          integrator_splats(scene.render.integrator.method),
+          scene.render.passes,
+          scene.render.noise_target,
+          scene.render.spp_per_pass()};
 }
 
 // Every file of the spec's bundle has a safe path and a digest whose content was uploaded.
@@ -155,9 +165,11 @@ struct JobRecord {
   std::string error;
   int64_t submitted_unix = 0;
   double core_seconds = 0;
+  std::string tenant;
   std::vector<Rect> tiles;
   bool splats = false;
   uint32_t passes = 0;
+  uint64_t spp_per_pass = 0;
   double noise_target = 0;
   std::vector<std::unique_ptr<FrameRecord>> frames;
   std::map<uint32_t, FrameRecord*> by_number;
@@ -172,11 +184,13 @@ struct JobRecord {
 
 Coordinator::Coordinator(CoreOptions o)
     : options_(with_defaults(std::move(o))),
+      lock_(options_.state_dir),
       blobs_(options_.state_dir + "/blobs"),  // creates the state directory too
       store_(options_.state_dir + "/jobs.sqlite"),
       scheduler_(SchedulerOptions{options_.lease_seconds, options_.max_failures,
                                   options_.window_frames, options_.instance + "-L"}) {
   next_seq_ = store_.next_seq();
+  for (auto& [id, principal] : store_.workers()) workers_[id] = principal;
   for (const StoredJob& j : store_.jobs()) restore(j);
 }
 
@@ -217,8 +231,7 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
     refuse(ErrorCode::InvalidArgument,
            "tile_size: " + std::to_string(tile_size) + " is outside 8..4096");
   BundleScenes scene_for(bundle_dir, spec.files, spec.overrides);
-  if (frames.empty())
-    frames.push_back(0);  // a job without a frame range renders frame 0
+  if (frames.empty()) frames.push_back(0);  // a job without a frame range renders frame 0
   for (uint32_t number : frames) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
@@ -230,6 +243,7 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
       job.splats = plan.splats;
       job.passes = plan.passes;
       job.noise_target = plan.noise_target;
+      job.spp_per_pass = plan.spp_per_pass;
     } else if (plan.tiles != job.tiles || plan.passes != job.passes) {
       refuse(ErrorCode::InvalidArgument,
              "frame " + std::to_string(number) + " (" + f->scene_path +
@@ -294,11 +308,15 @@ void Coordinator::restore(const StoredJob& stored) {
   job->error = stored.error;
   job->submitted_unix = stored.submitted_unix;
   job->core_seconds = stored.core_seconds;
+  job->tenant = stored.tenant;
   scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
                      spec->priority);
   if (terminal(job->state)) {
     scheduler_.cancel_job(job->id);
   } else {
+    // Leases from before the restart, ended: their holders' late results are still accepted.
+    for (const StoredLease& l : store_.leases(job->id))
+      scheduler_.restore_lease(l.lease_id, TaskRef{job->id, l.frame, l.pass, l.tile}, l.worker_id);
     // Failures before the restart still count toward failing a task (and skipping a worker).
     for (const JobStore::TaskFailure& e : store_.failures(job->id))
       scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id, e.message);
@@ -326,7 +344,7 @@ std::vector<std::string> Coordinator::missing_blobs(const std::vector<std::strin
 
 std::string Coordinator::put_blob(std::string_view bytes) { return blobs_.put(bytes); }
 
-std::string Coordinator::submit(const JobSpec& spec) {
+std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   uint64_t seq;
   {
     std::lock_guard lock(mu_);
@@ -344,16 +362,18 @@ std::string Coordinator::submit(const JobSpec& spec) {
     throw;
   }
   job->submitted_unix = int64_t(unix_now());
+  job->tenant = caller.tenant;
   std::lock_guard lock(mu_);
-  store_.insert_job(
-      {id, seq, encode_job_spec(spec), int(JobState::Queued), "", job->submitted_unix, 0});
+  store_.insert_job({id, seq, encode_job_spec(spec), int(JobState::Queued), "", job->submitted_unix,
+                     0, caller.tenant});
   scheduler_.add_job(id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
                      spec.priority);
   jobs_[id] = job;
   ++version_;
   changed_.notify_all();
-  spdlog::info("job {} submitted: {} frames x {} passes x {} tiles ({})", id, job->frames.size(),
-               job->passes, job->tiles.size(), job->frames[0]->base.integrator);
+  spdlog::info("job {} submitted by {}{}: {} frames x {} passes x {} tiles ({})", id,
+               caller.principal, caller.tenant.empty() ? "" : " (tenant " + caller.tenant + ")",
+               job->frames.size(), job->passes, job->tiles.size(), job->frames[0]->base.integrator);
   return id;
 }
 
@@ -364,7 +384,15 @@ std::shared_ptr<JobRecord> Coordinator::find(const std::string& id) const {
 
 std::shared_ptr<JobRecord> Coordinator::find_or_throw(const std::string& id) const {
   std::shared_ptr<JobRecord> job = find(id);
-  if (!job) refuse(ErrorCode::NotFound, "no job '" + id + "'");
+  if (!job) refuse(ErrorCode::NotFound, "no job '" + clip(id) + "'");
+  return job;
+}
+
+std::shared_ptr<JobRecord> Coordinator::find_for(const std::string& id,
+                                                 const Caller& caller) const {
+  std::shared_ptr<JobRecord> job = find_or_throw(id);
+  if (!caller.all_tenants && job->tenant != caller.tenant)
+    refuse(ErrorCode::PermissionDenied, "job " + id + " belongs to another tenant");
   return job;
 }
 
@@ -380,8 +408,8 @@ FrameStatus Coordinator::frame_status(const JobRecord& job, const FrameRecord& f
 }
 
 JobStatus Coordinator::status_of(const JobRecord& job) const {
-  JobStatus s{job.id,           job.spec.name,      job.state, job.error,
-              job.core_seconds, job.submitted_unix, {}};
+  JobStatus s{job.id,    job.spec.name,    job.tenant,         job.state,
+              job.error, job.core_seconds, job.submitted_unix, {}};
   for (const auto& f : job.frames) s.frames.push_back(frame_status(job, *f));
   return s;
 }
@@ -403,31 +431,33 @@ void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) 
   job.state = s;
   job.error = err;
   store_.set_state(job.id, int(s), err);
+  if (terminal(s)) store_.delete_leases(job.id);
   if (terminal(s))
     spdlog::info("job {} {}{}", job.id, job_state_name(s), err.empty() ? "" : ": " + err);
   ++version_;
   changed_.notify_all();
 }
 
-std::vector<JobStatus> Coordinator::list() const {
+std::vector<JobStatus> Coordinator::list(const Caller& caller) const {
   std::lock_guard lock(mu_);
   std::vector<const JobRecord*> order;
-  for (auto& [id, j] : jobs_) order.push_back(j.get());
+  for (auto& [id, j] : jobs_)
+    if (caller.all_tenants || j->tenant == caller.tenant) order.push_back(j.get());
   std::sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->seq < b->seq; });
   std::vector<JobStatus> out;
   for (const JobRecord* j : order) out.push_back(status_of(*j));
   return out;
 }
 
-JobStatus Coordinator::status(const std::string& id) const {
+JobStatus Coordinator::status(const std::string& id, const Caller& caller) const {
   std::lock_guard lock(mu_);
-  return status_of(*find_or_throw(id));
+  return status_of(*find_for(id, caller));
 }
 
 std::optional<JobStatus> Coordinator::next_status(const std::string& id, uint64_t& seen,
-                                                  double timeout) const {
+                                                  double timeout, const Caller& caller) const {
   std::unique_lock lock(mu_);
-  std::shared_ptr<JobRecord> job = find_or_throw(id);
+  std::shared_ptr<JobRecord> job = find_for(id, caller);
   if (seen == version_) {
     if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
     changed_.wait_for(lock, std::chrono::duration<double>(timeout));
@@ -437,23 +467,24 @@ std::optional<JobStatus> Coordinator::next_status(const std::string& id, uint64_
   return status_of(*job);
 }
 
-void Coordinator::cancel(const std::string& id) {
+void Coordinator::cancel(const std::string& id, const Caller& caller) {
   std::lock_guard lock(mu_);
-  std::shared_ptr<JobRecord> job = find_or_throw(id);
+  std::shared_ptr<JobRecord> job = find_for(id, caller);
   if (terminal(job->state))
     refuse(ErrorCode::FailedPrecondition,
            "job " + id + " has already ended (" + job_state_name(job->state) + ")");
   scheduler_.cancel_job(id);
-  set_state(*job, JobState::Cancelled, "cancelled by a user");
+  set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
 }
 
-FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame) const {
+FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame,
+                              const Caller& caller) const {
   FrameImage image;
   std::shared_ptr<JobRecord> job;
   FrameRecord* f = nullptr;
   {
     std::lock_guard lock(mu_);
-    job = find_or_throw(job_id);
+    job = find_for(job_id, caller);
     auto it = job->by_number.find(frame);
     if (it == job->by_number.end())
       refuse(ErrorCode::NotFound, "job " + job->id + " has no frame " + std::to_string(frame));
@@ -476,20 +507,54 @@ FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame) const {
 // ---------------------------------------------------------------------------------------------
 // Workers
 
-Registration Coordinator::register_worker(const WorkerInfo& w) {
+Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& caller) {
   std::lock_guard lock(mu_);
-  std::string host = w.hostname.empty() ? "worker" : w.hostname;
+  std::string host;
+  for (char c : w.hostname.substr(0, 64))  // part of an id that appears in logs and file rows
+    if (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.') host += c;
+  if (host.empty()) host = "worker";
   Registration r;
   r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
   r.lease_seconds = uint32_t(std::max(1.0, options_.lease_seconds));
   r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
-  spdlog::info("worker {} registered: {} cores, {}, {}", r.worker_id, w.cores, w.build_id, w.isa);
+  store_.insert_worker(r.worker_id, caller.principal);
+  workers_[r.worker_id] = caller.principal;
+  spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
+               w.cores, clip(w.build_id), clip(w.isa));
   return r;
 }
 
-LeaseResult Coordinator::lease(const std::string& worker_id) {
+void Coordinator::check_worker(const std::string& worker_id, const Caller& caller) const {
   if (worker_id.empty()) refuse(ErrorCode::InvalidArgument, "worker_id is empty");
+  auto it = workers_.find(worker_id);
+  if (it == workers_.end())
+    refuse(ErrorCode::NotFound, "no worker '" + clip(worker_id) + "' registered; register first");
+  if (it->second != caller.principal) {
+    spdlog::warn("refused: {} called as worker {}, registered by {}", caller.principal, worker_id,
+                 it->second);
+    refuse(ErrorCode::PermissionDenied,
+           "worker " + worker_id + " was registered with another token");
+  }
+}
+
+void Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
+                              const TaskRef* task) const {
+  std::string holder = scheduler_.lease_worker(lease_id);
+  if (holder.empty()) refuse(ErrorCode::NotFound, "no lease '" + clip(lease_id) + "'");
+  if (holder != worker_id) {
+    spdlog::warn("refused: worker {} used lease {}, held by {}", worker_id, lease_id, holder);
+    refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is held by another worker");
+  }
+  if (task && !(*scheduler_.lease_task(lease_id) == *task)) {
+    spdlog::warn("refused: worker {} sent task {} under lease {}, which is for task {}", worker_id,
+                 task_id_text(*task), lease_id, task_id_text(*scheduler_.lease_task(lease_id)));
+    refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is for another task");
+  }
+}
+
+LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& caller) {
   std::lock_guard lock(mu_);
+  check_worker(worker_id, caller);
   if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
   LeaseResult out;
   std::optional<Lease> l = scheduler_.lease(worker_id, now());
@@ -497,6 +562,8 @@ LeaseResult Coordinator::lease(const std::string& worker_id) {
     out.no_more_work = !scheduler_.work_left_for(worker_id);
     return out;
   }
+  store_.insert_lease(
+      {l->lease_id, l->task.job_id, l->task.frame, l->task.pass, l->task.tile, worker_id});
   std::shared_ptr<JobRecord> job = find(l->task.job_id);
   FrameRecord* f = job->by_number.at(l->task.frame);
   if (f->first_lease_at < 0) f->first_lease_at = now();
@@ -507,13 +574,16 @@ LeaseResult Coordinator::lease(const std::string& worker_id) {
   return out;
 }
 
-uint32_t Coordinator::renew(const std::string& lease_id) {
+uint32_t Coordinator::renew(const std::string& worker_id, const std::string& lease_id,
+                            const Caller& caller) {
   std::lock_guard lock(mu_);
+  check_worker(worker_id, caller);
+  check_lease(worker_id, lease_id, nullptr);
   switch (scheduler_.renew(lease_id, now())) {
     case LeaseOutcome::Ok:
       return uint32_t(std::max(1.0, options_.lease_seconds));
     case LeaseOutcome::NotFound:
-      refuse(ErrorCode::NotFound, "no lease '" + lease_id + "'");
+      refuse(ErrorCode::NotFound, "no lease '" + clip(lease_id) + "'");
     case LeaseOutcome::Ended:
       break;
   }
@@ -555,6 +625,8 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
                                            std::to_string(r.task.pass));
   if (std::string why = merge_incompatibility(f.base, buffer.header); !why.empty())
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
+  if (std::string why = task_buffer_problem(buffer, job.spp_per_pass); !why.empty())
+    refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
   return buffer;
 }
 
@@ -562,27 +634,40 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
 bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds) {
   if (scheduler_.complete(r.lease_id, r.task, now()) != CompleteOutcome::Accepted)
     return false;  // another result came first, or the job was cancelled or failed meanwhile
-  std::string worker = scheduler_.lease_worker(r.lease_id);
-  if (worker.empty()) worker = r.worker_id;  // a lease from before a restart
-  store_.task_done(job.id, r.task.frame, r.task.pass, r.task.tile, worker);
+  store_.task_done(job.id, r.task.frame, r.task.pass, r.task.tile, r.worker_id);
   job.core_seconds += core_seconds;
   store_.add_core_seconds(job.id, core_seconds);
   return true;
 }
 
-bool Coordinator::complete(const TaskResult& r) {
+void Coordinator::check_upload(const std::string& worker_id, const std::string& lease_id,
+                               const TaskRef& task, const Caller& caller) const {
+  std::lock_guard lock(mu_);
+  check_worker(worker_id, caller);
+  std::shared_ptr<JobRecord> job = find_or_throw(task.job_id);
+  if (!job->by_number.count(task.frame) || task.tile >= job->tiles.size() ||
+      task.pass >= job->passes)
+    refuse(ErrorCode::NotFound, "job " + job->id + " has no task " + task_id_text(task));
+  check_lease(worker_id, lease_id, &task);
+}
+
+bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
+  check_upload(r.worker_id, r.lease_id, r.task, caller);
   std::shared_ptr<JobRecord> job;
   FrameRecord* f = nullptr;
   {
     std::lock_guard lock(mu_);
     job = find_or_throw(r.task.job_id);
-    auto it = job->by_number.find(r.task.frame);
-    if (it == job->by_number.end() || r.task.tile >= job->tiles.size() ||
-        r.task.pass >= job->passes)
-      refuse(ErrorCode::NotFound, "job " + job->id + " has no task " + task_id_text(r.task));
-    f = it->second;
+    f = job->by_number.at(r.task.frame);
   }
-  SampleBuffer buffer = checked_buffer(*job, *f, r);
+  SampleBuffer buffer;
+  try {
+    buffer = checked_buffer(*job, *f, r);
+  } catch (const CoordinatorError& e) {
+    spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(r.task),
+                 r.worker_id, e.what());
+    throw;
+  }
   std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
   if (!f->acc) {
     if (f->progress.done) return false;  // merged and checkpointed already
@@ -614,10 +699,13 @@ bool Coordinator::complete(const TaskResult& r) {
   return true;
 }
 
-void Coordinator::fail(const TaskFailureReport& report) {
+void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
   std::lock_guard lock(mu_);
+  check_worker(report.worker_id, caller);
+  check_lease(report.worker_id, report.lease_id, nullptr);
   std::optional<TaskRef> task = scheduler_.lease_task(report.lease_id);
-  switch (scheduler_.fail(report.lease_id, report.message, report.handed_back, now())) {
+  std::string message = report.message.substr(0, 4096);  // it becomes part of the job's error
+  switch (scheduler_.fail(report.lease_id, message, report.handed_back, now())) {
     case LeaseOutcome::NotFound:
       refuse(ErrorCode::NotFound, "no lease '" + report.lease_id + "'");
     case LeaseOutcome::Ended:
@@ -627,9 +715,9 @@ void Coordinator::fail(const TaskFailureReport& report) {
   }
   if (task && !report.handed_back) {
     // Recorded under the id the scheduler counted it under (the lease's worker).
-    store_.task_failed(task->job_id, task->frame, task->pass, task->tile,
-                       scheduler_.lease_worker(report.lease_id), report.message);
-    spdlog::warn("task {} failed on {}: {}", task_id_text(*task), report.worker_id, report.message);
+    store_.task_failed(task->job_id, task->frame, task->pass, task->tile, report.worker_id,
+                       message);
+    spdlog::warn("task {} failed on {}: {}", task_id_text(*task), report.worker_id, clip(message));
   }
   if (task && scheduler_.job_failed(task->job_id)) {
     std::shared_ptr<JobRecord> job = find(task->job_id);

@@ -26,8 +26,8 @@
 
 #include "coordinator/job_store.h"
 #include "coordinator/scheduler.h"
-#include "engine/sample_buffer.h"
 #include "engine/progress.h"
+#include "engine/sample_buffer.h"
 #include "farm/blob_store.h"
 #include "farm/job.h"
 
@@ -37,6 +37,8 @@ enum class ErrorCode {
   InvalidArgument,     // malformed request, frame range, bundle, scene or sample buffer
   NotFound,            // unknown job, frame, task, lease or blob
   FailedPrecondition,  // a lease that has ended; a frame with no pass yet; a job that has ended
+  PermissionDenied,    // another tenant's job; another worker's lease or registration; a role
+  Unauthenticated,     // (the service's) a missing, unknown or expired token
   ResourceExhausted,   // over a configured limit
   DataLoss,            // a payload's checksum does not match
   Unavailable,         // shutting down
@@ -55,6 +57,15 @@ enum class JobState : int { Queued = 1, Running = 2, Completed = 3, Failed = 4, 
 bool terminal(JobState state);
 const char* job_state_name(JobState state);  // "JOB_QUEUED", ..., as logs and errors spell it
 
+// Who makes a call, as the service authenticated it (farm/auth.h); the core sees no tokens.
+// `principal` binds a worker's registration to the identity that made it; a caller with
+// all_tenants (admin, or the open loopback mode) sees every tenant's jobs.
+struct Caller {
+  std::string principal = "local";
+  std::string tenant;
+  bool all_tenants = true;
+};
+
 struct FrameStatus {
   uint32_t frame = 0;
   FrameProgress progress;  // engine/progress.h: passes, spp, relMSE, ETA
@@ -62,6 +73,7 @@ struct FrameStatus {
 
 struct JobStatus {
   std::string job_id, name;
+  std::string tenant;  // whose job it is
   JobState state = JobState::Queued;
   std::string error;  // why it failed (the workers' messages) or was cancelled
   double core_seconds = 0;
@@ -69,7 +81,8 @@ struct JobStatus {
   std::vector<FrameStatus> frames;
 };
 
-// The current image of a frame: its merged prefix as an encoded sample buffer (engine/buffer_file.h).
+// The current image of a frame: its merged prefix as an encoded sample buffer
+// (engine/buffer_file.h).
 struct FrameImage {
   FrameStatus status;
   std::string buffer;
@@ -105,7 +118,7 @@ struct LeaseResult {
 
 // A task's result as uploaded: the encoded sample buffer, its transfer checksum already checked.
 struct TaskResult {
-  std::string worker_id;  // counted for a lease from before a restart
+  std::string worker_id;  // must hold the lease
   std::string lease_id;
   TaskRef task;
   std::string buffer;
@@ -139,31 +152,43 @@ class Coordinator {
   Coordinator(const Coordinator&) = delete;
   Coordinator& operator=(const Coordinator&) = delete;
 
-  // ---- Jobs
+  // ---- Jobs. A caller without all_tenants sees only its tenant's jobs: another tenant's job is
+  // refused with PermissionDenied, and list() leaves them out.
   std::vector<std::string> missing_blobs(const std::vector<std::string>& sha256) const;
   std::string put_blob(std::string_view bytes);  // one uploaded bundle file; returns its digest
   // Checks the spec against the stored blobs (every frame's scene parsed with the job's
-  // overrides, so a bad scene is refused now, not by a worker later) and queues the job.
-  std::string submit(const JobSpec& spec);  // the new job's id
-  std::vector<JobStatus> list() const;      // in submission order
-  JobStatus status(const std::string& job_id) const;
+  // overrides, so a bad scene is refused now, not by a worker later) and queues the job under
+  // the caller's tenant.
+  std::string submit(const JobSpec& spec, const Caller& caller = {});  // the new job's id
+  std::vector<JobStatus> list(const Caller& caller = {}) const;        // in submission order
+  JobStatus status(const std::string& job_id, const Caller& caller = {}) const;
   // For watching a job: its status if it changed since version `seen` (0: never seen), waiting
   // up to timeout_seconds for a change; `seen` becomes the version returned.
   std::optional<JobStatus> next_status(const std::string& job_id, uint64_t& seen,
-                                       double timeout_seconds) const;
-  void cancel(const std::string& job_id);
-  FrameImage fetch(const std::string& job_id, uint32_t frame) const;
+                                       double timeout_seconds, const Caller& caller = {}) const;
+  void cancel(const std::string& job_id, const Caller& caller = {});
+  FrameImage fetch(const std::string& job_id, uint32_t frame, const Caller& caller = {}) const;
 
-  // ---- Workers
-  Registration register_worker(const WorkerInfo& worker);
-  LeaseResult lease(const std::string& worker_id);
-  uint32_t renew(const std::string& lease_id);  // the lease's length from now, in seconds
+  // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal
+  // (stored, so it outlives a restart); every later call naming it must come from the same
+  // principal, and a lease is renewed, failed or completed only by the worker holding it.
+  Registration register_worker(const WorkerInfo& worker, const Caller& caller = {});
+  LeaseResult lease(const std::string& worker_id, const Caller& caller = {});
+  // The lease's length from now, in seconds.
+  uint32_t renew(const std::string& worker_id, const std::string& lease_id,
+                 const Caller& caller = {});
   std::string blob(const std::string& sha256) const;
+  // Whether an upload may start: the job and task exist and the caller's worker holds the
+  // task's lease (current, or expired with the task not yet done). Called on an upload's header,
+  // before any of its bytes are buffered; complete() checks again.
+  void check_upload(const std::string& worker_id, const std::string& lease_id, const TaskRef& task,
+                    const Caller& caller = {}) const;
   // True when the result was merged; false when another result for the task came first, or the
   // task is no longer needed (stopped frame, ended job). The result is durable before this
-  // returns true.
-  bool complete(const TaskResult& result);
-  void fail(const TaskFailureReport& report);
+  // returns true. A result that does not match its task (tile, pass, header, sample counts) or
+  // holds a non-finite sum is refused with InvalidArgument and logged against its worker.
+  bool complete(const TaskResult& result, const Caller& caller = {});
+  void fail(const TaskFailureReport& report, const Caller& caller = {});
 
   // Refuses leases and ends watches from now on.
   void shut_down();
@@ -183,8 +208,16 @@ class Coordinator {
   FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;    // under mu_
   std::shared_ptr<JobRecord> find(const std::string& id) const;                  // under mu_
   std::shared_ptr<JobRecord> find_or_throw(const std::string& id) const;         // under mu_
+  // find_or_throw, refusing another tenant's job.                                 // under mu_
+  std::shared_ptr<JobRecord> find_for(const std::string& id, const Caller& caller) const;
+  // The worker's registration checked against the caller; throws if unknown or not theirs.
+  void check_worker(const std::string& worker_id, const Caller& caller) const;  // under mu_
+  // The lease is known and held by worker_id (and for `task` when given).         // under mu_
+  void check_lease(const std::string& worker_id, const std::string& lease_id,
+                   const TaskRef* task) const;
 
   CoreOptions options_;
+  StateDirLock lock_;  // before anything in the state directory is opened
   BlobStore blobs_;
   JobStore store_;
   mutable std::mutex mu_;
@@ -193,6 +226,7 @@ class Coordinator {
   bool closing_ = false;
   Scheduler scheduler_;
   std::map<std::string, std::shared_ptr<JobRecord>> jobs_;
+  std::map<std::string, std::string> workers_;  // worker id -> principal that registered it
   uint64_t next_seq_ = 1, next_worker_ = 1;
 };
 

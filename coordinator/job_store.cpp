@@ -1,6 +1,13 @@
 #include "coordinator/job_store.h"
 
+#include <fcntl.h>
 #include <sqlite3.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 
 namespace rf {
 
@@ -55,6 +62,36 @@ class Stmt {
 
 }  // namespace
 
+StateDirLock::StateDirLock(const std::string& dir) {
+  if (dir.empty()) throw StoreError("the coordinator's state directory is not set");
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  std::string path = dir + "/lock";
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw StoreError(path + ": cannot open: " + std::strerror(errno));
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    int err = errno;
+    char pid[32] = {};
+    ssize_t n = ::pread(fd_, pid, sizeof pid - 1, 0);
+    std::string holder = n > 0 ? std::string(pid, size_t(n)) : std::string("unknown");
+    while (!holder.empty() && (holder.back() == '\n' || holder.back() == ' ')) holder.pop_back();
+    ::close(fd_);
+    fd_ = -1;
+    if (err == EWOULDBLOCK)
+      throw StoreError("state directory " + dir + " is in use by another coordinator (pid " +
+                       holder + ", " + path + "); one coordinator per state directory");
+    throw StoreError(path + ": cannot lock: " + std::strerror(err));
+  }
+  std::string pid = std::to_string(::getpid()) + "\n";
+  if (::ftruncate(fd_, 0) != 0 || ::pwrite(fd_, pid.data(), pid.size(), 0) < 0) {
+    // The lock holds without the pid; a second coordinator then names it "unknown".
+  }
+}
+
+StateDirLock::~StateDirLock() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
 JobStore::JobStore(const std::string& path) : path_(path) {
   if (sqlite3_open(path.c_str(), &db_) != SQLITE_OK) {
     std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
@@ -74,6 +111,20 @@ JobStore::JobStore(const std::string& path) : path_(path) {
       "pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL, done INTEGER NOT NULL, "
       "message TEXT NOT NULL DEFAULT '', at INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
   exec("CREATE INDEX IF NOT EXISTS task_events_job ON task_events (job_id, done)");
+  // Added with tenants: a store written before them gains the column, its jobs tenant ''.
+  bool has_tenant = false;
+  {
+    Stmt s(db_, "SELECT name FROM pragma_table_info('jobs')", path_);
+    while (s.step()) has_tenant |= s.text(0) == "tenant";
+  }
+  if (!has_tenant) exec("ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT ''");
+  exec(
+      "CREATE TABLE IF NOT EXISTS workers (id TEXT PRIMARY KEY, principal TEXT NOT NULL, "
+      "registered INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
+  exec(
+      "CREATE TABLE IF NOT EXISTS leases (id TEXT PRIMARY KEY, job_id TEXT NOT NULL, frame "
+      "INTEGER NOT NULL, pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL)");
+  exec("CREATE INDEX IF NOT EXISTS leases_job ON leases (job_id)");
 }
 
 JobStore::~JobStore() { sqlite3_close(db_); }
@@ -93,10 +144,17 @@ uint64_t JobStore::next_seq() {
 }
 
 void JobStore::insert_job(const StoredJob& j) {
-  Stmt s(db_, "INSERT INTO jobs (id, seq, spec, state, error, submitted) VALUES (?,?,?,?,?,?)",
+  Stmt s(db_,
+         "INSERT INTO jobs (id, seq, spec, state, error, submitted, tenant) VALUES "
+         "(?,?,?,?,?,?,?)",
          path_);
-  s.bind(j.id).bind(int64_t(j.seq)).bind_blob(j.spec).bind(int64_t(j.state)).bind(j.error)
+  s.bind(j.id)
+      .bind(int64_t(j.seq))
+      .bind_blob(j.spec)
+      .bind(int64_t(j.state))
+      .bind(j.error)
       .bind(j.submitted_unix)
+      .bind(j.tenant)
       .step();
 }
 
@@ -112,7 +170,8 @@ void JobStore::add_core_seconds(const std::string& id, double seconds) {
 
 void JobStore::task_done(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
                          const std::string& worker) {
-  Stmt s(db_, "INSERT INTO task_events (job_id, frame, pass, tile, worker, done) VALUES (?,?,?,?,?,1)",
+  Stmt s(db_,
+         "INSERT INTO task_events (job_id, frame, pass, tile, worker, done) VALUES (?,?,?,?,?,1)",
          path_);
   s.bind(id).bind(int64_t(frame)).bind(int64_t(pass)).bind(int64_t(tile)).bind(worker).step();
 }
@@ -123,19 +182,74 @@ void JobStore::task_failed(const std::string& id, uint32_t frame, uint32_t pass,
          "INSERT INTO task_events (job_id, frame, pass, tile, worker, done, message) VALUES "
          "(?,?,?,?,?,0,?)",
          path_);
-  s.bind(id).bind(int64_t(frame)).bind(int64_t(pass)).bind(int64_t(tile)).bind(worker)
+  s.bind(id)
+      .bind(int64_t(frame))
+      .bind(int64_t(pass))
+      .bind(int64_t(tile))
+      .bind(worker)
       .bind(message)
       .step();
 }
 
 std::vector<StoredJob> JobStore::jobs() const {
-  Stmt s(db_, "SELECT id, seq, spec, state, error, submitted, core_seconds FROM jobs ORDER BY seq",
+  Stmt s(db_,
+         "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant FROM jobs ORDER BY "
+         "seq",
          path_);
   std::vector<StoredJob> out;
   while (s.step())
     out.push_back({s.text(0), uint64_t(s.integer(1)), s.text(2), int(s.integer(3)), s.text(4),
-                   s.integer(5), s.real(6)});
+                   s.integer(5), s.real(6), s.text(7)});
   return out;
+}
+
+void JobStore::insert_worker(const std::string& id, const std::string& principal) {
+  Stmt s(db_, "INSERT OR REPLACE INTO workers (id, principal) VALUES (?,?)", path_);
+  s.bind(id).bind(principal).step();
+}
+
+std::vector<std::pair<std::string, std::string>> JobStore::workers() const {
+  Stmt s(db_, "SELECT id, principal FROM workers", path_);
+  std::vector<std::pair<std::string, std::string>> out;
+  while (s.step()) out.emplace_back(s.text(0), s.text(1));
+  return out;
+}
+
+void JobStore::insert_lease(const StoredLease& l) {
+  exec("PRAGMA synchronous=NORMAL");
+  try {
+    Stmt s(db_,
+           "INSERT OR REPLACE INTO leases (id, job_id, frame, pass, tile, worker) VALUES "
+           "(?,?,?,?,?,?)",
+           path_);
+    s.bind(l.lease_id)
+        .bind(l.job_id)
+        .bind(int64_t(l.frame))
+        .bind(int64_t(l.pass))
+        .bind(int64_t(l.tile))
+        .bind(l.worker_id)
+        .step();
+  } catch (...) {
+    exec("PRAGMA synchronous=FULL");
+    throw;
+  }
+  exec("PRAGMA synchronous=FULL");
+}
+
+std::vector<StoredLease> JobStore::leases(const std::string& job_id) const {
+  Stmt s(db_, "SELECT id, frame, pass, tile, worker FROM leases WHERE job_id = ? ORDER BY rowid",
+         path_);
+  s.bind(job_id);
+  std::vector<StoredLease> out;
+  while (s.step())
+    out.push_back({s.text(0), job_id, uint32_t(s.integer(1)), uint32_t(s.integer(2)),
+                   uint32_t(s.integer(3)), s.text(4)});
+  return out;
+}
+
+void JobStore::delete_leases(const std::string& job_id) {
+  Stmt s(db_, "DELETE FROM leases WHERE job_id = ?", path_);
+  s.bind(job_id).step();
 }
 
 std::vector<JobStore::TaskFailure> JobStore::failures(const std::string& id) const {

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 struct sqlite3;
@@ -21,12 +22,34 @@ struct StoreError : std::runtime_error {
 
 struct StoredJob {
   std::string id;
-  uint64_t seq = 0;       // submission order
-  std::string spec;       // serialized rayfarm.v1.JobSpec
-  int state = 0;          // rayfarm.v1.JobState
+  uint64_t seq = 0;  // submission order
+  std::string spec;  // serialized rayfarm.v1.JobSpec
+  int state = 0;     // rayfarm.v1.JobState
   std::string error;
   int64_t submitted_unix = 0;
   double core_seconds = 0;
+  std::string tenant;  // whose job it is ('' before tenants existed)
+};
+
+// A lease as handed out, kept so that its holder's late result is accepted after a restart.
+struct StoredLease {
+  std::string lease_id, job_id;
+  uint32_t frame = 0, pass = 0, tile = 0;
+  std::string worker_id;
+};
+
+// One coordinator per state directory: an exclusive lock (flock) on STATE_DIR/lock, held for
+// the object's life, with the holder's pid written in the file. A second holder is refused
+// with a StoreError naming the first one's pid.
+class StateDirLock {
+ public:
+  explicit StateDirLock(const std::string& state_dir);  // creates the directory if needed
+  ~StateDirLock();
+  StateDirLock(const StateDirLock&) = delete;
+  StateDirLock& operator=(const StateDirLock&) = delete;
+
+ private:
+  int fd_ = -1;
 };
 
 class JobStore {
@@ -45,6 +68,15 @@ class JobStore {
   void task_failed(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
                    const std::string& worker_id, const std::string& message);
   std::vector<StoredJob> jobs() const;  // in submission order
+
+  // Worker registrations (id -> the principal that registered it) and leases. Lease rows are
+  // written with synchronous=NORMAL (no fsync): losing the last ones in a power cut only makes
+  // those late results be rendered again.
+  void insert_worker(const std::string& worker_id, const std::string& principal);
+  std::vector<std::pair<std::string, std::string>> workers() const;
+  void insert_lease(const StoredLease& lease);
+  std::vector<StoredLease> leases(const std::string& job_id) const;
+  void delete_leases(const std::string& job_id);  // the job ended
 
   struct TaskFailure {
     uint32_t frame, pass, tile;

@@ -197,6 +197,12 @@ std::string Scheduler::lease_worker(const std::string& lease_id) const {
   return it == leases_.end() ? "" : it->second.worker_id;
 }
 
+void Scheduler::restore_lease(const std::string& lease_id, const TaskRef& task,
+                              const std::string& worker_id) {
+  if (!tasks_.count(task)) return;
+  leases_[lease_id] = LeaseState{task, worker_id, 0, false};
+}
+
 void Scheduler::restore_failure(const TaskRef& ref, const std::string& worker_id,
                                 const std::string& message) {
   count_failure(ref, worker_id, message);

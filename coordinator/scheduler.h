@@ -61,6 +61,10 @@ class Scheduler {
   void mark_done(const TaskRef& task);
   std::optional<TaskRef> lease_task(const std::string& lease_id) const;
   std::string lease_worker(const std::string& lease_id) const;  // "" for an unknown lease
+  // Restoring from the job store: a lease handed out before a restart, ended (its task is
+  // queued again), so that its holder's late result is recognised.
+  void restore_lease(const std::string& lease_id, const TaskRef& task,
+                     const std::string& worker_id);
   // Restoring from the job store: a failure recorded before a restart counts as before.
   void restore_failure(const TaskRef& task, const std::string& worker_id,
                        const std::string& message);

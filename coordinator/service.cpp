@@ -9,10 +9,15 @@
 #include <signal.h>
 #include <spdlog/spdlog.h>
 
+#include <sys/file.h>
+
 #include <chrono>
+#include <ctime>
+#include <mutex>
 #include <optional>
 
 #include "coordinator/core.h"
+#include "farm/auth.h"
 #include "farm/chunking.h"
 #include "farm/convert.h"
 #include "proto/rayfarm.grpc.pb.h"
@@ -35,6 +40,10 @@ StatusCode grpc_code(ErrorCode c) {
       return StatusCode::NOT_FOUND;
     case ErrorCode::FailedPrecondition:
       return StatusCode::FAILED_PRECONDITION;
+    case ErrorCode::PermissionDenied:
+      return StatusCode::PERMISSION_DENIED;
+    case ErrorCode::Unauthenticated:
+      return StatusCode::UNAUTHENTICATED;
     case ErrorCode::ResourceExhausted:
       return StatusCode::RESOURCE_EXHAUSTED;
     case ErrorCode::DataLoss:
@@ -47,12 +56,81 @@ StatusCode grpc_code(ErrorCode c) {
   return StatusCode::INTERNAL;
 }
 
-// Runs a handler. A refusal answers with its code; anything else thrown must not take the
-// server down: it answers INTERNAL with the message.
+// Which role a method needs; an admin token passes both.
+enum class Access { Client, Worker };
+
+// The one place where calls are authenticated and authorised (docs/security.md). Every handler
+// goes through guarded(), which asks the gate first; gRPC C++ server interceptors cannot end a
+// call with a status of their choosing, so this is the interceptor. The gate serves plaintext
+// and TLS alike: the token travels as call metadata ("authorization: Bearer TOKEN").
+class Gate {
+ public:
+  explicit Gate(std::string token_file) : file_(std::move(token_file)) {
+    if (!file_.empty()) table_ = std::make_shared<const TokenTable>(TokenTable::load(file_));
+  }
+  bool open() const { return file_.empty(); }
+  void reload() {
+    if (open()) return;
+    auto fresh = std::make_shared<const TokenTable>(TokenTable::load(file_));
+    std::lock_guard lock(mu_);
+    table_ = std::move(fresh);
+  }
+
+  // The caller of this call, or a refusal: UNAUTHENTICATED without an accepted token,
+  // PERMISSION_DENIED for a token of the wrong role. Refusals are logged with the peer and
+  // the token's id (a digest prefix), never the token.
+  Caller admit(ServerContext* ctx, Access need, const char* method) const {
+    if (open()) return Caller{};
+    auto deny = [&](ErrorCode code, const std::string& why) {
+      spdlog::warn("refused {} from {}: {}", method, ctx->peer(), why);
+      throw CoordinatorError(code, why);
+    };
+    std::string token;
+    const auto& md = ctx->client_metadata();
+    auto it = md.find("authorization");
+    if (it == md.end())
+      deny(ErrorCode::Unauthenticated,
+           "no token: this coordinator needs 'authorization: Bearer TOKEN' (--token-file, "
+           "RAYFARM_TOKEN_FILE or RAYFARM_TOKEN)");
+    std::string_view value(it->second.data(), it->second.size());
+    constexpr std::string_view kBearer = "Bearer ";
+    if (value.substr(0, kBearer.size()) != kBearer)
+      deny(ErrorCode::Unauthenticated, "the authorization metadata is not 'Bearer TOKEN'");
+    token = std::string(value.substr(kBearer.size()));
+    std::shared_ptr<const TokenTable> table;
+    {
+      std::lock_guard lock(mu_);
+      table = table_;
+    }
+    Principal who;
+    switch (table->check(token, int64_t(std::time(nullptr)), &who)) {
+      case TokenTable::Check::Unknown:
+        deny(ErrorCode::Unauthenticated, "token " + token_id(token) + " is not accepted");
+      case TokenTable::Check::Expired:
+        deny(ErrorCode::Unauthenticated, "token " + token_id(token) + " has expired");
+      case TokenTable::Check::Accepted:
+        break;
+    }
+    Role needed = need == Access::Client ? Role::Client : Role::Worker;
+    if (who.role != Role::Admin && who.role != needed)
+      deny(ErrorCode::PermissionDenied, std::string(method) + " needs a " + role_name(needed) +
+                                            " or admin token; " + who.id + " is a " +
+                                            role_name(who.role) + " token");
+    return Caller{who.id, who.tenant, who.role == Role::Admin};
+  }
+
+ private:
+  std::string file_;
+  mutable std::mutex mu_;
+  std::shared_ptr<const TokenTable> table_;
+};
+
+// Runs a handler for its admitted caller. A refusal answers with its code; anything else
+// thrown must not take the server down: it answers INTERNAL with the message.
 template <class F>
-Status handle(F&& f) {
+Status guarded(const Gate& gate, ServerContext* ctx, Access need, const char* method, F&& f) {
   try {
-    f();
+    f(gate.admit(ctx, need, method));
     return Status::OK;
   } catch (const CoordinatorError& e) {
     return Status(grpc_code(e.code), e.what());
@@ -114,6 +192,7 @@ pb::JobStatus to_wire(const JobStatus& s) {
   out.set_error(s.error);
   out.set_core_seconds(s.core_seconds);
   out.set_submitted_unix(s.submitted_unix);
+  out.set_tenant(s.tenant);
   for (const FrameStatus& f : s.frames) *out.add_frames() = to_wire(f);
   return out;
 }
@@ -167,52 +246,56 @@ void receive_blobs(Coordinator& core, grpc::ServerReaderInterface<pb::SubmitRequ
 
 class JobServiceImpl final : public pb::JobService::Service {
  public:
-  JobServiceImpl(Coordinator& c, const CoordinatorOptions& o) : c_(c), o_(o) {}
+  JobServiceImpl(Coordinator& c, const CoordinatorOptions& o, const Gate& g)
+      : c_(c), o_(o), g_(g) {}
 
-  Status MissingBlobs(ServerContext*, const pb::MissingBlobsRequest* r,
+  Status MissingBlobs(ServerContext* ctx, const pb::MissingBlobsRequest* r,
                       pb::MissingBlobsResponse* o) override {
-    return handle([&] {
+    return guarded(g_, ctx, Access::Client, "MissingBlobs", [&](const Caller&) {
       for (std::string& d : c_.missing_blobs({r->sha256().begin(), r->sha256().end()}))
         o->add_sha256(std::move(d));
     });
   }
-  Status Submit(ServerContext*, grpc::ServerReader<pb::SubmitRequest>* r,
+  Status Submit(ServerContext* ctx, grpc::ServerReader<pb::SubmitRequest>* r,
                 pb::SubmitResponse* o) override {
-    return handle([&] {
+    return guarded(g_, ctx, Access::Client, "Submit", [&](const Caller& caller) {
       pb::SubmitRequest first;
       if (!r->Read(&first) || !first.has_spec())
         bad_request("the first message of Submit must be the job spec");
       receive_blobs(c_, r, o_);
-      o->set_job_id(c_.submit(from_wire(first.spec())));
+      o->set_job_id(c_.submit(from_wire(first.spec()), caller));
     });
   }
-  Status ListJobs(ServerContext*, const pb::ListJobsRequest*, pb::ListJobsResponse* o) override {
-    return handle([&] {
-      for (const JobStatus& s : c_.list()) *o->add_jobs() = to_wire(s);
+  Status ListJobs(ServerContext* ctx, const pb::ListJobsRequest*,
+                  pb::ListJobsResponse* o) override {
+    return guarded(g_, ctx, Access::Client, "ListJobs", [&](const Caller& caller) {
+      for (const JobStatus& s : c_.list(caller)) *o->add_jobs() = to_wire(s);
     });
   }
-  Status GetJob(ServerContext*, const pb::JobRef* r, pb::JobStatus* o) override {
-    return handle([&] { *o = to_wire(c_.status(r->job_id())); });
+  Status GetJob(ServerContext* ctx, const pb::JobRef* r, pb::JobStatus* o) override {
+    return guarded(g_, ctx, Access::Client, "GetJob",
+                   [&](const Caller& caller) { *o = to_wire(c_.status(r->job_id(), caller)); });
   }
   // A message at every change, until the job ends or the client goes.
   Status WatchJob(ServerContext* ctx, const pb::JobRef* r,
                   grpc::ServerWriter<pb::JobStatus>* w) override {
-    return handle([&] {
+    return guarded(g_, ctx, Access::Client, "WatchJob", [&](const Caller& caller) {
       uint64_t seen = 0;
       while (!ctx->IsCancelled()) {
-        std::optional<JobStatus> s = c_.next_status(r->job_id(), seen, 1.0);
+        std::optional<JobStatus> s = c_.next_status(r->job_id(), seen, 1.0, caller);
         if (!s) continue;
         if (!w->Write(to_wire(*s)) || terminal(s->state)) return;
       }
     });
   }
-  Status CancelJob(ServerContext*, const pb::JobRef* r, pb::CancelResponse*) override {
-    return handle([&] { c_.cancel(r->job_id()); });
+  Status CancelJob(ServerContext* ctx, const pb::JobRef* r, pb::CancelResponse*) override {
+    return guarded(g_, ctx, Access::Client, "CancelJob",
+                   [&](const Caller& caller) { c_.cancel(r->job_id(), caller); });
   }
-  Status FetchFrame(ServerContext*, const pb::FetchRequest* r,
+  Status FetchFrame(ServerContext* ctx, const pb::FetchRequest* r,
                     grpc::ServerWriter<pb::FetchResponse>* w) override {
-    return handle([&] {
-      FrameImage image = c_.fetch(r->job_id(), r->frame());
+    return guarded(g_, ctx, Access::Client, "FetchFrame", [&](const Caller& caller) {
+      FrameImage image = c_.fetch(r->job_id(), r->frame(), caller);
       write_chunks(w, image.buffer, [&](pb::Chunk&& c, bool first) {
         pb::FetchResponse m;
         *m.mutable_chunk() = std::move(c);
@@ -225,73 +308,93 @@ class JobServiceImpl final : public pb::JobService::Service {
  private:
   Coordinator& c_;
   const CoordinatorOptions& o_;
+  const Gate& g_;
 };
 
 class WorkerServiceImpl final : public pb::WorkerService::Service {
  public:
-  WorkerServiceImpl(Coordinator& c, const CoordinatorOptions& o) : c_(c), o_(o) {}
+  WorkerServiceImpl(Coordinator& c, const CoordinatorOptions& o, const Gate& g)
+      : c_(c), o_(o), g_(g) {}
 
-  Status Register(ServerContext*, const pb::RegisterRequest* r, pb::RegisterResponse* o) override {
-    return handle([&] {
-      Registration reg = c_.register_worker({r->hostname(), r->cores(), r->build_id(), r->isa()});
+  Status Register(ServerContext* ctx, const pb::RegisterRequest* r,
+                  pb::RegisterResponse* o) override {
+    return guarded(g_, ctx, Access::Worker, "Register", [&](const Caller& caller) {
+      Registration reg =
+          c_.register_worker({r->hostname(), r->cores(), r->build_id(), r->isa()}, caller);
       o->set_worker_id(reg.worker_id);
       o->set_lease_seconds(reg.lease_seconds);
       o->set_keepalive_seconds(reg.keepalive_seconds);
     });
   }
-  Status LeaseTask(ServerContext*, const pb::LeaseRequest* r, pb::LeaseResponse* o) override {
-    return handle([&] {
-      LeaseResult l = c_.lease(r->worker_id());
+  Status LeaseTask(ServerContext* ctx, const pb::LeaseRequest* r, pb::LeaseResponse* o) override {
+    return guarded(g_, ctx, Access::Worker, "LeaseTask", [&](const Caller& caller) {
+      LeaseResult l = c_.lease(r->worker_id(), caller);
       if (l.task)
         to_wire(*l.task, o->mutable_task());
       else
         o->set_no_more_work(l.no_more_work);
     });
   }
-  Status RenewLease(ServerContext*, const pb::RenewRequest* r, pb::RenewResponse* o) override {
-    return handle([&] { o->set_lease_seconds(c_.renew(r->lease_id())); });
+  Status RenewLease(ServerContext* ctx, const pb::RenewRequest* r, pb::RenewResponse* o) override {
+    return guarded(g_, ctx, Access::Worker, "RenewLease", [&](const Caller& caller) {
+      o->set_lease_seconds(c_.renew(r->worker_id(), r->lease_id(), caller));
+    });
   }
-  Status FetchBlob(ServerContext*, const pb::BlobRequest* r,
+  Status FetchBlob(ServerContext* ctx, const pb::BlobRequest* r,
                    grpc::ServerWriter<pb::Chunk>* w) override {
-    return handle([&] {
+    return guarded(g_, ctx, Access::Worker, "FetchBlob", [&](const Caller&) {
       write_chunks(w, c_.blob(r->sha256()), [](pb::Chunk&& c, bool) { return std::move(c); });
     });
   }
-  // A header, then the sample buffer in chunks.
-  Status CompleteTask(ServerContext*, grpc::ServerReader<pb::CompleteRequest>* r,
+  // A header, then the sample buffer in chunks. The header is checked (job, task, lease held
+  // by this caller's worker) before a byte of the buffer is read.
+  Status CompleteTask(ServerContext* ctx, grpc::ServerReader<pb::CompleteRequest>* r,
                       pb::CompleteResponse* o) override {
-    return handle([&] {
+    return guarded(g_, ctx, Access::Worker, "CompleteTask", [&](const Caller& caller) {
       pb::CompleteRequest msg;
       if (!r->Read(&msg) || !msg.has_header())
         bad_request("the first message of CompleteTask must be the header");
       const pb::CompleteHeader header = msg.header();
       std::optional<TaskRef> task = parse_task_id(header.task_id());
-      if (!task) bad_request("task_id '" + header.task_id() + "' is malformed");
+      if (!task) bad_request("task_id '" + header.task_id().substr(0, 64) + "' is malformed");
+      c_.check_upload(header.worker_id(), header.lease_id(), *task, caller);
       ChunkAssembler chunks(o_.max_buffer_bytes);
       while (r->Read(&msg)) {
         if (!msg.has_chunk()) bad_request("only chunks may follow the header");
         check_chunks(chunks.add(msg.chunk()), "sample buffer", chunks);
       }
       check_chunks(chunks.finish(), "sample buffer", chunks);
-      o->set_accepted(
-          c_.complete({header.worker_id(), header.lease_id(), std::move(*task), chunks.take()}));
+      o->set_accepted(c_.complete(
+          {header.worker_id(), header.lease_id(), std::move(*task), chunks.take()}, caller));
     });
   }
-  Status FailTask(ServerContext*, const pb::FailRequest* r, pb::FailResponse*) override {
-    return handle([&] {
-      c_.fail({r->worker_id(), r->lease_id(), r->message(), r->handed_back()});
+  Status FailTask(ServerContext* ctx, const pb::FailRequest* r, pb::FailResponse*) override {
+    return guarded(g_, ctx, Access::Worker, "FailTask", [&](const Caller& caller) {
+      c_.fail({r->worker_id(), r->lease_id(), r->message(), r->handed_back()}, caller);
     });
   }
 
  private:
   Coordinator& c_;
   const CoordinatorOptions& o_;
+  const Gate& g_;
 };
+
+// Whether a listen address only reaches this machine: 127.0.0.0/8, ::1, localhost, a Unix
+// socket.
+bool loopback_only(const std::string& listen) {
+  if (listen.rfind("unix:", 0) == 0 || listen.rfind("unix-abstract:", 0) == 0) return true;
+  std::string host = listen.substr(0, listen.rfind(':'));
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']')
+    host = host.substr(1, host.size() - 2);
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
 
 }  // namespace
 
 struct CoordinatorServer::Impl {
   CoordinatorOptions options;
+  std::unique_ptr<Gate> gate;
   std::unique_ptr<Coordinator> core;
   std::unique_ptr<JobServiceImpl> jobs;
   std::unique_ptr<WorkerServiceImpl> workers;
@@ -302,14 +405,20 @@ struct CoordinatorServer::Impl {
 CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
     : impl_(std::make_unique<Impl>()) {
   if (o.state_dir.empty()) throw std::runtime_error("coordinator: --state-dir is required");
+  if (o.token_file.empty() && !loopback_only(o.listen))
+    throw std::runtime_error(
+        "coordinator: refusing to listen on " + o.listen +
+        " without --token-file: anyone who reaches it could submit, cancel and upload results. "
+        "Give --token-file (docs/security.md) or listen on a loopback address (127.0.0.1:PORT)");
   impl_->options = o;
+  impl_->gate = std::make_unique<Gate>(o.token_file);
   CoreOptions core;
   core.state_dir = o.state_dir;
   core.lease_seconds = o.lease_seconds;
   core.window_frames = o.window_frames;
   impl_->core = std::make_unique<Coordinator>(core);
-  impl_->jobs = std::make_unique<JobServiceImpl>(*impl_->core, impl_->options);
-  impl_->workers = std::make_unique<WorkerServiceImpl>(*impl_->core, impl_->options);
+  impl_->jobs = std::make_unique<JobServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
+  impl_->workers = std::make_unique<WorkerServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder b;
@@ -320,6 +429,8 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   int min_ping_ms = int(std::max(1.0, o.lease_seconds / 3) * 1000 / 2);
   b.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, min_ping_ms);
   b.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  // A second coordinator on the same port must fail to bind, not share the port's clients.
+  b.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   impl_->server = b.BuildAndStart();
   if (!impl_->server || impl_->port == 0)
     throw std::runtime_error("coordinator: cannot listen on " + o.listen);
@@ -328,6 +439,8 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
 CoordinatorServer::~CoordinatorServer() { shutdown(); }
 
 int CoordinatorServer::port() const { return impl_->port; }
+
+void CoordinatorServer::reload_tokens() { impl_->gate->reload(); }
 
 void CoordinatorServer::wait() { impl_->server->Wait(); }
 
@@ -342,12 +455,24 @@ int run_coordinator(const CoordinatorOptions& o) {
   sigemptyset(&set);
   sigaddset(&set, SIGINT);
   sigaddset(&set, SIGTERM);
+  sigaddset(&set, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);  // before gRPC starts its threads
   CoordinatorServer server(o);
-  spdlog::info("coordinator listening on {} (port {}), state in {}", o.listen, server.port(),
-               o.state_dir);
+  spdlog::info("coordinator listening on {} (port {}), state in {}, {}", o.listen, server.port(),
+               o.state_dir,
+               o.token_file.empty() ? std::string("no token file: loopback only, no authentication")
+                                    : "tokens from " + o.token_file);
   int sig = 0;
-  sigwait(&set, &sig);
+  for (;;) {
+    sigwait(&set, &sig);
+    if (sig != SIGHUP) break;
+    try {
+      server.reload_tokens();
+      spdlog::info("SIGHUP: token file {} re-read", o.token_file);
+    } catch (const std::exception& e) {
+      spdlog::error("SIGHUP: {}; keeping the tokens read before", e.what());
+    }
+  }
   spdlog::info("signal {}: shutting down", sig);
   server.shutdown();
   return 0;

@@ -13,6 +13,9 @@ namespace rf {
 struct CoordinatorOptions {
   std::string listen = "127.0.0.1:7070";
   std::string state_dir;
+  // Accepted tokens (farm/auth.h), re-read on SIGHUP. Without one every call is admitted as an
+  // admin, and the coordinator listens on loopback only.
+  std::string token_file;
   double lease_seconds = 30;
   uint32_t window_frames = 4;
   uint64_t max_blob_bytes = 1ull << 30;    // one scene asset
@@ -29,6 +32,8 @@ class CoordinatorServer {
   int port() const;  // the bound port (useful with --listen HOST:0)
   void wait();       // until shutdown() is called
   void shutdown();   // stops accepting, ends streams, waits for handlers
+  // Re-reads the token file; on an error keeps the tokens it has and rethrows.
+  void reload_tokens();
 
  private:
   struct Impl;

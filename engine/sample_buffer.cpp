@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cassert>
+#include <cmath>
 #include <stdexcept>
 
 #include "engine/filter.h"
@@ -192,7 +193,6 @@ uint64_t SampleBuffer::total_samples() const {
   return n;
 }
 
-
 bool SampleBuffer::planes_match_rect() const {
   if (rect.w < 0 || rect.h < 0) return false;
   size_t a = size_t(rect.area());
@@ -200,6 +200,41 @@ bool SampleBuffer::planes_match_rect() const {
          batch_sum.size() == 3 * a && batch_sum_sq.size() == 3 * a &&
          aov.size() == size_t(header.aovs.channels()) * a &&
          (splat.empty() || splat.size() == frame_channels(header));
+}
+
+std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass) {
+  if (!b.planes_match_rect()) return "its planes do not match its rect";
+  const double cs = b.header.core_seconds;
+  if (!std::isfinite(cs) || cs < 0 || cs > 1e7)
+    return "core_seconds " + std::to_string(cs) + " is outside 0..1e7";
+  const uint64_t samples = b.total_samples();
+  const uint64_t frame_pixels = uint64_t(b.header.width) * uint64_t(b.header.height);
+  if (samples == 0 && !b.splat.empty()) {
+    if (b.light_paths != spp_per_pass * frame_pixels)
+      return std::to_string(b.light_paths) + " light paths, not the pass's " +
+             std::to_string(spp_per_pass * frame_pixels);
+  } else {
+    for (size_t i = 0; i < b.count.size(); ++i)
+      if (b.count[i] != spp_per_pass)
+        return "pixel " + std::to_string(i) + " of its rect has " + std::to_string(b.count[i]) +
+               " samples, not the pass's " + std::to_string(spp_per_pass);
+    if (!b.splat.empty() && b.light_paths != spp_per_pass * uint64_t(b.rect.area()))
+      return std::to_string(b.light_paths) + " light paths, not the pass's " +
+             std::to_string(spp_per_pass * uint64_t(b.rect.area()));
+  }
+  if (b.nonfinite_samples > std::max(samples, b.light_paths))
+    return "more non-finite samples than samples";
+  auto finite = [](const std::vector<double>& v, bool non_negative) {
+    for (double x : v)
+      if (!std::isfinite(x) || (non_negative && x < 0)) return false;
+    return true;
+  };
+  if (!finite(b.sum, false) || !finite(b.batch_sum, false) || !finite(b.splat, false) ||
+      !finite(b.aov, false))
+    return "a sum is not finite";
+  if (!finite(b.sum_sq, true) || !finite(b.batch_sum_sq, true))
+    return "a sum of squares is negative or not finite";
+  return "";
 }
 
 }  // namespace rf

@@ -39,7 +39,7 @@ inline double relative_error(double squared_error, double reference) {
 // What identifies the image a buffer belongs to. Buffers merge only when every field but
 // `passes`, `build_id`, `isa` and `core_seconds` is equal.
 struct BufferHeader {
-  std::string scene_digest;   // SHA-256 hex of the scene bundle
+  std::string scene_digest;  // SHA-256 hex of the scene bundle
   uint64_t seed = 0;
   uint32_t frame = 0;
   std::string integrator;     // e.g. "path"
@@ -49,8 +49,8 @@ struct BufferHeader {
   AovSet aovs;                // the AOV planes the buffer carries (engine/aov.h)
   PassSet passes;
   std::string build_id;
-  std::string isa;            // Embree's ISA / CPU kind that made it
-  double core_seconds = 0;    // summed over all merged buffers
+  std::string isa;          // Embree's ISA / CPU kind that made it
+  double core_seconds = 0;  // summed over all merged buffers
   bool operator==(const BufferHeader&) const = default;
 };
 
@@ -154,5 +154,13 @@ struct SplatTarget {
 // every pixel within the filter's radius (the box half-open, so a point on a pixel border lands
 // in one pixel). Non-finite and black contributions are dropped.
 void splat_to_film(SplatTarget& target, Vec2 raster, RGB value);
+
+// Why a one-pass task buffer cannot be what one pass of spp_per_pass samples per pixel made
+// ("" when it could): sample counts other than the pass's (spp_per_pass in every pixel, and
+// spp_per_pass light paths per pixel of its rect with splats; a light tracer's pass leaves the
+// camera plane empty and traces spp_per_pass light paths per pixel of the frame), a non-finite
+// sum or a negative sum of squares, or diagnostics out of range. The coordinator refuses such
+// uploads before they are merged.
+std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass);
 
 }  // namespace rf

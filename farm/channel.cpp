@@ -1,12 +1,46 @@
 #include "farm/channel.h"
 
+#include <grpcpp/support/client_interceptor.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 
 namespace rf {
 
+namespace {
+
+// Adds the bearer token to the initial metadata of every call on its channel.
+class TokenInterceptor final : public grpc::experimental::Interceptor {
+ public:
+  explicit TokenInterceptor(const std::string* header) : header_(header) {}
+  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+    if (methods->QueryInterceptionHookPoint(
+            grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA))
+      methods->GetSendInitialMetadata()->emplace("authorization", *header_);
+    methods->Proceed();
+  }
+
+ private:
+  const std::string* header_;
+};
+
+class TokenInterceptorFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
+ public:
+  explicit TokenInterceptorFactory(const std::string& token) : header_("Bearer " + token) {}
+  grpc::experimental::Interceptor* CreateClientInterceptor(
+      grpc::experimental::ClientRpcInfo*) override {
+    return new TokenInterceptor(&header_);
+  }
+
+ private:
+  std::string header_;  // lives as long as the channel, which owns the factory
+};
+
+}  // namespace
+
 std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
+                                                   const std::string& token,
                                                    int keepalive_seconds) {
   grpc::ChannelArguments args;
   if (keepalive_seconds > 0) {
@@ -17,7 +51,10 @@ std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
+  if (!token.empty()) interceptors.push_back(std::make_unique<TokenInterceptorFactory>(token));
+  return grpc::experimental::CreateCustomChannelWithInterceptors(
+      address, grpc::InsecureChannelCredentials(), args, std::move(interceptors));
 }
 
 void set_deadline(grpc::ClientContext& ctx, double seconds, bool wait_for_ready) {

@@ -14,7 +14,10 @@ namespace rf {
 // A channel to a coordinator. Reconnect attempts back off (jittered by gRPC) from 100 ms up to
 // 2 s, so a restarted coordinator is found again within about 2 s. With keepalive_seconds > 0
 // it also pings that often (the coordinator permits it), so a partition is noticed in time.
+// A non-empty token (farm/auth.h client_token) goes with every call on the channel as
+// "authorization: Bearer TOKEN" call metadata, added by a client interceptor.
 std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
+                                                   const std::string& token,
                                                    int keepalive_seconds = 0);
 
 // Every RPC has a deadline. With wait_for_ready the call waits for the channel to (re)connect

@@ -6,8 +6,12 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <set>
 
@@ -52,8 +56,16 @@ class CoreBench {
 
   Coordinator& core() { return *core_; }
 
+  // The id the coordinator issued to the worker called `name` in this test (registered on first
+  // use; registrations are stored, so they outlive a restart).
+  std::string worker(const std::string& name, const Caller& caller = {}) {
+    auto it = workers_.find(name);
+    if (it != workers_.end()) return it->second;
+    return workers_[name] = core_->register_worker({name, 1, "test", "test"}, caller).worker_id;
+  }
+
   // Uploads the scene's bundle and submits a job of `passes` passes of frame 1.
-  std::string submit(uint32_t passes) {
+  std::string submit(uint32_t passes, const Caller& caller = {}) {
     std::string scene = test::source_dir() + "/" + kScene;
     JobSpec spec;
     spec.name = "cornell";
@@ -67,27 +79,31 @@ class CoreBench {
     spec.overrides.passes = passes;
     spec.overrides.spp = kSamplesPerPass * passes;
     spec.tile_size = 8;
-    return core_->submit(spec);
+    return core_->submit(spec, caller);
   }
 
   TaskAssignment lease(const std::string& worker = "w") {
-    LeaseResult l = core_->lease(worker);
+    LeaseResult l = core_->lease(this->worker(worker));
     EXPECT_TRUE(l.task) << worker << " got no task";
     return l.task.value_or(TaskAssignment{});
   }
 
   // The task's result as a worker would send it: one pass of its tile, every sample `value`.
-  std::string result(const TaskAssignment& a, float value) {
+  SampleBuffer result_buffer(const TaskAssignment& a, float value) {
     SampleBuffer b(header(a), a.rect, false);
     for (int y = a.rect.y0; y < a.rect.y1(); ++y)
       for (int x = a.rect.x0; x < a.rect.x1(); ++x)
         for (int s = 0; s < kSamplesPerPass; ++s) b.add_sample(x, y, RGB(value));
     b.finish_pass();
-    return encode_buffer(b);
+    return b;
   }
+  std::string result(const TaskAssignment& a, float value) {
+    return encode_buffer(result_buffer(a, value));
+  }
+  const std::string& state_dir() const { return state_; }
 
   bool complete(const TaskAssignment& a, float value, const std::string& worker = "w") {
-    return core_->complete({worker, a.lease_id, a.task, result(a, value)});
+    return core_->complete({this->worker(worker), a.lease_id, a.task, result(a, value)});
   }
 
   SampleBuffer image(const std::string& job) {
@@ -105,6 +121,7 @@ class CoreBench {
 
   std::string state_;
   std::unique_ptr<Coordinator> core_;
+  std::map<std::string, std::string> workers_;
 };
 
 // The code a call is refused with; nothing when it is not refused.
@@ -130,7 +147,7 @@ TEST(CoordinatorCore, ResultOfALeaseFromBeforeARestartIsAcceptedOnce) {
   EXPECT_TRUE(bench.complete(late, 1.0f));
   EXPECT_FALSE(bench.complete(late, 1.0f)) << "the same result again";
   std::set<TaskRef> rest;
-  while (std::optional<TaskAssignment> a = bench.core().lease("w").task) {
+  while (std::optional<TaskAssignment> a = bench.core().lease(bench.worker("w")).task) {
     EXPECT_EQ(a->lease_id.rfind("B-L", 0), 0u) << a->lease_id;
     EXPECT_NE(a->task, done.task);
     EXPECT_NE(a->task, late.task);
@@ -151,14 +168,16 @@ TEST(CoordinatorCore, LateResultOfAnExpiredLeaseIsMergedAndEndsTheNewerLease) {
   std::string job = bench.submit(1);
   TaskAssignment slow = bench.lease("slow");
   bench.now = 5;
-  EXPECT_EQ(bench.core().renew(slow.lease_id), 10u);  // renewed until 15
+  EXPECT_EQ(bench.core().renew(bench.worker("slow"), slow.lease_id), 10u);  // renewed until 15
   bench.now = 16;
   TaskAssignment fast = bench.lease("fast");
   ASSERT_EQ(fast.task, slow.task) << "the expired task is handed out again first";
-  EXPECT_EQ(refusal([&] { bench.core().renew(slow.lease_id); }), ErrorCode::FailedPrecondition);
+  EXPECT_EQ(refusal([&] { bench.core().renew(bench.worker("slow"), slow.lease_id); }),
+            ErrorCode::FailedPrecondition);
   bench.now = 17;
   EXPECT_TRUE(bench.complete(slow, 2.0f, "slow"));
-  EXPECT_EQ(refusal([&] { bench.core().renew(fast.lease_id); }), ErrorCode::FailedPrecondition);
+  EXPECT_EQ(refusal([&] { bench.core().renew(bench.worker("fast"), fast.lease_id); }),
+            ErrorCode::FailedPrecondition);
   EXPECT_FALSE(bench.complete(fast, 5.0f, "fast"));
   for (int i = 0; i < 3; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 2.0f));
   SampleBuffer frame = bench.image(job);
@@ -196,9 +215,9 @@ TEST(CoordinatorCore, AWorkerThatFailsRepeatedlyGetsNoMoreTasksOfTheJob) {
   for (int i = 0; i < 3; ++i) {
     TaskAssignment a = bench.lease("bad");
     EXPECT_TRUE(failed.insert(a.task).second) << "a worker does not get back a task it failed";
-    bench.core().fail({"bad", a.lease_id, "driver crash", false});
+    bench.core().fail({bench.worker("bad"), a.lease_id, "driver crash", false});
   }
-  EXPECT_FALSE(bench.core().lease("bad").task);
+  EXPECT_FALSE(bench.core().lease(bench.worker("bad")).task);
   EXPECT_EQ(bench.core().status(job).state, JobState::Running) << "each task failed once";
   TaskAssignment good = bench.lease("good");
   EXPECT_TRUE(failed.count(good.task)) << "a failed task is queued again";
@@ -212,7 +231,7 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
   auto fail_on = [&](const std::string& worker) {
     TaskAssignment a = bench.lease(worker);
     EXPECT_EQ(a.task.tile, 0u) << "the failed task comes first again";
-    bench.core().fail({worker, a.lease_id, "out of memory on " + worker, false});
+    bench.core().fail({bench.worker(worker), a.lease_id, "out of memory on " + worker, false});
   };
   fail_on("w1");
   fail_on("w2");
@@ -223,7 +242,7 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
   EXPECT_EQ(s.state, JobState::Failed);
   for (const char* w : {"w1", "w2", "w3"})
     EXPECT_NE(s.error.find(std::string("out of memory on ") + w), std::string::npos) << s.error;
-  EXPECT_FALSE(bench.core().lease("w4").task) << "a failed job hands out nothing";
+  EXPECT_FALSE(bench.core().lease(bench.worker("w4")).task) << "a failed job hands out nothing";
 }
 
 // Tasks handed back by workers shutting down are queued again without counting as failures.
@@ -233,9 +252,9 @@ TEST(CoordinatorCore, HandedBackTasksAreNotFailures) {
   for (const char* w : {"w1", "w2", "w3", "w4", "w1", "w1", "w1"}) {
     TaskAssignment a = bench.lease(w);
     EXPECT_EQ(a.task.tile, 0u) << "the handed-back task is next, for any worker";
-    bench.core().fail({w, a.lease_id, "worker shutting down", true});
+    bench.core().fail({bench.worker(w), a.lease_id, "worker shutting down", true});
   }
-  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease("w1"), 1.0f));
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease("w1"), 1.0f, "w1"));
   EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
 }
 
@@ -286,29 +305,155 @@ TEST(CoordinatorCore, RefusalsCarryTheirCodes) {
   std::string job = bench.submit(1);
   EXPECT_EQ(refusal([&] { core.fetch(job, 1); }), ErrorCode::FailedPrecondition) << "no pass yet";
   EXPECT_EQ(refusal([&] { core.fetch(job, 7); }), ErrorCode::NotFound);
-  EXPECT_EQ(refusal([&] { core.renew("no-such-lease"); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.renew(bench.worker("w"), "no-such-lease"); }), ErrorCode::NotFound);
   EXPECT_EQ(refusal([&] { core.lease(""); }), ErrorCode::InvalidArgument);
   TaskAssignment a = bench.lease();
   TaskAssignment wrong = a;
   wrong.rect.w = 4;  // a buffer that does not cover the task's tile
   EXPECT_EQ(refusal([&] {
-              core.complete({"w", a.lease_id, a.task, bench.result(wrong, 1)});
+              core.complete({bench.worker("w"), a.lease_id, a.task, bench.result(wrong, 1)});
             }),
             ErrorCode::InvalidArgument);
   EXPECT_EQ(refusal([&] {
-              core.complete({"w", a.lease_id, a.task, "not a buffer"});
+              core.complete({bench.worker("w"), a.lease_id, a.task, "not a buffer"});
             }),
             ErrorCode::InvalidArgument);
   TaskRef unknown = a.task;
   unknown.tile = 99;
   EXPECT_EQ(refusal([&] {
-              core.complete({"w", a.lease_id, unknown, bench.result(a, 1)});
+              core.complete({bench.worker("w"), a.lease_id, unknown, bench.result(a, 1)});
             }),
             ErrorCode::NotFound);
   core.cancel(job);
   EXPECT_EQ(refusal([&] { core.cancel(job); }), ErrorCode::FailedPrecondition);
   core.shut_down();
-  EXPECT_EQ(refusal([&] { core.lease("w"); }), ErrorCode::Unavailable);
+  EXPECT_EQ(refusal([&] { core.lease(bench.worker("w")); }), ErrorCode::Unavailable);
+}
+
+// Uploads, renewals and failures count only from the worker holding the lease, called by the
+// identity that registered it. Another identity using the holder's worker id, another worker
+// using its lease, invented worker or lease ids, and a lease sent with another task are refused;
+// three invented workers failing the task do not fail the job; the holder's result is merged.
+TEST(CoordinatorCore, OnlyTheLeaseHolderMayCompleteRenewOrFailItsTask) {
+  CoreBench bench("core-lease-holder");
+  std::string job = bench.submit(1);
+  Coordinator& core = bench.core();
+  const Caller alice{"t:alice", "", true}, mallory{"t:mallory", "", true};
+  std::string a = bench.worker("a", alice), m = bench.worker("m", mallory);
+  TaskAssignment task = core.lease(a, alice).task.value();
+  std::string forged = bench.result(task, 1000.0f);
+  EXPECT_EQ(refusal([&] {
+              core.complete({a, task.lease_id, task.task, forged}, mallory);
+            }),
+            ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] {
+              core.complete({m, task.lease_id, task.task, forged}, mallory);
+            }),
+            ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] {
+              core.complete({"invented", task.lease_id, task.task, forged}, mallory);
+            }),
+            ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] {
+              core.complete({m, "", task.task, forged}, mallory);
+            }),
+            ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.check_upload(m, "A-L999", task.task, mallory); }),
+            ErrorCode::NotFound);
+  TaskRef other = task.task;
+  other.tile = (other.tile + 1) % 4;
+  EXPECT_EQ(refusal([&] {
+              core.complete({a, task.lease_id, other, forged}, alice);
+            }),
+            ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] { core.renew(m, task.lease_id, mallory); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] {
+              core.fail({m, task.lease_id, "forged", false}, mallory);
+            }),
+            ErrorCode::PermissionDenied);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_EQ(refusal([&] {
+                core.fail({"fake-" + std::to_string(i), task.lease_id, "forged", false}, mallory);
+              }),
+              ErrorCode::NotFound);
+  EXPECT_EQ(core.status(job).state, JobState::Running);
+  EXPECT_EQ(core.renew(a, task.lease_id, alice), 10u);
+  EXPECT_TRUE(core.complete({a, task.lease_id, task.task, bench.result(task, 1.0f)}, alice));
+  while (std::optional<TaskAssignment> t = core.lease(a, alice).task)
+    EXPECT_TRUE(core.complete({a, t->lease_id, t->task, bench.result(*t, 1.0f)}, alice));
+  EXPECT_EQ(core.status(job).state, JobState::Completed);
+  SampleBuffer frame = bench.image(job);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) ASSERT_EQ(frame.estimate(x, y)[0], 1.0f) << x << "," << y;
+}
+
+// A result that could not come from one honest pass of its task is refused before it is merged:
+// a non-finite sum, a negative sum of squares, a pixel with one sample too many, an absurd
+// core_seconds. The frame is then made of the honest result alone.
+TEST(CoordinatorCore, ResultsWithWrongCountsOrNonFiniteSumsAreRefused) {
+  CoreBench bench("core-bad-results");
+  std::string job = bench.submit(1);
+  TaskAssignment a = bench.lease();
+  std::vector<std::function<void(SampleBuffer&)>> damage = {
+      [](SampleBuffer& b) { b.sum[5] = std::nan(""); },
+      [](SampleBuffer& b) { b.batch_sum[0] = INFINITY; },
+      [](SampleBuffer& b) { b.sum_sq[2] = -1; },
+      [](SampleBuffer& b) { b.count[7] += 1; },
+      [](SampleBuffer& b) { b.header.core_seconds = 1e308; },
+  };
+  for (size_t i = 0; i < damage.size(); ++i) {
+    SampleBuffer b = bench.result_buffer(a, 1.0f);
+    damage[i](b);
+    EXPECT_EQ(refusal([&] {
+                bench.core().complete({bench.worker("w"), a.lease_id, a.task, encode_buffer(b)});
+              }),
+              ErrorCode::InvalidArgument)
+        << "damage " << i;
+  }
+  EXPECT_TRUE(bench.complete(a, 2.0f));
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 2.0f));
+  SampleBuffer frame = bench.image(job);
+  EXPECT_EQ(frame.estimate(a.rect.x0, a.rect.y0)[0], 2.0f);
+  EXPECT_LT(frame.header.core_seconds, 1.0);
+}
+
+// A client token sees its tenant's jobs only: another tenant's job is refused (status, watch,
+// cancel, fetch) and left out of the list; an admin sees all. The tenant survives a restart.
+TEST(CoordinatorCore, ClientsSeeOnlyTheirTenantsJobs) {
+  CoreBench bench("core-tenants");
+  const Caller shot1{"t:a", "shot1", false}, shot2{"t:b", "shot2", false},
+      admin{"t:ops", "ops", true};
+  std::string job = bench.submit(1, shot1);
+  Coordinator& core = bench.core();
+  EXPECT_EQ(core.status(job, shot1).tenant, "shot1");
+  EXPECT_EQ(refusal([&] { core.status(job, shot2); }), ErrorCode::PermissionDenied);
+  uint64_t seen = 0;
+  EXPECT_EQ(refusal([&] { core.next_status(job, seen, 0.0, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] { core.fetch(job, 1, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] { core.cancel(job, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_TRUE(core.list(shot2).empty());
+  EXPECT_EQ(core.list(shot1).size(), 1u);
+  EXPECT_EQ(core.list(admin).size(), 1u);
+  bench.start("B");
+  EXPECT_EQ(refusal([&] { bench.core().status(job, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(bench.core().status(job, admin).tenant, "shot1");
+  bench.core().cancel(job, shot1);
+  EXPECT_EQ(bench.core().status(job, shot1).state, JobState::Cancelled);
+}
+
+// One coordinator per state directory: a second one is refused, naming the first one's pid.
+TEST(CoordinatorCore, ASecondCoordinatorOnTheSameStateDirectoryIsRefused) {
+  CoreBench bench("core-lock");
+  CoreOptions o;
+  o.state_dir = bench.state_dir();
+  try {
+    Coordinator second(o);
+    ADD_FAILURE() << "a second coordinator opened the same state directory";
+  } catch (const StoreError& e) {
+    EXPECT_NE(std::string(e.what()).find("pid " + std::to_string(::getpid())), std::string::npos)
+        << e.what();
+  }
+  bench.start("B");  // the lock is released with the first coordinator
 }
 
 }  // namespace

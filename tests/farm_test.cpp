@@ -6,10 +6,10 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <signal.h>
 #include "farm/chunking.h"
 #include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
-#include <signal.h>
 
 #include <chrono>
 #include <cmath>
@@ -21,9 +21,10 @@
 #include <regex>
 #include <thread>
 
-#include "engine/digest.h"
 #include "engine/buffer_file.h"
+#include "engine/digest.h"
 #include "tests/support/exr.h"
+#include "tests/support/farm.h"
 #include "tests/support/process.h"
 #include "tests/support/test_support.h"
 
@@ -32,122 +33,15 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace pb = rayfarm::v1;
+using test::chunks_of;
+using test::complete_with;
+using test::expect_same_image;
 using test::Exr;
+using test::Farm;
 using test::Process;
 using test::read_exr;
 
 const std::string kCornell = "scenes/cornell-box/scene.json";
-
-// Every channel (RGBA and variance) within DESIGN.md's merge tolerance.
-void expect_same_image(const std::string& farm, const std::string& local) {
-  Exr a = read_exr(farm), b = read_exr(local);
-  ASSERT_EQ(a.w, b.w);
-  ASSERT_EQ(a.h, b.h);
-  ASSERT_EQ(a.nch, b.nch);
-  size_t bad = 0;
-  for (size_t i = 0; i < a.px.size(); ++i) {
-    double x = a.px[i], y = b.px[i];
-    if (std::fabs(x - y) > 1e-6 * std::max(std::fabs(x), std::fabs(y)) + 1e-12) ++bad;
-  }
-  EXPECT_EQ(bad, 0u) << farm << " differs from " << local << " in " << bad << " of "
-                     << a.px.size() << " values";
-}
-
-class Farm {
- public:
-  explicit Farm(const std::string& tag, double lease_seconds = 30)
-      : dir_(test::make_temp_dir(tag)), lease_seconds_(lease_seconds) {
-    start_coordinator(0);
-  }
-
-  void start_coordinator(int port) {
-    coordinator_ = std::make_unique<Process>(
-        std::vector<std::string>{test::rayfarm_binary(), "coordinator", "--listen",
-                                 "127.0.0.1:" + std::to_string(port), "--state-dir", dir_ + "/state",
-                                 "--lease-seconds", std::to_string(lease_seconds_)},
-        dir_ + "/coordinator" + std::to_string(starts_++) + ".log");
-    std::smatch m;
-    std::regex re("\\(port ([0-9]+)\\)");
-    std::string log;
-    for (int i = 0; i < 500; ++i) {
-      log = coordinator_->log();
-      if (std::regex_search(log, m, re)) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    ASSERT_TRUE(std::regex_search(log, m, re)) << log;
-    port_ = std::stoi(m[1]);
-  }
-
-  Process& worker(const std::vector<std::string>& extra = {"--exit-when-idle"}) {
-    std::vector<std::string> argv{test::rayfarm_binary(), "worker", "--coordinator", address(),
-                                  "--cache-dir", dir_ + "/cache"};
-    argv.insert(argv.end(), extra.begin(), extra.end());
-    workers_.push_back(std::make_unique<Process>(
-        argv, dir_ + "/worker" + std::to_string(workers_.size()) + ".log"));
-    return *workers_.back();
-  }
-
-  // A client command against this coordinator (run from the source tree).
-  test::CommandResult client(const std::string& args) const {
-    return test::run_command("cd " + test::source_dir() + " && " + test::rayfarm_binary() + " " +
-                             args + " --coordinator " + address());
-  }
-  std::string submit(const std::string& args) const {
-    // The job id is stdout alone (run_command adds 2>&1 outside the braces; the importers'
-    // warnings go to stderr).
-    test::CommandResult r = test::run_command("cd " + test::source_dir() + " && { " +
-                                              test::rayfarm_binary() + " submit " + args +
-                                              " --coordinator " + address() + " 2>/dev/null; }");
-    EXPECT_EQ(r.exit_code, 0) << r.output;
-    std::string id = r.output;
-    while (!id.empty() && (id.back() == '\n' || id.back() == ' ')) id.pop_back();
-    EXPECT_NE(id, "");
-    return id;
-  }
-  nlohmann::json status(const std::string& job) const {
-    test::CommandResult r = client("status " + job + " --json");
-    EXPECT_EQ(r.exit_code, 0) << r.output;
-    return nlohmann::json::parse(r.output, nullptr, false);
-  }
-  // A local render of the same job and frame, for comparison.
-  std::string local(const std::string& args, uint32_t frame) const {
-    std::string out = dir_ + "/local-" + std::to_string(local_count_++) + ".exr";
-    test::CommandResult r = test::run_command("cd " + test::source_dir() + " && " +
-                                              test::rayfarm_binary() + " render " + args +
-                                              " --frame " + std::to_string(frame) + " -q -o " + out);
-    EXPECT_EQ(r.exit_code, 0) << r.output;
-    return out;
-  }
-
-  // SIGKILLs the coordinator and starts it again on the same port and state directory.
-  void restart_coordinator() {
-    coordinator_->signal(SIGKILL);
-    coordinator_->wait(10);
-    start_coordinator(port_);
-  }
-
-  std::string worker_log(size_t i) const { return workers_.at(i)->log(); }
-  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
-  const std::string& dir() const { return dir_; }
-  Process& coordinator() { return *coordinator_; }
-  std::shared_ptr<grpc::Channel> channel() const {
-    return grpc::CreateChannel(address(), grpc::InsecureChannelCredentials());
-  }
-
- private:
-  std::string dir_;
-  double lease_seconds_;
-  int port_ = 0, starts_ = 0;
-  mutable int local_count_ = 0;
-  std::unique_ptr<Process> coordinator_;
-  std::vector<std::unique_ptr<Process>> workers_;
-};
-
-std::string fetched(const Farm& farm, const std::string& job, uint32_t frame) {
-  char name[64];
-  std::snprintf(name, sizeof name, "%s.%04u.exr", job.c_str(), frame);
-  return farm.dir() + "/out-" + job + "/" + name;
-}
 
 TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
   Farm farm("farm-e2e");
@@ -171,11 +65,11 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
     }
   }
   for (uint32_t f = 1; f <= 4; ++f) {
-    expect_same_image(fetched(farm, a, f), farm.local(tiled, f));
-    expect_same_image(fetched(farm, b, f), farm.local(splat, f));
+    expect_same_image(farm.fetched(a, f), farm.local(tiled, f));
+    expect_same_image(farm.fetched(b, f), farm.local(splat, f));
   }
   // Frames differ from each other (each has its own seed stream).
-  Exr f1 = read_exr(fetched(farm, a, 1)), f2 = read_exr(fetched(farm, a, 2));
+  Exr f1 = read_exr(farm.fetched(a, 1)), f2 = read_exr(farm.fetched(a, 2));
   EXPECT_NE(f1.px, f2.px);
   // Each worker built at most one BVH per job, not one per frame: a frame only changes the seeds.
   for (const std::string& log : {farm.worker_log(0), farm.worker_log(1)}) {
@@ -191,21 +85,24 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
 // AOV layers included.
 TEST(Farm, ImportedScenesShipTheirFilesAndRenderWithAovsAsLocally) {
   Farm farm("farm-formats");
-  const std::string common = " --spp 8 --passes 4 --res 24x16 --integrator path --aov albedo,normal,depth";
+  const std::string common =
+      " --spp 8 --passes 4 --res 24x16 --integrator path --aov albedo,normal,depth";
   const std::vector<std::string> scenes = {"tests/data/pbrt/directives.pbrt",
                                            "tests/data/gltf/textured_external.gltf",
                                            "scenes/veach-mis/scene.xml"};
   std::vector<std::string> jobs;
-  for (const std::string& scene : scenes) jobs.push_back(farm.submit(scene + common + " --frames 1"));
+  for (const std::string& scene : scenes)
+    jobs.push_back(farm.submit(scene + common + " --frames 1"));
   farm.worker();
   for (size_t i = 0; i < jobs.size(); ++i) {
     SCOPED_TRACE(scenes[i] + " job " + jobs[i]);
     EXPECT_EQ(farm.client("watch " + jobs[i]).exit_code, 0);
-    test::CommandResult r = farm.client("fetch " + jobs[i] + " -o " + farm.dir() + "/out-" + jobs[i]);
+    test::CommandResult r =
+        farm.client("fetch " + jobs[i] + " -o " + farm.dir() + "/out-" + jobs[i]);
     ASSERT_EQ(r.exit_code, 0) << r.output;
     std::string local = farm.local(scenes[i] + common, 1);
     EXPECT_EQ(read_exr(local).nch, 15);  // RGBA, variance and the AOV layers
-    expect_same_image(fetched(farm, jobs[i], 1), local);
+    expect_same_image(farm.fetched(jobs[i], 1), local);
   }
   // A bad file is refused at submit, naming the file and line, before any worker sees it.
   test::write_text(farm.dir() + "/bad.pbrt", "WorldBegin\nShape \"cylinder\"\n");
@@ -243,7 +140,7 @@ TEST(Farm, SigkilledWorkerLosesNoWorkAndTheImageStillEqualsTheLocalRender) {
   EXPECT_EQ(s["frames"][0]["passes_merged"], 8);
   EXPECT_DOUBLE_EQ(s["frames"][0]["spp"].get<double>(), 256.0);  // the spp asked, no more
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
-  expect_same_image(fetched(farm, job, 1), farm.local(job_args, 1));
+  expect_same_image(farm.fetched(job, 1), farm.local(job_args, 1));
 }
 
 TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
@@ -260,7 +157,8 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 4);
-  ASSERT_NE(s["state"], "completed") << "the job ended before the kill; the test needs a longer job";
+  ASSERT_NE(s["state"], "completed")
+      << "the job ended before the kill; the test needs a longer job";
   farm.restart_coordinator();
   // The restored job keeps what was checkpointed, and the workers reconnect by themselves.
   nlohmann::json after = farm.status(job);
@@ -272,7 +170,8 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
     EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);  // nothing lost, nothing counted twice
   }
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
-  for (uint32_t f = 1; f <= 2; ++f) expect_same_image(fetched(farm, job, f), farm.local(job_args, f));
+  for (uint32_t f = 1; f <= 2; ++f)
+    expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 
 TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
@@ -287,12 +186,12 @@ TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
   EXPECT_TRUE(f["stopped_on_target"].get<bool>());
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   std::string local = farm.local(job_args, 3);
-  Exr farm_image = read_exr(fetched(farm, job, 3)), local_image = read_exr(local);
+  Exr farm_image = read_exr(farm.fetched(job, 3)), local_image = read_exr(local);
   EXPECT_EQ(farm_image.attr("rayfarm:passes"), local_image.attr("rayfarm:passes"));
   EXPECT_EQ(farm_image.attr("rayfarm:passes"),
             "0-" + std::to_string(f["passes_merged"].get<int>() - 1));
   EXPECT_LT(f["passes_merged"].get<int>(), 64);
-  expect_same_image(fetched(farm, job, 3), local);
+  expect_same_image(farm.fetched(job, 3), local);
 }
 
 TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
@@ -316,7 +215,7 @@ TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
   EXPECT_EQ(worker.wait(30), 0);
   EXPECT_EQ(farm.status(job)["frames"][0]["eta_seconds"].get<double>(), 0.0);
   Exr mid = read_exr(mid_dir + "/" + job + ".0001.exr");
-  Exr fin = read_exr(fetched(farm, job, 1));
+  Exr fin = read_exr(farm.fetched(job, 1));
   ASSERT_EQ(mid.w, 64);
   int mid_passes = std::stoi(mid.attr("rayfarm:passes").substr(2)) + 1;  // "0-K"
   EXPECT_GE(mid_passes, 3);
@@ -347,7 +246,8 @@ TEST(Farm, HealthAndReflectionNameBothServices) {
 TEST(Farm, PerFramePatternRendersEachFramesOwnSceneAndAMissingFrameFileIsRefused) {
   Farm farm("farm-pattern");
   std::string shots = farm.dir() + "/shots";
-  std::string base = test::run_command("cat " + test::source_dir() + "/scenes/caustic/scene.json").output;
+  std::string base =
+      test::run_command("cat " + test::source_dir() + "/scenes/caustic/scene.json").output;
   for (int f = 1; f <= 2; ++f) {
     std::string text = base;
     size_t at = text.find("\"reflectance\": 0.7");
@@ -365,9 +265,9 @@ TEST(Farm, PerFramePatternRendersEachFramesOwnSceneAndAMissingFrameFileIsRefused
   for (uint32_t f = 1; f <= 2; ++f) {
     char name[64];
     std::snprintf(name, sizeof name, "/shot.%04u.json", f);
-    expect_same_image(fetched(farm, job, f), farm.local(shots + name + settings, f));
+    expect_same_image(farm.fetched(job, f), farm.local(shots + name + settings, f));
   }
-  Exr dark = read_exr(fetched(farm, job, 1)), bright = read_exr(fetched(farm, job, 2));
+  Exr dark = read_exr(farm.fetched(job, 1)), bright = read_exr(farm.fetched(job, 2));
   double sum1 = 0, sum2 = 0;
   for (size_t i = 0; i < dark.px.size(); ++i) sum1 += dark.px[i], sum2 += bright.px[i];
   EXPECT_LT(sum1, sum2);  // the floor's reflectance differs between the two files
@@ -398,9 +298,11 @@ TEST(Farm, SigtermDrainsOrHandsBackTheTaskInFlight) {
 
 TEST(Farm, CorruptedWorkerCacheIsFetchedAgain) {
   Farm farm("farm-cache");
-  std::string scene_bytes = test::run_command("cat " + test::source_dir() + "/scenes/caustic/scene.json").output;
+  std::string scene_bytes =
+      test::run_command("cat " + test::source_dir() + "/scenes/caustic/scene.json").output;
   std::string digest = sha256_hex(scene_bytes);
-  test::write_text(farm.dir() + "/cache/blobs/" + digest.substr(0, 2) + "/" + digest, "{ corrupted");
+  test::write_text(farm.dir() + "/cache/blobs/" + digest.substr(0, 2) + "/" + digest,
+                   "{ corrupted");
   std::string job = farm.submit("scenes/caustic/scene.json --spp 4 --passes 2 --res 32x24");
   Process& w = farm.worker();
   ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
@@ -409,7 +311,8 @@ TEST(Farm, CorruptedWorkerCacheIsFetchedAgain) {
 }
 
 TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
-  // A tiny run that shows the script works (not how fast): its farm render must equal its local one.
+  // A tiny run that shows the script works (not how fast): its farm render must equal its local
+  // one.
   test::CommandResult r = test::run_command(
       "cd " + test::source_dir() + " && RAYFARM_BIN=" + test::rayfarm_binary() +
       " bench/farm_bench.sh 20 scenes/cornell-box/scene.json --spp 4 --passes 2 --res 32x32");
@@ -423,29 +326,13 @@ TEST(Farm, BenchmarkScriptRunsAndItsFarmImageEqualsTheLocalOne) {
 }
 
 // A fake worker leases the next task and reports it failed with `message`.
-void lease_and_fail(const Farm& farm, const std::string& worker_id, const std::string& message) {
-  auto workers = pb::WorkerService::NewStub(farm.channel());
-  grpc::ClientContext c1, c2;
-  c1.set_wait_for_ready(true);
-  pb::LeaseRequest lr;
-  lr.set_worker_id(worker_id);
-  pb::LeaseResponse lresp;
-  ASSERT_TRUE(workers->LeaseTask(&c1, lr, &lresp).ok());
-  ASSERT_TRUE(lresp.has_task());
-  pb::FailRequest fr;
-  fr.set_worker_id(worker_id);
-  fr.set_lease_id(lresp.task().lease_id());
-  fr.set_task_id(lresp.task().task_id());
-  fr.set_message(message);
-  pb::FailResponse fresp;
-  ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
-}
-
 TEST(Farm, FailuresCountAcrossACoordinatorRestart) {
   Farm farm("farm-failures");
   std::string job = farm.submit(kCornell + " --spp 1 --passes 1 --res 16x16");
   auto fail_once = [&](int w) {
-    lease_and_fail(farm, "fake-" + std::to_string(w), "driver crash on fake-" + std::to_string(w));
+    auto stub = pb::WorkerService::NewStub(farm.channel());
+    test::lease_and_fail(*stub, "fake-" + std::to_string(w),
+                         "driver crash on fake-" + std::to_string(w));
   };
   fail_once(1);
   fail_once(2);
@@ -494,35 +381,11 @@ TEST(LongFarm, RandomKillsOfWorkersAndCoordinatorLoseNothing) {
     EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);
   }
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
-  for (uint32_t f = 1; f <= 4; ++f) expect_same_image(fetched(farm, job, f), farm.local(job_args, f));
+  for (uint32_t f = 1; f <= 4; ++f)
+    expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 
 // --- Bad requests, straight through the generated stubs ------------------------------------
-
-grpc::Status complete_with(pb::WorkerService::Stub& stub, const pb::Task& task,
-                           const std::vector<pb::Chunk>& chunks) {
-  grpc::ClientContext ctx;
-  pb::CompleteResponse resp;
-  auto w = stub.CompleteTask(&ctx, &resp);
-  pb::CompleteRequest head;
-  head.mutable_header()->set_worker_id("test");
-  head.mutable_header()->set_lease_id(task.lease_id());
-  head.mutable_header()->set_task_id(task.task_id());
-  w->Write(head);
-  for (const pb::Chunk& c : chunks) {
-    pb::CompleteRequest m;
-    *m.mutable_chunk() = c;
-    if (!w->Write(m)) break;
-  }
-  w->WritesDone();
-  return w->Finish();
-}
-
-std::vector<pb::Chunk> chunks_of(const std::string& bytes) {
-  std::vector<pb::Chunk> out;
-  for_each_chunk(bytes, [&](pb::Chunk&& c) { out.push_back(std::move(c)); });
-  return out;
-}
 
 TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
   Farm farm("farm-bad");
@@ -576,51 +439,45 @@ TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
   }
   // A real job and a lease on one of its tasks.
   std::string job = farm.submit(kCornell + " --spp 4 --passes 4 --res 64x64 --tile-size 32");
-  pb::Task task;
-  {
-    grpc::ClientContext ctx;
-    pb::LeaseRequest req;
-    req.set_worker_id("test-worker");
-    pb::LeaseResponse resp;
-    ASSERT_TRUE(workers->LeaseTask(&ctx, req, &resp).ok());
-    ASSERT_TRUE(resp.has_task());
-    task = resp.task();
-  }
+  const std::string me = test::register_worker(*workers, "test-worker");
+  std::optional<pb::Task> leased = test::lease_task(*workers, me);
+  ASSERT_TRUE(leased);
+  const pb::Task task = *leased;
   // A buffer of the wrong size for the task's tile.
   BufferHeader h;
   h.scene_digest = task.scene_digest();
   h.passes = PassSet::range(task.pass(), task.pass() + 1);
   h.width = 64, h.height = 64;
   SampleBuffer wrong(h, Rect{0, 0, 8, 8}, false);
-  grpc::Status st = complete_with(*workers, task, chunks_of(encode_buffer(wrong)));
+  grpc::Status st = complete_with(*workers, me, task, chunks_of(encode_buffer(wrong)));
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
   // Bytes that are not a sample buffer.
-  st = complete_with(*workers, task, chunks_of("not a sample buffer"));
+  st = complete_with(*workers, me, task, chunks_of("not a sample buffer"));
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
   // A checksum that does not match.
   std::vector<pb::Chunk> corrupt = chunks_of(encode_buffer(wrong));
   corrupt[0].mutable_data()->at(10) ^= 1;
-  st = complete_with(*workers, task, corrupt);
+  st = complete_with(*workers, me, task, corrupt);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::DATA_LOSS) << st.error_message();
   // Over the size limit (announced in the first chunk; nothing that large is sent).
   std::vector<pb::Chunk> huge = chunks_of("x");
   huge[0].set_total_size(uint64_t(64) << 30);
-  st = complete_with(*workers, task, huge);
+  st = complete_with(*workers, me, task, huge);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << st.error_message();
   // Offsets out of order.
   std::vector<pb::Chunk> gap = chunks_of(std::string(3 << 20, 'x'));
   gap.erase(gap.begin() + 1);
-  st = complete_with(*workers, task, gap);
+  st = complete_with(*workers, me, task, gap);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
   {  // Renewing: an unknown lease, then one that ended (handed back).
     grpc::ClientContext c1, c2, c3;
     pb::RenewRequest rr;
-    rr.set_worker_id("test-worker");
+    rr.set_worker_id(me);
     rr.set_lease_id("no-such-lease");
     pb::RenewResponse rresp;
     EXPECT_EQ(workers->RenewLease(&c1, rr, &rresp).error_code(), grpc::StatusCode::NOT_FOUND);
     pb::FailRequest fr;
-    fr.set_worker_id("test-worker");
+    fr.set_worker_id(me);
     fr.set_lease_id(task.lease_id());
     fr.set_task_id(task.task_id());
     fr.set_handed_back(true);
@@ -659,7 +516,8 @@ TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
   {  // A task failing on 3 different workers fails the job with their messages.
     std::string doomed = farm.submit(kCornell + " --spp 1 --passes 1 --res 16x16");
     for (int w = 1; w <= 3; ++w)
-      lease_and_fail(farm, "fake-" + std::to_string(w), "out of memory on fake-" + std::to_string(w));
+      test::lease_and_fail(*workers, "fake-" + std::to_string(w),
+                           "out of memory on fake-" + std::to_string(w));
     test::CommandResult r = farm.client("watch " + doomed);
     EXPECT_EQ(r.exit_code, 1) << r.output;
     nlohmann::json s = farm.status(doomed);

@@ -16,9 +16,9 @@
 #include <set>
 #include <thread>
 
+#include "engine/buffer_file.h"
 #include "engine/build_info.h"
 #include "engine/digest.h"
-#include "engine/buffer_file.h"
 #include "engine/render.h"
 #include "engine/scene.h"
 #include "farm/blob_store.h"
@@ -127,7 +127,7 @@ class Worker {
 // Pings at most a third of the lease apart (the coordinator's keepalive_seconds), so a partition
 // is noticed within one lease.
 void Worker::connect(int keepalive_seconds) {
-  channel_ = coordinator_channel(o_.coordinator, keepalive_seconds);
+  channel_ = coordinator_channel(o_.coordinator, o_.token, keepalive_seconds);
   stub_ = pb::WorkerService::NewStub(channel_);
 }
 
@@ -420,6 +420,12 @@ int Worker::run() {
     set_deadline(ctx, 5, kWaitForReady);
     pb::LeaseResponse resp;
     grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
+    if (s.error_code() == grpc::StatusCode::NOT_FOUND) {
+      // The coordinator does not know this worker id (its state directory was replaced).
+      spdlog::warn("lease: {}; registering again", s.error_message());
+      if (!register_self()) break;
+      continue;
+    }
     if (!s.ok()) {
       if (!transient(s)) throw std::runtime_error("lease: " + s.error_message());
       if (attempt == 0) spdlog::warn("lease: {}; retrying", s.error_message());

@@ -17,11 +17,12 @@ namespace rf {
 
 struct WorkerOptions {
   std::string coordinator = "127.0.0.1:7070";
-  std::string cache_dir;       // default: $XDG_CACHE_HOME/rayfarm or ~/.cache/rayfarm
+  std::string token;      // a worker (or admin) token; "" when the coordinator needs none
+  std::string cache_dir;  // default: $XDG_CACHE_HOME/rayfarm or ~/.cache/rayfarm
   double drain_seconds = 60;
   bool exit_when_idle = false;
   double idle_poll_seconds = 1;
-  int max_tasks = 0;           // exit after this many tasks (0: no limit); for tests and benches
+  int max_tasks = 0;  // exit after this many tasks (0: no limit); for tests and benches
 };
 
 // Runs until signalled (or idle with exit_when_idle). Returns the process exit status.

@@ -1,0 +1,393 @@
+// The coordinator against a hostile client (docs/security.md), with real processes on loopback:
+// tokens, roles and tenants on every method, the token file re-read on SIGHUP, uploads accepted
+// only from the worker holding the lease (checked before a byte of the upload is buffered),
+// loopback-only without tokens, one coordinator per state directory and per port. Each farm image
+// is still compared with the local render of the same job.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <chrono>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "engine/digest.h"
+#include "farm/auth.h"
+#include "farm/probe.h"
+#include "proto/rayfarm.grpc.pb.h"
+#include "tests/support/farm.h"
+
+namespace rf {
+namespace {
+
+namespace pb = rayfarm::v1;
+using test::Farm;
+
+const std::string kJob = "scenes/cornell-box/scene.json --spp 8 --passes 4 --res 32x32";
+
+// A token made by `rayfarm token new`: the token (line 1) and its token-file line (line 2).
+struct Token {
+  std::string token, line, file;
+};
+
+Token make_token(const std::string& dir, const std::string& name, const std::string& args) {
+  test::CommandResult r =
+      test::run_command("{ " + test::rayfarm_binary() + " token new " + args + " 2>/dev/null; }");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  Token t;
+  std::istringstream in(r.output);
+  std::getline(in, t.token);
+  std::getline(in, t.line);
+  EXPECT_EQ(t.token.rfind("rft_", 0), 0u) << r.output;
+  EXPECT_EQ(t.line.substr(0, 64), sha256_hex(t.token)) << "line 2 holds the digest";
+  t.file = dir + "/" + name + ".token";
+  test::write_text(t.file, t.token + "\n");
+  return t;
+}
+
+void write_token_file(const std::string& path, const std::vector<const Token*>& tokens) {
+  std::string text = "# accepted tokens\n";
+  for (const Token* t : tokens) text += t->line + "\n";
+  test::write_text(path, text);
+}
+
+// Calls every method of both services once on `channel`, with requests that are harmless when
+// admitted, and returns each one's status code.
+std::map<std::string, grpc::StatusCode> call_every_method(std::shared_ptr<grpc::Channel> channel) {
+  auto jobs = pb::JobService::NewStub(channel);
+  auto workers = pb::WorkerService::NewStub(channel);
+  std::map<std::string, grpc::StatusCode> out;
+  auto unary = [&](const std::string& name, auto&& call) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    out[name] = call(ctx).error_code();
+  };
+  pb::JobRef ref;
+  ref.set_job_id("j999999");
+  unary("MissingBlobs", [&](grpc::ClientContext& c) {
+    pb::MissingBlobsResponse r;
+    return jobs->MissingBlobs(&c, pb::MissingBlobsRequest{}, &r);
+  });
+  unary("Submit", [&](grpc::ClientContext& c) {
+    pb::SubmitResponse r;
+    auto w = jobs->Submit(&c, &r);
+    w->WritesDone();
+    return w->Finish();
+  });
+  unary("ListJobs", [&](grpc::ClientContext& c) {
+    pb::ListJobsResponse r;
+    return jobs->ListJobs(&c, pb::ListJobsRequest{}, &r);
+  });
+  unary("GetJob", [&](grpc::ClientContext& c) {
+    pb::JobStatus r;
+    return jobs->GetJob(&c, ref, &r);
+  });
+  unary("WatchJob", [&](grpc::ClientContext& c) {
+    auto rd = jobs->WatchJob(&c, ref);
+    pb::JobStatus m;
+    while (rd->Read(&m)) {
+    }
+    return rd->Finish();
+  });
+  unary("CancelJob", [&](grpc::ClientContext& c) {
+    pb::CancelResponse r;
+    return jobs->CancelJob(&c, ref, &r);
+  });
+  unary("FetchFrame", [&](grpc::ClientContext& c) {
+    pb::FetchRequest req;
+    req.set_job_id("j999999");
+    auto rd = jobs->FetchFrame(&c, req);
+    pb::FetchResponse m;
+    while (rd->Read(&m)) {
+    }
+    return rd->Finish();
+  });
+  unary("Register", [&](grpc::ClientContext& c) {
+    pb::RegisterRequest req;
+    req.set_hostname("probe");
+    pb::RegisterResponse r;
+    return workers->Register(&c, req, &r);
+  });
+  unary("LeaseTask", [&](grpc::ClientContext& c) {
+    pb::LeaseRequest req;
+    req.set_worker_id("invented");
+    pb::LeaseResponse r;
+    return workers->LeaseTask(&c, req, &r);
+  });
+  unary("RenewLease", [&](grpc::ClientContext& c) {
+    pb::RenewRequest req;
+    req.set_worker_id("invented");
+    req.set_lease_id("invented");
+    pb::RenewResponse r;
+    return workers->RenewLease(&c, req, &r);
+  });
+  unary("FetchBlob", [&](grpc::ClientContext& c) {
+    pb::BlobRequest req;
+    req.set_sha256(std::string(64, 'a'));
+    auto rd = workers->FetchBlob(&c, req);
+    pb::Chunk m;
+    while (rd->Read(&m)) {
+    }
+    return rd->Finish();
+  });
+  unary("CompleteTask", [&](grpc::ClientContext& c) {
+    pb::CompleteResponse r;
+    auto w = workers->CompleteTask(&c, &r);
+    pb::CompleteRequest head;
+    head.mutable_header()->set_worker_id("invented");
+    head.mutable_header()->set_task_id("j999999/1/0/0");
+    w->Write(head);
+    w->WritesDone();
+    return w->Finish();
+  });
+  unary("FailTask", [&](grpc::ClientContext& c) {
+    pb::FailRequest req;
+    req.set_worker_id("invented");
+    pb::FailResponse r;
+    return workers->FailTask(&c, req, &r);
+  });
+  return out;
+}
+
+const std::set<std::string> kWorkerMethods = {"Register",  "LeaseTask",    "RenewLease",
+                                              "FetchBlob", "CompleteTask", "FailTask"};
+
+bool wait_for(const std::function<bool()>& f, double seconds) {
+  for (int i = 0; i < int(seconds * 50); ++i) {
+    if (f()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return f();
+}
+
+// Every method of both services asks for a token of the right role: none, an unknown one and an
+// expired one are UNAUTHENTICATED; a client token on a worker method and a worker token on a job
+// method are PERMISSION_DENIED; an admin passes everywhere. The health service stays open. A
+// client sees its tenant's jobs only; the job it submits renders on a worker (worker token) to
+// the local image. SIGHUP re-reads the file: a token added is accepted, one removed is refused.
+// No token appears in the coordinator's log.
+TEST(Security, TokensRolesAndTenantsAreCheckedOnEveryMethod) {
+  std::string dir = test::make_temp_dir("security-tokens");
+  Token shot1 = make_token(dir, "shot1", "--role client --tenant shot1");
+  Token shot2 = make_token(dir, "shot2", "--role client --tenant shot2");
+  Token worker = make_token(dir, "worker", "--role worker --tenant farm");
+  Token admin = make_token(dir, "admin", "--role admin --tenant ops");
+  Token expired = make_token(dir, "expired", "--role admin --tenant ops --expires 2020-01-01");
+  Token later = make_token(dir, "later", "--role client --tenant shot3");
+  EXPECT_NE(expired.line.find("expires=2020-01-01T00:00:00Z"), std::string::npos) << expired.line;
+  std::string tokens = dir + "/tokens";
+  write_token_file(tokens, {&shot1, &shot2, &worker, &admin, &expired});
+  Farm farm("security-farm", 30, tokens);
+  farm.client_token_file = shot1.file;
+  farm.worker_token_file = worker.file;
+
+  for (const std::string& t :
+       {std::string(), std::string("rft_") + std::string(64, '0'), expired.token}) {
+    for (auto& [method, code] : call_every_method(farm.channel(t)))
+      EXPECT_EQ(code, grpc::StatusCode::UNAUTHENTICATED) << method << " with token '" << t << "'";
+  }
+  for (auto& [method, code] : call_every_method(farm.channel(shot1.token))) {
+    if (kWorkerMethods.count(method))
+      EXPECT_EQ(code, grpc::StatusCode::PERMISSION_DENIED) << method << " with a client token";
+    else
+      EXPECT_NE(code, grpc::StatusCode::PERMISSION_DENIED) << method << " with a client token";
+  }
+  for (auto& [method, code] : call_every_method(farm.channel(worker.token))) {
+    if (kWorkerMethods.count(method))
+      EXPECT_NE(code, grpc::StatusCode::PERMISSION_DENIED) << method << " with a worker token";
+    else
+      EXPECT_EQ(code, grpc::StatusCode::PERMISSION_DENIED) << method << " with a worker token";
+  }
+  for (auto& [method, code] : call_every_method(farm.channel(admin.token))) {
+    EXPECT_NE(code, grpc::StatusCode::UNAUTHENTICATED) << method << " with an admin token";
+    EXPECT_NE(code, grpc::StatusCode::PERMISSION_DENIED) << method << " with an admin token";
+  }
+  EXPECT_EQ(check_health(farm.address()), "SERVING") << "probes carry no token";
+  test::CommandResult none =
+      test::run_command(test::rayfarm_binary() + " status --coordinator " + farm.address());
+  EXPECT_NE(none.exit_code, 0);
+  EXPECT_NE(none.output.find("UNAUTHENTICATED"), std::string::npos) << none.output;
+
+  std::string job = farm.submit(kJob + " --frames 1");
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  test::expect_same_image(farm.fetched(job, 1), farm.local(kJob, 1));
+  EXPECT_EQ(farm.status(job)["tenant"], "shot1");
+
+  auto as = [&](const Token& t, const std::string& args) {
+    return test::run_command(test::rayfarm_binary() + " " + args + " --coordinator " +
+                             farm.address() + " --token-file " + t.file);
+  };
+  test::CommandResult other = as(shot2, "status " + job);
+  EXPECT_NE(other.exit_code, 0);
+  EXPECT_NE(other.output.find("PERMISSION_DENIED"), std::string::npos) << other.output;
+  EXPECT_NE(as(shot2, "fetch " + job + " -o " + dir + "/stolen").exit_code, 0);
+  EXPECT_NE(as(shot2, "watch " + job).exit_code, 0);
+  EXPECT_EQ(as(shot2, "status").output.find(job), std::string::npos) << "listed to another tenant";
+  EXPECT_NE(as(admin, "status").output.find(job), std::string::npos) << "an admin sees all";
+
+  // SIGHUP: `later` is accepted once added, shot2 refused once removed.
+  EXPECT_EQ(call_every_method(farm.channel(later.token))["ListJobs"],
+            grpc::StatusCode::UNAUTHENTICATED);
+  write_token_file(tokens, {&shot1, &worker, &admin, &later});
+  farm.coordinator().signal(SIGHUP);
+  ASSERT_TRUE(farm.coordinator().wait_for_log("SIGHUP: token file", 10))
+      << farm.coordinator().log();
+  EXPECT_EQ(call_every_method(farm.channel(later.token))["ListJobs"], grpc::StatusCode::OK);
+  EXPECT_EQ(call_every_method(farm.channel(shot2.token))["ListJobs"],
+            grpc::StatusCode::UNAUTHENTICATED);
+  // A broken file on SIGHUP keeps the tokens read before, and says why.
+  test::write_text(tokens, "not a token line\n");
+  farm.coordinator().signal(SIGHUP);
+  ASSERT_TRUE(farm.coordinator().wait_for_log(tokens + ":1:", 10)) << farm.coordinator().log();
+  EXPECT_EQ(call_every_method(farm.channel(later.token))["ListJobs"], grpc::StatusCode::OK);
+
+  std::string log = farm.coordinator().log();
+  for (const Token* t : {&shot1, &shot2, &worker, &admin, &expired, &later})
+    EXPECT_EQ(log.find(t->token), std::string::npos) << "a token is in the coordinator's log";
+  EXPECT_NE(log.find("refused"), std::string::npos) << "refusals are logged";
+}
+
+long rss_kib(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+  return -1;
+}
+
+// A second worker token cannot change a job it does not hold the leases of: uploads with an
+// empty, invented or another task's lease, or under another token's worker id, are refused
+// (before the upload's bytes are read), invented worker ids cannot fail the job, and an upload
+// for a job that does not exist is refused after its header, without buffering the 300 MiB
+// that follow. The honest worker's image still equals the local render, and the coordinator
+// logs each refusal with the worker it came from.
+TEST(Security, UploadsAreAcceptedOnlyFromTheWorkerHoldingTheLease) {
+  std::string dir = test::make_temp_dir("security-uploads");
+  Token client = make_token(dir, "client", "--role client --tenant shot1");
+  Token honest = make_token(dir, "honest", "--role worker --tenant farm");
+  Token rogue = make_token(dir, "rogue", "--role worker --tenant farm");
+  std::string tokens = dir + "/tokens";
+  write_token_file(tokens, {&client, &honest, &rogue});
+  Farm farm("security-uploads-farm", 30, tokens);
+  farm.client_token_file = client.file;
+  farm.worker_token_file = honest.file;
+  std::string job = farm.submit(kJob + " --frames 1 --tile-size 16");
+
+  auto stub = pb::WorkerService::NewStub(farm.channel(rogue.token));
+  std::string me = test::register_worker(*stub, "rogue");
+  std::optional<pb::Task> leased = test::lease_task(*stub, me);
+  ASSERT_TRUE(leased);
+  const pb::Task mine = *leased;
+  auto garbage = test::chunks_of(std::string(1000, 'x'));
+  pb::Task other = mine;  // another task of the job, under my lease
+  other.set_task_id(job + "/1/0/3");
+  ASSERT_NE(other.task_id(), mine.task_id());
+  EXPECT_EQ(test::complete_with(*stub, me, other, garbage).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  pb::Task no_lease = other;
+  no_lease.set_lease_id("");
+  EXPECT_EQ(test::complete_with(*stub, me, no_lease, garbage).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  no_lease.set_lease_id("L-invented");
+  EXPECT_EQ(test::complete_with(*stub, me, no_lease, garbage).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(test::complete_with(*stub, "invented", mine, garbage).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  for (int i = 0; i < 3; ++i) {
+    grpc::ClientContext ctx;
+    pb::FailRequest fr;
+    fr.set_worker_id("fake-" + std::to_string(i));
+    fr.set_lease_id(mine.lease_id());
+    fr.set_message("forged failure");
+    pb::FailResponse resp;
+    EXPECT_EQ(stub->FailTask(&ctx, fr, &resp).error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+  {  // my own lease, handed back: the honest worker renders that task too
+    grpc::ClientContext ctx;
+    pb::FailRequest fr;
+    fr.set_worker_id(me);
+    fr.set_lease_id(mine.lease_id());
+    fr.set_handed_back(true);
+    pb::FailResponse resp;
+    EXPECT_TRUE(stub->FailTask(&ctx, fr, &resp).ok());
+  }
+  {  // 300 MiB announced for a job that does not exist: refused after the header
+    long before = rss_kib(farm.coordinator().pid());
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    pb::CompleteResponse resp;
+    auto w = stub->CompleteTask(&ctx, &resp);
+    pb::CompleteRequest head;
+    head.mutable_header()->set_worker_id(me);
+    head.mutable_header()->set_lease_id(mine.lease_id());
+    head.mutable_header()->set_task_id("j999999/1/0/0");
+    ASSERT_TRUE(w->Write(head));
+    std::string mib(1 << 20, 'x');
+    int written = 0;
+    for (uint64_t i = 0; i < 300; ++i) {
+      pb::CompleteRequest m;
+      m.mutable_chunk()->set_offset(i << 20);
+      m.mutable_chunk()->set_data(mib);
+      if (i == 0) {  // a well-formed stream: a server that buffered it would take it all
+        m.mutable_chunk()->set_total_size(uint64_t(300) << 20);
+        m.mutable_chunk()->set_sha256(std::string(64, '0'));
+      }
+      if (!w->Write(m)) break;
+      ++written;
+    }
+    long during = rss_kib(farm.coordinator().pid());
+    if (written == 300) w->WritesDone();
+    grpc::Status st = w->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::NOT_FOUND) << st.error_message();
+    EXPECT_LT(written, 300) << "the stream went on after the refusal";
+    EXPECT_LT(during - before, 64 * 1024) << "RSS " << before << " -> " << during << " KiB";
+  }
+  EXPECT_EQ(farm.status(job)["state"], "running");
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  test::expect_same_image(farm.fetched(job, 1), farm.local(kJob + " --tile-size 16", 1));
+  std::string log = farm.coordinator().log();
+  EXPECT_NE(log.find("refused: worker " + me + " sent task " + other.task_id()), std::string::npos)
+      << log;
+}
+
+// Without a token file the coordinator listens on loopback only, and says why; with one it
+// listens anywhere. A second coordinator on the same state directory exits naming the first
+// one's pid; a second one on the same port fails to bind instead of sharing it.
+TEST(Security, LoopbackOnlyWithoutTokensAndOneCoordinatorPerStateDirectoryAndPort) {
+  std::string dir = test::make_temp_dir("security-listen");
+  auto run = [&](const std::string& args) {
+    return test::run_command("timeout 20 " + test::rayfarm_binary() + " coordinator " + args);
+  };
+  test::CommandResult open = run("--listen 0.0.0.0:0 --state-dir " + dir + "/open");
+  EXPECT_EQ(open.exit_code, 1) << open.output;
+  EXPECT_NE(open.output.find("--token-file"), std::string::npos) << open.output;
+
+  Token admin = make_token(dir, "admin", "--role admin --tenant ops");
+  write_token_file(dir + "/tokens", {&admin});
+  Farm farm("security-listen-farm", 30, dir + "/tokens");
+  test::CommandResult same_dir = run("--listen 127.0.0.1:0 --state-dir " + farm.dir() + "/state");
+  EXPECT_NE(same_dir.exit_code, 0);
+  EXPECT_NE(same_dir.output.find("pid " + std::to_string(farm.coordinator().pid())),
+            std::string::npos)
+      << same_dir.output;
+  test::CommandResult same_port =
+      run("--listen " + farm.address() + " --state-dir " + dir + "/second");
+  EXPECT_NE(same_port.exit_code, 0);
+  EXPECT_NE(same_port.output.find("cannot listen"), std::string::npos) << same_port.output;
+  EXPECT_TRUE(farm.coordinator().running());
+
+  test::Process anywhere({test::rayfarm_binary(), "coordinator", "--listen", "0.0.0.0:0",
+                          "--state-dir", dir + "/anywhere", "--token-file", dir + "/tokens"},
+                         dir + "/anywhere.log");
+  EXPECT_TRUE(anywhere.wait_for_log("listening on 0.0.0.0:0", 20)) << anywhere.log();
+}
+
+}  // namespace
+}  // namespace rf

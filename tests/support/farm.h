@@ -1,0 +1,78 @@
+// The farm harness for end-to-end tests with real processes on loopback (no mocks of gRPC): a
+// coordinator process on a temporary state directory, worker processes, the client commands,
+// local renders to compare with, and raw gRPC stubs for requests the CLI would never send.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "proto/rayfarm.grpc.pb.h"
+#include "tests/support/process.h"
+#include "tests/support/test_support.h"
+
+namespace rf::test {
+
+// Every channel (RGBA and variance) of two EXRs within DESIGN.md's merge tolerance,
+// |a-b| <= 1e-6 * max(|a|,|b|) + 1e-12 (in practice the farm's images are bit-identical).
+void expect_same_image(const std::string& farm, const std::string& local);
+
+class Farm {
+ public:
+  // A coordinator with this lease time; with a token file, it authenticates every call, and
+  // client() and worker() show the tokens in client_token_file / worker_token_file.
+  explicit Farm(const std::string& tag, double lease_seconds = 30,
+                const std::string& coordinator_token_file = "");
+
+  void start_coordinator(int port);  // and waits until it logs its port
+  // SIGKILLs the coordinator and starts it again on the same port and state directory.
+  void restart_coordinator();
+
+  Process& worker(const std::vector<std::string>& extra = {"--exit-when-idle"});
+  // A client command against this coordinator (run from the source tree), output 2>&1.
+  CommandResult client(const std::string& args) const;
+  std::string submit(const std::string& args) const;  // the job id; expects success
+  nlohmann::json status(const std::string& job) const;
+  // A local render of the same job and frame, for comparison; returns the EXR's path.
+  std::string local(const std::string& args, uint32_t frame) const;
+  // Where `fetch JOB -o DIR/out-JOB` puts a frame.
+  std::string fetched(const std::string& job, uint32_t frame) const;
+
+  std::string worker_log(size_t i) const { return workers_.at(i)->log(); }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  const std::string& dir() const { return dir_; }
+  Process& coordinator() { return *coordinator_; }
+  // A plain channel; with a token, it sends "authorization: Bearer TOKEN" on every call.
+  std::shared_ptr<grpc::Channel> channel(const std::string& token = "") const;
+
+  std::string client_token_file, worker_token_file;
+
+ private:
+  std::string dir_;
+  double lease_seconds_;
+  std::string token_file_;
+  int port_ = 0, starts_ = 0;
+  mutable int local_count_ = 0;
+  std::unique_ptr<Process> coordinator_;
+  std::vector<std::unique_ptr<Process>> workers_;
+};
+
+// Registers a worker under `hostname` through a raw stub; the id the coordinator issued.
+std::string register_worker(rayfarm::v1::WorkerService::Stub& stub, const std::string& hostname);
+// Leases a task for a registered worker; nothing (and a test failure) when none is given.
+std::optional<rayfarm::v1::Task> lease_task(rayfarm::v1::WorkerService::Stub& stub,
+                                            const std::string& worker_id);
+// Registers as `hostname`, leases a task and reports it failed with `message`.
+void lease_and_fail(rayfarm::v1::WorkerService::Stub& stub, const std::string& hostname,
+                    const std::string& message);
+// CompleteTask with a header naming worker_id and the task's lease, then these chunks.
+grpc::Status complete_with(rayfarm::v1::WorkerService::Stub& stub, const std::string& worker_id,
+                           const rayfarm::v1::Task& task,
+                           const std::vector<rayfarm::v1::Chunk>& chunks);
+std::vector<rayfarm::v1::Chunk> chunks_of(const std::string& bytes);
+
+}  // namespace rf::test
