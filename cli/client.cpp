@@ -9,21 +9,24 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   auto add_addr = [&](CLI::App* c) {
     c->add_option("--coordinator", shared.coordinator,
                   "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
-    c->add_option("--token-file", shared.token_file,
-                  "file holding the token (default: $RAYFARM_TOKEN_FILE, else $RAYFARM_TOKEN)");
+    add_credential_options(*c, shared);
   };
   struct Args {
     OverrideArgs overrides;
     SubmitArgs submit;
     std::string job, fetch_dir, health_addr;
     bool json = false, services = false;
+    StatusPage page;
     std::optional<uint32_t> fetch_frame;
     float fetch_exposure = 0;
   };
   auto a = std::make_shared<Args>();
-  const std::string& addr = shared.coordinator;
+
   // Read when the command runs, after parsing, so a bad token file is reported as such.
-  auto ep = [&shared] { return Endpoint{shared.coordinator, client_token(shared.token_file)}; };
+  auto ep = [&shared] {
+    return Endpoint{shared.coordinator, load_client_credentials(shared.token_file, shared.tls_ca,
+                                                                shared.tls_cert, shared.tls_key)};
+  };
 
   auto* submit = app.add_subcommand("submit", "submit a job; prints its id");
   add_addr(submit);
@@ -37,6 +40,8 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   submit->add_option("--name", a->submit.name, "job name (default: the scene's file name)");
   submit->add_option("--tile-size", a->submit.tile_size, "tile size in pixels")
       ->check(CLI::PositiveNumber);
+  submit->add_option("--build-id", a->submit.build_id,
+                     "merge results of this worker build only (default: the first result's)");
   out.push_back({submit, [a, ep] {
                    a->submit.overrides = overrides_of(a->overrides);
                    return cmd_submit(ep(), a->submit);
@@ -46,7 +51,9 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   add_addr(status);
   status->add_option("job", a->job, "one job");
   status->add_flag("--json", a->json, "machine-readable");
-  out.push_back({status, [a, ep] { return cmd_status(ep(), a->job, a->json); }});
+  status->add_option("--limit", a->page.limit, "at most this many jobs (default: all)");
+  status->add_option("--after", a->page.after, "the jobs after this one");
+  out.push_back({status, [a, ep] { return cmd_status(ep(), a->job, a->json, a->page); }});
 
   auto* watch = app.add_subcommand("watch", "follow a job until it ends (exit 0: completed)");
   add_addr(watch);
@@ -71,11 +78,29 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   auto* health = app.add_subcommand("health", "check a coordinator's gRPC health service");
   health->add_option("--coordinator", shared.coordinator,
                      "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
+  health->add_option("--tls-ca", shared.tls_ca,
+                     "CA of the coordinator's TLS certificate (default: $RAYFARM_TLS_CA; none: "
+                     "plaintext)");
   health->add_option("address", a->health_addr, "HOST:PORT (default: as --coordinator)");
   health->add_flag("--services", a->services, "also list its services (server reflection)");
-  out.push_back({health, [a, &addr] {
-                   return cmd_health(a->health_addr.empty() ? addr : a->health_addr, a->services);
+  out.push_back({health, [a, &shared] {
+                   Endpoint e{a->health_addr.empty() ? shared.coordinator : a->health_addr,
+                              load_client_credentials("", shared.tls_ca, "", "")};
+                   e.creds.token.clear();  // the health service takes none
+                   return cmd_health(e, a->services);
                  }});
+}
+
+void add_credential_options(CLI::App& c, SharedOptions& shared) {
+  c.add_option("--token-file", shared.token_file,
+               "file holding the token (default: $RAYFARM_TOKEN_FILE, else $RAYFARM_TOKEN)");
+  c.add_option("--tls-ca", shared.tls_ca,
+               "CA of the coordinator's TLS certificate, PEM (default: $RAYFARM_TLS_CA; none: "
+               "plaintext)");
+  c.add_option("--tls-cert", shared.tls_cert,
+               "this client's TLS certificate for mutual TLS, PEM (default: $RAYFARM_TLS_CERT)");
+  c.add_option("--tls-key", shared.tls_key,
+               "the key of --tls-cert, PEM (default: $RAYFARM_TLS_KEY)");
 }
 
 }  // namespace rf::cli

@@ -34,7 +34,11 @@ struct SharedOptions {
   int threads = 0;  // 0: all cores
   std::string coordinator;
   std::string token_file;  // the token shown to the coordinator (farm/auth.h client_token)
+  std::string tls_ca, tls_cert, tls_key;  // PEM files (farm/channel.h load_client_credentials)
 };
+
+// --token-file, --tls-ca, --tls-cert, --tls-key on a command that talks to a coordinator.
+void add_credential_options(CLI::App& cmd, SharedOptions& shared);
 
 // The scene overrides `render` and `submit` share (--spp, --passes, --integrator, ...).
 struct OverrideArgs {

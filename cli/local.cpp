@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include <spdlog/spdlog.h>
 #include "bench/bench.h"
 #include "cli/commands.h"
 #include "engine/buffer_file.h"
@@ -12,7 +13,6 @@
 #include "engine/local_render.h"
 #include "engine/progress.h"
 #include "engine/render.h"
-#include <spdlog/spdlog.h>
 
 namespace rf::cli {
 
@@ -91,9 +91,9 @@ void warn_nonfinite(const SampleBuffer& b) {
 void print_summary(const SampleBuffer& frame, double seconds, uint64_t rays) {
   double spp = samples_per_pixel(frame);
   double samples = spp * double(frame.rect.area());
-  std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n",
-              spp, seconds, human(samples / seconds).c_str(),
-              human(double(rays) / seconds).c_str(), frame.rel_mse(), frame.header.passes.count());
+  std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n", spp,
+              seconds, human(samples / seconds).c_str(), human(double(rays) / seconds).c_str(),
+              frame.rel_mse(), frame.header.passes.count());
 }
 
 struct RenderArgs {

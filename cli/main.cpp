@@ -31,8 +31,7 @@ int main(int argc, char** argv) {
   try {
     for (const rf::cli::Command& c : commands) {
       if (!c.app->parsed()) continue;
-      spdlog::set_pattern(c.long_running ? "[%Y-%m-%d %H:%M:%S.%e] %^%l%$: %v"
-                                              : "%^%l%$: %v");
+      spdlog::set_pattern(c.long_running ? "[%Y-%m-%d %H:%M:%S.%e] %^%l%$: %v" : "%^%l%$: %v");
       return c.run();
     }
   } catch (const rf::FarmError& e) {

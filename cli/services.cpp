@@ -5,6 +5,7 @@
 #include "farm/auth.h"
 #include "worker/worker.h"
 
+#include <cctype>
 #include <cstdio>
 
 namespace rf::cli {
@@ -19,6 +20,36 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       ->check(CLI::PositiveNumber);
   coord->add_option("--window", co->window_frames, "frames open at once per job")
       ->check(CLI::PositiveNumber);
+  coord->add_option_function<std::vector<std::string>>(
+      "--limit",
+      [co](const std::vector<std::string>& items) {
+        for (const std::string& item : items) {
+          size_t eq = item.find('=');
+          uint64_t value = 0;
+          bool ok = eq != std::string::npos && eq + 1 < item.size() &&
+                    std::isdigit(static_cast<unsigned char>(item[eq + 1]));
+          try {
+            if (ok) value = std::stoull(item.substr(eq + 1));
+          } catch (const std::exception&) {
+            ok = false;
+          }
+          if (!ok || !co->limits.set(item.substr(0, eq), value)) {
+            std::string names;
+            for (const std::string& n : JobLimits::names()) names += " " + n;
+            throw CLI::ValidationError("--limit",
+                                       "'" + item + "' is not NAME=VALUE with NAME one of" + names);
+          }
+        }
+      },
+      "a per-job limit, NAME=VALUE (docs/security.md; repeatable)");
+  coord->add_option("--tls-cert", co->tls_cert, "serve TLS with this certificate chain (PEM)");
+  coord->add_option("--tls-key", co->tls_key, "the key of --tls-cert (PEM)");
+  coord->add_option("--tls-client-ca", co->tls_client_ca,
+                    "mutual TLS: verify client certificates against this CA (PEM); the worker "
+                    "methods then require one");
+  coord->add_option("--health-listen", co->health_listen,
+                    "also serve the health service alone, in plaintext, here (HOST:PORT; for "
+                    "probes that cannot speak TLS)");
   coord->add_option("--token-file", co->token_file,
                     "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
                     "on SIGHUP (without it: loopback only, no authentication)");
@@ -36,13 +67,12 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                    "exit once the coordinator has no queued or leased work left");
   worker->add_option("--max-tasks", wo->max_tasks, "exit after this many tasks");
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)");
-  worker->add_option("--token-file", shared.token_file,
-                     "file holding a worker token (default: $RAYFARM_TOKEN_FILE, else "
-                     "$RAYFARM_TOKEN)");
+  add_credential_options(*worker, shared);
   out.push_back({worker,
                  [wo, &shared] {
                    wo->coordinator = shared.coordinator;
-                   wo->token = client_token(shared.token_file);
+                   wo->creds = load_client_credentials(shared.token_file, shared.tls_ca,
+                                                       shared.tls_cert, shared.tls_key);
                    return run_worker(*wo);
                  },
                  true});

@@ -41,7 +41,7 @@ std::string default_coordinator() {
 namespace {
 
 std::unique_ptr<pb::JobService::Stub> job_stub(const Endpoint& ep) {
-  return pb::JobService::NewStub(coordinator_channel(ep.address, ep.token));
+  return pb::JobService::NewStub(coordinator_channel(ep.address, ep.creds));
 }
 
 const char* code_name(grpc::StatusCode c) {
@@ -141,6 +141,7 @@ JobSpec job_spec(const SubmitArgs& a) {
   spec.overrides = a.overrides;
   spec.priority = a.priority;
   spec.tile_size = uint32_t(a.tile_size);
+  spec.build_id = a.build_id;
   return spec;
 }
 
@@ -240,17 +241,27 @@ std::string job_line(const pb::JobStatus& j) {
 
 }  // namespace
 
-int cmd_status(const Endpoint& ep, const std::string& job, bool json) {
+int cmd_status(const Endpoint& ep, const std::string& job, bool json, const StatusPage& page) {
   const std::string& addr = ep.address;
   auto stub = job_stub(ep);
   std::vector<pb::JobStatus> jobs;
-  grpc::ClientContext ctx;
-  set_deadline(ctx, 30);
-  if (job.empty()) {
-    pb::ListJobsResponse resp;
-    check(stub->ListJobs(&ctx, pb::ListJobsRequest{}, &resp), "status", addr);
-    jobs.assign(resp.jobs().begin(), resp.jobs().end());
+  if (job.empty()) {  // page by page, up to page.limit jobs (all when 0)
+    std::string after = page.after, next;
+    do {
+      grpc::ClientContext ctx;
+      set_deadline(ctx, 30);
+      pb::ListJobsRequest req;
+      req.set_after(after);
+      if (page.limit) req.set_limit(uint32_t(std::min<uint64_t>(page.limit - jobs.size(), 1000)));
+      pb::ListJobsResponse resp;
+      check(stub->ListJobs(&ctx, req, &resp), "status", addr);
+      jobs.insert(jobs.end(), resp.jobs().begin(), resp.jobs().end());
+      next = after = resp.next_after();
+    } while (!after.empty() && (page.limit == 0 || jobs.size() < page.limit));
+    if (!next.empty()) std::fprintf(stderr, "more jobs follow: status --after %s\n", next.c_str());
   } else {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 30);
     pb::JobRef ref;
     ref.set_job_id(job);
     pb::JobStatus s;
@@ -389,12 +400,15 @@ int cmd_cancel(const Endpoint& ep, const std::string& job) {
   return 0;
 }
 
-int cmd_health(const std::string& addr, bool services) {
+int cmd_health(const Endpoint& ep, bool services) {
+  const std::string& addr = ep.address;
   try {
-    std::string s = check_health(addr);
+    auto creds = channel_credentials(ep.creds);
+    std::string s = check_health(addr, "", 5, creds);
     std::printf("%s: %s\n", addr.c_str(), s.c_str());
     if (services)
-      for (const std::string& name : list_services(addr)) std::printf("  %s\n", name.c_str());
+      for (const std::string& name : list_services(addr, 5, creds))
+        std::printf("  %s\n", name.c_str());
     return s == "SERVING" ? 0 : 1;
   } catch (const ProbeError& e) {
     std::printf("%s: unreachable: %s\n", addr.c_str(), e.what());

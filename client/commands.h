@@ -6,6 +6,7 @@
 #include <string>
 
 #include "engine/scene.h"
+#include "farm/channel.h"
 
 namespace rf {
 
@@ -19,10 +20,10 @@ struct FarmError : std::runtime_error {
 // $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
 std::string default_coordinator();
 
-// A coordinator and the token to show it (farm/auth.h client_token; "" for none).
+// A coordinator and how to show ourselves to it (farm/channel.h).
 struct Endpoint {
   std::string address;
-  std::string token;
+  ClientCredentials creds;
 };
 
 struct SubmitArgs {
@@ -31,16 +32,22 @@ struct SubmitArgs {
   std::string name;
   SceneOverrides overrides;
   int priority = 0;
-  int tile_size = 0;  // 0: the coordinator's default
+  int tile_size = 0;     // 0: the coordinator's default
+  std::string build_id;  // merge results of this build only (empty: the first result's)
 };
 
 int cmd_submit(const Endpoint& ep, const SubmitArgs& args);  // prints the job id
-int cmd_status(const Endpoint& ep, const std::string& job, bool json);
+// `status` without a job pages through the list: at most `limit` jobs (0: all) after `after`.
+struct StatusPage {
+  uint64_t limit = 0;
+  std::string after;
+};
+int cmd_status(const Endpoint& ep, const std::string& job, bool json, const StatusPage& page);
 int cmd_watch(const Endpoint& ep,
               const std::string& job);  // 0 completed, 1 failed, 3 cancelled
 int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out_dir,
               std::optional<uint32_t> frame, float exposure);
 int cmd_cancel(const Endpoint& ep, const std::string& job);
-int cmd_health(const std::string& addr, bool list_services);
+int cmd_health(const Endpoint& ep, bool list_services);
 
 }  // namespace rf

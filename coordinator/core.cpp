@@ -166,6 +166,7 @@ struct JobRecord {
   int64_t submitted_unix = 0;
   double core_seconds = 0;
   std::string tenant;
+  std::string build_id;  // results of this build only; empty: the first merged result's
   std::vector<Rect> tiles;
   bool splats = false;
   uint32_t passes = 0;
@@ -182,6 +183,26 @@ struct JobRecord {
   }
 };
 
+bool JobLimits::set(const std::string& name, uint64_t value) {
+  std::map<std::string, uint64_t*> fields = {{"pixels_per_frame", &pixels_per_frame},
+                                             {"tiles_per_frame", &tiles_per_frame},
+                                             {"tasks_per_job", &tasks_per_job},
+                                             {"frames_per_job", &frames_per_job},
+                                             {"spp", &spp},
+                                             {"name_bytes", &name_bytes},
+                                             {"path_bytes", &path_bytes},
+                                             {"bundle_files", &bundle_files}};
+  auto it = fields.find(name);
+  if (it == fields.end()) return false;
+  *it->second = value;
+  return true;
+}
+
+std::vector<std::string> JobLimits::names() {
+  return {"pixels_per_frame", "tiles_per_frame", "tasks_per_job", "frames_per_job", "spp",
+          "name_bytes",       "path_bytes",      "bundle_files"};
+}
+
 Coordinator::Coordinator(CoreOptions o)
     : options_(with_defaults(std::move(o))),
       lock_(options_.state_dir),
@@ -190,7 +211,8 @@ Coordinator::Coordinator(CoreOptions o)
       scheduler_(SchedulerOptions{options_.lease_seconds, options_.max_failures,
                                   options_.window_frames, options_.instance + "-L"}) {
   next_seq_ = store_.next_seq();
-  for (auto& [id, principal] : store_.workers()) workers_[id] = principal;
+  for (const JobStore::StoredWorker& w : store_.workers())
+    workers_[w.id] = {w.principal, w.build_id};
   for (const StoredJob& j : store_.jobs()) restore(j);
 }
 
@@ -204,6 +226,8 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   job->seq = seq;
   job->spec = spec;
   if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
+  check_limits(spec);
+  job->build_id = spec.build_id;
   check_bundle(spec, blobs_);
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
   try {
@@ -226,6 +250,11 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
       refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
     }
   }
+  const JobLimits& limits = options_.limits;
+  if (frames.size() > limits.frames_per_job)
+    refuse(ErrorCode::ResourceExhausted, "frames: " + std::to_string(frames.size()) +
+                                             " frames; the limit frames_per_job is " +
+                                             std::to_string(limits.frames_per_job));
   int tile_size = spec.tile_size ? int(spec.tile_size) : kDefaultTileSize;
   if (tile_size < 8 || tile_size > 4096)
     refuse(ErrorCode::InvalidArgument,
@@ -236,7 +265,32 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
     f->scene_path = expand_frame_pattern(spec.scene_path, number);
-    FramePlan plan = plan_frame(scene_for(f->scene_path), number, tile_size);
+    const Scene& scene = scene_for(f->scene_path);
+    uint64_t pixels = uint64_t(scene.film.width) * uint64_t(scene.film.height);
+    if (pixels > limits.pixels_per_frame)
+      refuse(ErrorCode::ResourceExhausted,
+             "frame " + std::to_string(number) + ": " + std::to_string(scene.film.width) + "x" +
+                 std::to_string(scene.film.height) + " is " + std::to_string(pixels) +
+                 " pixels; the limit pixels_per_frame is " +
+                 std::to_string(limits.pixels_per_frame));
+    if (scene.render.spp > limits.spp)
+      refuse(ErrorCode::ResourceExhausted,
+             "spp " + std::to_string(scene.render.spp) +
+                 " is over the limit spp = " + std::to_string(limits.spp));
+    FramePlan plan = plan_frame(scene, number, tile_size);
+    if (plan.tiles.size() > limits.tiles_per_frame)
+      refuse(ErrorCode::ResourceExhausted,
+             "frame " + std::to_string(number) + ": " + std::to_string(plan.tiles.size()) +
+                 " tiles of " + std::to_string(tile_size) +
+                 " pixels; the limit tiles_per_frame is " + std::to_string(limits.tiles_per_frame) +
+                 " (use a larger --tile-size)");
+    uint64_t tasks = uint64_t(frames.size()) * plan.passes * plan.tiles.size();
+    if (tasks > limits.tasks_per_job)
+      refuse(ErrorCode::ResourceExhausted,
+             std::to_string(frames.size()) + " frames x " + std::to_string(plan.passes) +
+                 " passes x " + std::to_string(plan.tiles.size()) +
+                 " tiles = " + std::to_string(tasks) + " tasks; the limit tasks_per_job is " +
+                 std::to_string(limits.tasks_per_job));
     f->base = plan.base;
     if (job.frames.empty()) {
       job.tiles = plan.tiles;
@@ -293,40 +347,81 @@ void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
 
 void Coordinator::restore(const StoredJob& stored) {
   std::optional<JobSpec> spec = decode_job_spec(stored.spec);
-  if (!spec) {
-    spdlog::error("job {}: stored spec does not parse; skipped", stored.id);
-    return;
-  }
+  if (!spec) return restore_failed(stored, "its stored spec does not parse");
   std::shared_ptr<JobRecord> job;
   try {
     job = build_job(stored.id, stored.seq, *spec);
-  } catch (const CoordinatorError& e) {
-    spdlog::error("job {}: cannot be restored: {}", stored.id, e.what());
-    return;
+    job->state = JobState(stored.state);
+    job->error = stored.error;
+    job->submitted_unix = stored.submitted_unix;
+    job->core_seconds = stored.core_seconds;
+    job->tenant = stored.tenant;
+    if (job->build_id.empty()) job->build_id = stored.build_id;
+    scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
+                       spec->priority);
+    if (terminal(job->state)) {
+      scheduler_.cancel_job(job->id);
+    } else {
+      // Leases from before the restart, ended: their holders' late results are still accepted.
+      for (const StoredLease& l : store_.leases(job->id))
+        scheduler_.restore_lease(l.lease_id, TaskRef{job->id, l.frame, l.pass, l.tile},
+                                 l.worker_id);
+      // Failures before the restart still count toward failing a task (and skipping a worker).
+      for (const JobStore::TaskFailure& e : store_.failures(job->id))
+        scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id,
+                                   e.message);
+      if (scheduler_.job_failed(job->id))
+        set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
+    }
+    for (auto& f : job->frames) resume_frame(*job, *f);
+  } catch (const std::exception& e) {  // bad_alloc included: one job never stops the others
+    if (job) scheduler_.cancel_job(job->id);
+    return restore_failed(stored, e.what());
   }
-  job->state = JobState(stored.state);
-  job->error = stored.error;
-  job->submitted_unix = stored.submitted_unix;
-  job->core_seconds = stored.core_seconds;
-  job->tenant = stored.tenant;
-  scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
-                     spec->priority);
-  if (terminal(job->state)) {
-    scheduler_.cancel_job(job->id);
-  } else {
-    // Leases from before the restart, ended: their holders' late results are still accepted.
-    for (const StoredLease& l : store_.leases(job->id))
-      scheduler_.restore_lease(l.lease_id, TaskRef{job->id, l.frame, l.pass, l.tile}, l.worker_id);
-    // Failures before the restart still count toward failing a task (and skipping a worker).
-    for (const JobStore::TaskFailure& e : store_.failures(job->id))
-      scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id, e.message);
-    if (scheduler_.job_failed(job->id))
-      set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
-  }
-  for (auto& f : job->frames) resume_frame(*job, *f);
   jobs_[job->id] = job;
   spdlog::info("restored job {} ({}), {} tasks done in the database", job->id,
                job_state_name(job->state), store_.tasks_done(job->id));
+}
+
+void Coordinator::restore_failed(const StoredJob& stored, const std::string& why) {
+  auto job = std::make_shared<JobRecord>();
+  job->id = stored.id;
+  job->seq = stored.seq;
+  if (std::optional<JobSpec> spec = decode_job_spec(stored.spec)) job->spec = *spec;
+  job->submitted_unix = stored.submitted_unix;
+  job->core_seconds = stored.core_seconds;
+  job->tenant = stored.tenant;
+  job->state = JobState(stored.state);
+  job->error = stored.error;
+  jobs_[job->id] = job;
+  spdlog::error("job {}: cannot be restored: {}", stored.id, why);
+  if (!terminal(job->state))
+    set_state(*job, JobState::Failed, "the coordinator could not restore it: " + why);
+}
+
+void Coordinator::check_limits(const JobSpec& spec) const {
+  const JobLimits& l = options_.limits;
+  auto too_long = [&](const std::string& what, const std::string& s, uint64_t limit,
+                      const char* name) {
+    if (s.size() > limit)
+      refuse(ErrorCode::InvalidArgument, what + " is " + std::to_string(s.size()) +
+                                             " bytes; the limit " + name + " is " +
+                                             std::to_string(limit));
+  };
+  too_long("name", spec.name, l.name_bytes, "name_bytes");
+  too_long("scene_path", spec.scene_path, l.path_bytes, "path_bytes");
+  too_long("frames", spec.frames, l.path_bytes, "path_bytes");
+  too_long("build_id", spec.build_id, l.name_bytes, "name_bytes");
+  if (spec.files.size() > l.bundle_files)
+    refuse(ErrorCode::ResourceExhausted, "the bundle has " + std::to_string(spec.files.size()) +
+                                             " files; the limit bundle_files is " +
+                                             std::to_string(l.bundle_files));
+  for (const BundleEntry& f : spec.files)
+    too_long("a bundle path", f.path, l.path_bytes, "path_bytes");
+}
+
+bool Coordinator::build_ok(const JobRecord& job, const std::string& build_id) const {
+  return job.build_id.empty() || job.build_id == build_id;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -408,8 +503,15 @@ FrameStatus Coordinator::frame_status(const JobRecord& job, const FrameRecord& f
 }
 
 JobStatus Coordinator::status_of(const JobRecord& job) const {
-  JobStatus s{job.id,    job.spec.name,    job.tenant,         job.state,
-              job.error, job.core_seconds, job.submitted_unix, {}};
+  JobStatus s;
+  s.job_id = job.id;
+  s.name = job.spec.name;
+  s.tenant = job.tenant;
+  s.build_id = job.build_id;
+  s.state = job.state;
+  s.error = job.error;
+  s.core_seconds = job.core_seconds;
+  s.submitted_unix = job.submitted_unix;
   for (const auto& f : job.frames) s.frames.push_back(frame_status(job, *f));
   return s;
 }
@@ -438,12 +540,18 @@ void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) 
   changed_.notify_all();
 }
 
-std::vector<JobStatus> Coordinator::list(const Caller& caller) const {
+std::vector<JobStatus> Coordinator::list(const Caller& caller, size_t limit,
+                                         const std::string& after, bool* more) const {
   std::lock_guard lock(mu_);
+  uint64_t after_seq = 0;
+  if (!after.empty()) after_seq = find_for(after, caller)->seq;
   std::vector<const JobRecord*> order;
   for (auto& [id, j] : jobs_)
-    if (caller.all_tenants || j->tenant == caller.tenant) order.push_back(j.get());
+    if ((caller.all_tenants || j->tenant == caller.tenant) && j->seq > after_seq)
+      order.push_back(j.get());
   std::sort(order.begin(), order.end(), [](auto* a, auto* b) { return a->seq < b->seq; });
+  if (more) *more = order.size() > limit;
+  if (order.size() > limit) order.resize(limit);
   std::vector<JobStatus> out;
   for (const JobRecord* j : order) out.push_back(status_of(*j));
   return out;
@@ -517,8 +625,8 @@ Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& cal
   r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
   r.lease_seconds = uint32_t(std::max(1.0, options_.lease_seconds));
   r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
-  store_.insert_worker(r.worker_id, caller.principal);
-  workers_[r.worker_id] = caller.principal;
+  store_.insert_worker({r.worker_id, caller.principal, w.build_id.substr(0, 256)});
+  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256)};
   spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
                w.cores, clip(w.build_id), clip(w.isa));
   return r;
@@ -529,9 +637,9 @@ void Coordinator::check_worker(const std::string& worker_id, const Caller& calle
   auto it = workers_.find(worker_id);
   if (it == workers_.end())
     refuse(ErrorCode::NotFound, "no worker '" + clip(worker_id) + "' registered; register first");
-  if (it->second != caller.principal) {
+  if (it->second.principal != caller.principal) {
     spdlog::warn("refused: {} called as worker {}, registered by {}", caller.principal, worker_id,
-                 it->second);
+                 it->second.principal);
     refuse(ErrorCode::PermissionDenied,
            "worker " + worker_id + " was registered with another token");
   }
@@ -557,9 +665,15 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
   check_worker(worker_id, caller);
   if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
   LeaseResult out;
-  std::optional<Lease> l = scheduler_.lease(worker_id, now());
+  // Only jobs that merge this worker's build (a job pinned to another build is not its work).
+  const std::string& build = workers_.at(worker_id).build_id;
+  Scheduler::JobFilter may = [&](const std::string& job_id) {
+    std::shared_ptr<JobRecord> job = find(job_id);
+    return job && build_ok(*job, build);
+  };
+  std::optional<Lease> l = scheduler_.lease(worker_id, now(), may);
   if (!l) {
-    out.no_more_work = !scheduler_.work_left_for(worker_id);
+    out.no_more_work = !scheduler_.work_left_for(worker_id, may);
     return out;
   }
   store_.insert_lease(
@@ -631,9 +745,15 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
 }
 
 // The scheduler's verdict on a durable result and, when it is the first, the database row.
-bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds) {
+bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds,
+                                const std::string& build_id) {
+  if (!build_ok(job, build_id)) return false;  // another build's result was merged meanwhile
   if (scheduler_.complete(r.lease_id, r.task, now()) != CompleteOutcome::Accepted)
     return false;  // another result came first, or the job was cancelled or failed meanwhile
+  if (job.build_id.empty()) {  // the first merged result pins the job to its build
+    job.build_id = build_id;
+    store_.set_build(job.id, build_id);
+  }
   store_.task_done(job.id, r.task.frame, r.task.pass, r.task.tile, r.worker_id);
   job.core_seconds += core_seconds;
   store_.add_core_seconds(job.id, core_seconds);
@@ -663,6 +783,11 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   SampleBuffer buffer;
   try {
     buffer = checked_buffer(*job, *f, r);
+    std::lock_guard lock(mu_);
+    if (!build_ok(*job, buffer.header.build_id))
+      refuse(ErrorCode::FailedPrecondition, "job " + job->id + " merges results of build '" +
+                                                job->build_id + "'; this one is from '" +
+                                                clip(buffer.header.build_id) + "'");
   } catch (const CoordinatorError& e) {
     spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(r.task),
                  r.worker_id, e.what());
@@ -687,7 +812,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   }
   {
     std::lock_guard lock(mu_);
-    if (!record_result(*job, r, buffer.header.core_seconds)) return false;
+    if (!record_result(*job, r, buffer.header.core_seconds, buffer.header.build_id)) return false;
   }
   // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
   // frames' merges go on meanwhile.

@@ -73,7 +73,8 @@ struct FrameStatus {
 
 struct JobStatus {
   std::string job_id, name;
-  std::string tenant;  // whose job it is
+  std::string tenant;    // whose job it is
+  std::string build_id;  // the build whose results it merges, once known
   JobState state = JobState::Queued;
   std::string error;  // why it failed (the workers' messages) or was cancelled
   double core_seconds = 0;
@@ -129,11 +130,31 @@ struct TaskFailureReport {
   bool handed_back = false;  // the worker is shutting down: not a failure
 };
 
+// What one job may ask for, checked at submit: a job over a limit is refused naming it
+// (RESOURCE_EXHAUSTED for sizes, INVALID_ARGUMENT for strings). The coordinator keeps a record
+// per task (frames x passes x tiles) and, per open frame (CoreOptions::window_frames of them),
+// an accumulator of about 104 bytes per pixel (more with AOVs): the defaults bound one job to
+// 100k task records and 1.7 GB per open frame. `rayfarm coordinator --limit NAME=VALUE` sets them.
+struct JobLimits {
+  uint64_t pixels_per_frame = 4096ull * 4096;
+  uint64_t tiles_per_frame = 4096;
+  uint64_t tasks_per_job = 100000;
+  uint64_t frames_per_job = 10000;
+  uint64_t spp = uint64_t(1) << 20;
+  uint64_t name_bytes = 256;   // the job's name
+  uint64_t path_bytes = 1024;  // the scene path and each bundle path
+  uint64_t bundle_files = 10000;
+  // Sets the limit called `name` (the field's name); false if there is no such limit.
+  bool set(const std::string& name, uint64_t value);
+  static std::vector<std::string> names();
+};
+
 struct CoreOptions {
   std::string state_dir;
   double lease_seconds = 30;
   uint32_t window_frames = 4;
   int max_failures = 3;  // workers a task may fail on, and tasks a worker may fail, per job
+  JobLimits limits;
   // Distinguishes this run's lease and worker ids from an earlier run's; empty: made up from
   // the time and process id.
   std::string instance;
@@ -160,7 +181,10 @@ class Coordinator {
   // overrides, so a bad scene is refused now, not by a worker later) and queues the job under
   // the caller's tenant.
   std::string submit(const JobSpec& spec, const Caller& caller = {});  // the new job's id
-  std::vector<JobStatus> list(const Caller& caller = {}) const;        // in submission order
+  // In submission order; a page of at most `limit` jobs after job `after` (empty: the first).
+  // `more` is set when jobs follow the page.
+  std::vector<JobStatus> list(const Caller& caller = {}, size_t limit = SIZE_MAX,
+                              const std::string& after = "", bool* more = nullptr) const;
   JobStatus status(const std::string& job_id, const Caller& caller = {}) const;
   // For watching a job: its status if it changed since version `seen` (0: never seen), waiting
   // up to timeout_seconds for a change; `seen` becomes the version returned.
@@ -198,16 +222,22 @@ class Coordinator {
   std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec);
   void add_frames(JobRecord& job, const std::string& bundle_dir);
   void restore(const StoredJob& stored);
+  // A stored job that cannot be restored: kept, failed with the reason, with no frames.
+  void restore_failed(const StoredJob& stored, const std::string& why);
+  void check_limits(const JobSpec& spec) const;
+  // Whether the job merges results of this build (its pin, or any while none is known).
+  bool build_ok(const JobRecord& job, const std::string& build_id) const;  // under mu_
   void resume_frame(JobRecord& job, FrameRecord& f);
   SampleBuffer checked_buffer(const JobRecord& job, const FrameRecord& f,
                               const TaskResult& r) const;
-  bool record_result(JobRecord& job, const TaskResult& r, double core_seconds);  // under mu_
-  void publish_frame(JobRecord& job, FrameRecord& f);                            // under mu_
-  void set_state(JobRecord& job, JobState s, const std::string& error);          // under mu_
-  JobStatus status_of(const JobRecord& job) const;                               // under mu_
-  FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;    // under mu_
-  std::shared_ptr<JobRecord> find(const std::string& id) const;                  // under mu_
-  std::shared_ptr<JobRecord> find_or_throw(const std::string& id) const;         // under mu_
+  bool record_result(JobRecord& job, const TaskResult& r, double core_seconds,  // under mu_
+                     const std::string& build_id);
+  void publish_frame(JobRecord& job, FrameRecord& f);                          // under mu_
+  void set_state(JobRecord& job, JobState s, const std::string& error);        // under mu_
+  JobStatus status_of(const JobRecord& job) const;                             // under mu_
+  FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;  // under mu_
+  std::shared_ptr<JobRecord> find(const std::string& id) const;                // under mu_
+  std::shared_ptr<JobRecord> find_or_throw(const std::string& id) const;       // under mu_
   // find_or_throw, refusing another tenant's job.                                 // under mu_
   std::shared_ptr<JobRecord> find_for(const std::string& id, const Caller& caller) const;
   // The worker's registration checked against the caller; throws if unknown or not theirs.
@@ -226,7 +256,11 @@ class Coordinator {
   bool closing_ = false;
   Scheduler scheduler_;
   std::map<std::string, std::shared_ptr<JobRecord>> jobs_;
-  std::map<std::string, std::string> workers_;  // worker id -> principal that registered it
+  struct WorkerRecord {
+    std::string principal;  // the identity that registered it
+    std::string build_id;   // the build it said it runs
+  };
+  std::map<std::string, WorkerRecord> workers_;
   uint64_t next_seq_ = 1, next_worker_ = 1;
 };
 

@@ -8,6 +8,7 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <set>
 
 namespace rf {
 
@@ -111,16 +112,17 @@ JobStore::JobStore(const std::string& path) : path_(path) {
       "pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL, done INTEGER NOT NULL, "
       "message TEXT NOT NULL DEFAULT '', at INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
   exec("CREATE INDEX IF NOT EXISTS task_events_job ON task_events (job_id, done)");
-  // Added with tenants: a store written before them gains the column, its jobs tenant ''.
-  bool has_tenant = false;
+  // Columns added since: a store written before gains them, empty.
+  std::set<std::string> columns;
   {
     Stmt s(db_, "SELECT name FROM pragma_table_info('jobs')", path_);
-    while (s.step()) has_tenant |= s.text(0) == "tenant";
+    while (s.step()) columns.insert(s.text(0));
   }
-  if (!has_tenant) exec("ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT ''");
+  if (!columns.count("tenant")) exec("ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT ''");
+  if (!columns.count("build")) exec("ALTER TABLE jobs ADD COLUMN build TEXT NOT NULL DEFAULT ''");
   exec(
-      "CREATE TABLE IF NOT EXISTS workers (id TEXT PRIMARY KEY, principal TEXT NOT NULL, "
-      "registered INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
+      "CREATE TABLE IF NOT EXISTS workers (id TEXT PRIMARY KEY, principal TEXT NOT NULL, build "
+      "TEXT NOT NULL DEFAULT '', registered INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
   exec(
       "CREATE TABLE IF NOT EXISTS leases (id TEXT PRIMARY KEY, job_id TEXT NOT NULL, frame "
       "INTEGER NOT NULL, pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL)");
@@ -193,26 +195,31 @@ void JobStore::task_failed(const std::string& id, uint32_t frame, uint32_t pass,
 
 std::vector<StoredJob> JobStore::jobs() const {
   Stmt s(db_,
-         "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant FROM jobs ORDER BY "
-         "seq",
+         "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant, build FROM jobs "
+         "ORDER BY seq",
          path_);
   std::vector<StoredJob> out;
   while (s.step())
     out.push_back({s.text(0), uint64_t(s.integer(1)), s.text(2), int(s.integer(3)), s.text(4),
-                   s.integer(5), s.real(6), s.text(7)});
+                   s.integer(5), s.real(6), s.text(7), s.text(8)});
   return out;
 }
 
-void JobStore::insert_worker(const std::string& id, const std::string& principal) {
-  Stmt s(db_, "INSERT OR REPLACE INTO workers (id, principal) VALUES (?,?)", path_);
-  s.bind(id).bind(principal).step();
+void JobStore::insert_worker(const StoredWorker& w) {
+  Stmt s(db_, "INSERT OR REPLACE INTO workers (id, principal, build) VALUES (?,?,?)", path_);
+  s.bind(w.id).bind(w.principal).bind(w.build_id).step();
 }
 
-std::vector<std::pair<std::string, std::string>> JobStore::workers() const {
-  Stmt s(db_, "SELECT id, principal FROM workers", path_);
-  std::vector<std::pair<std::string, std::string>> out;
-  while (s.step()) out.emplace_back(s.text(0), s.text(1));
+std::vector<JobStore::StoredWorker> JobStore::workers() const {
+  Stmt s(db_, "SELECT id, principal, build FROM workers", path_);
+  std::vector<StoredWorker> out;
+  while (s.step()) out.push_back({s.text(0), s.text(1), s.text(2)});
   return out;
+}
+
+void JobStore::set_build(const std::string& id, const std::string& build) {
+  Stmt s(db_, "UPDATE jobs SET build = ? WHERE id = ?", path_);
+  s.bind(build).bind(id).step();
 }
 
 void JobStore::insert_lease(const StoredLease& l) {

@@ -28,7 +28,8 @@ struct StoredJob {
   std::string error;
   int64_t submitted_unix = 0;
   double core_seconds = 0;
-  std::string tenant;  // whose job it is ('' before tenants existed)
+  std::string tenant;    // whose job it is ('' before tenants existed)
+  std::string build_id;  // the build of its first merged result ('' until then)
 };
 
 // A lease as handed out, kept so that its holder's late result is accepted after a restart.
@@ -72,8 +73,12 @@ class JobStore {
   // Worker registrations (id -> the principal that registered it) and leases. Lease rows are
   // written with synchronous=NORMAL (no fsync): losing the last ones in a power cut only makes
   // those late results be rendered again.
-  void insert_worker(const std::string& worker_id, const std::string& principal);
-  std::vector<std::pair<std::string, std::string>> workers() const;
+  struct StoredWorker {
+    std::string id, principal, build_id;
+  };
+  void insert_worker(const StoredWorker& worker);
+  std::vector<StoredWorker> workers() const;
+  void set_build(const std::string& job_id, const std::string& build_id);
   void insert_lease(const StoredLease& lease);
   std::vector<StoredLease> leases(const std::string& job_id) const;
   void delete_leases(const std::string& job_id);  // the job ended

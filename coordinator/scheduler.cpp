@@ -68,11 +68,12 @@ void Scheduler::expire(double now) {
   }
 }
 
-std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now) {
+std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
+                                      const JobFilter& may) {
   expire(now);
   std::vector<JobState*> order;
   for (auto& [id, j] : jobs_)
-    if (!j.failed && !j.cancelled) order.push_back(&j);
+    if (!j.failed && !j.cancelled && (!may || may(id))) order.push_back(&j);
   std::sort(order.begin(), order.end(), [](const JobState* a, const JobState* b) {
     return std::tie(b->priority, a->order) < std::tie(a->priority, b->order);
   });
@@ -234,9 +235,9 @@ std::string Scheduler::job_error(const std::string& job_id) const {
   return it == jobs_.end() ? "" : it->second.error;
 }
 
-bool Scheduler::work_left_for(const std::string& worker_id) const {
+bool Scheduler::work_left_for(const std::string& worker_id, const JobFilter& may) const {
   for (const auto& [id, j] : jobs_) {
-    if (j.failed || j.cancelled) continue;
+    if (j.failed || j.cancelled || (may && !may(id))) continue;
     auto wf = j.worker_failures.find(worker_id);
     if (wf != j.worker_failures.end() && wf->second >= options_.max_failures) continue;
     for (const FrameState& f : j.frames)

@@ -13,6 +13,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <set>
@@ -49,8 +50,10 @@ class Scheduler {
                uint32_t passes, int priority);
   void cancel_job(const std::string& job_id);  // drops its queued tasks and ends its leases
 
+  // Which jobs a worker may get tasks of (all when empty).
+  using JobFilter = std::function<bool(const std::string& job_id)>;
   // The next task for a worker, or nothing. Expires overdue leases first.
-  std::optional<Lease> lease(const std::string& worker_id, double now);
+  std::optional<Lease> lease(const std::string& worker_id, double now, const JobFilter& may = {});
   LeaseOutcome renew(const std::string& lease_id, double now);
   // A result arrived for this lease (the caller merges it only on Accepted).
   CompleteOutcome complete(const std::string& lease_id, double now);
@@ -79,7 +82,7 @@ class Scheduler {
   bool job_failed(const std::string& job_id) const;
   std::string job_error(const std::string& job_id) const;  // the failing workers' messages
   // Queued or leased tasks this worker could still get (for --exit-when-idle).
-  bool work_left_for(const std::string& worker_id) const;
+  bool work_left_for(const std::string& worker_id, const JobFilter& may = {}) const;
   size_t queued_tasks() const;
 
  private:

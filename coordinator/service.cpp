@@ -13,8 +13,10 @@
 
 #include <chrono>
 #include <ctime>
+#include <fstream>
 #include <mutex>
 #include <optional>
+#include <sstream>
 
 #include "coordinator/core.h"
 #include "farm/auth.h"
@@ -65,7 +67,8 @@ enum class Access { Client, Worker };
 // and TLS alike: the token travels as call metadata ("authorization: Bearer TOKEN").
 class Gate {
  public:
-  explicit Gate(std::string token_file) : file_(std::move(token_file)) {
+  Gate(std::string token_file, bool worker_certs)
+      : file_(std::move(token_file)), worker_certs_(worker_certs) {
     if (!file_.empty()) table_ = std::make_shared<const TokenTable>(TokenTable::load(file_));
   }
   bool open() const { return file_.empty(); }
@@ -80,11 +83,19 @@ class Gate {
   // PERMISSION_DENIED for a token of the wrong role. Refusals are logged with the peer and
   // the token's id (a digest prefix), never the token.
   Caller admit(ServerContext* ctx, Access need, const char* method) const {
-    if (open()) return Caller{};
     auto deny = [&](ErrorCode code, const std::string& why) {
       spdlog::warn("refused {} from {}: {}", method, ctx->peer(), why);
       throw CoordinatorError(code, why);
     };
+    if (need == Access::Worker && worker_certs_) {
+      std::shared_ptr<const grpc::AuthContext> auth = ctx->auth_context();
+      if (!auth || !auth->IsPeerAuthenticated())
+        deny(ErrorCode::Unauthenticated,
+             std::string(method) +
+                 " needs a client certificate signed by the coordinator's "
+                 "--tls-client-ca (mutual TLS is on for workers)");
+    }
+    if (open()) return Caller{};
     std::string token;
     const auto& md = ctx->client_metadata();
     auto it = md.find("authorization");
@@ -121,9 +132,35 @@ class Gate {
 
  private:
   std::string file_;
+  bool worker_certs_;  // mutual TLS: worker methods need a verified client certificate
   mutable std::mutex mu_;
   std::shared_ptr<const TokenTable> table_;
 };
+
+std::string read_pem(const std::string& path, const char* flag) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in)
+    throw std::runtime_error(std::string("coordinator: ") + flag + " " + path + ": cannot read it");
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// TLS server credentials from the options' PEM files, or plaintext when none is given.
+std::shared_ptr<grpc::ServerCredentials> server_credentials(const CoordinatorOptions& o) {
+  if (o.tls_cert.empty() && o.tls_key.empty() && o.tls_client_ca.empty())
+    return grpc::InsecureServerCredentials();
+  if (o.tls_cert.empty() || o.tls_key.empty())
+    throw std::runtime_error("coordinator: TLS needs both --tls-cert and --tls-key");
+  // Client certificates: verified when sent; the gate requires one for the worker methods.
+  grpc::SslServerCredentialsOptions ssl(o.tls_client_ca.empty()
+                                            ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+                                            : GRPC_SSL_REQUEST_CLIENT_CERTIFICATE_AND_VERIFY);
+  if (!o.tls_client_ca.empty()) ssl.pem_root_certs = read_pem(o.tls_client_ca, "--tls-client-ca");
+  ssl.pem_key_cert_pairs.push_back(
+      {read_pem(o.tls_key, "--tls-key"), read_pem(o.tls_cert, "--tls-cert")});
+  return grpc::SslServerCredentials(ssl);
+}
 
 // Runs a handler for its admitted caller. A refusal answers with its code; anything else
 // thrown must not take the server down: it answers INTERNAL with the message.
@@ -193,6 +230,7 @@ pb::JobStatus to_wire(const JobStatus& s) {
   out.set_core_seconds(s.core_seconds);
   out.set_submitted_unix(s.submitted_unix);
   out.set_tenant(s.tenant);
+  out.set_build_id(s.build_id);
   for (const FrameStatus& f : s.frames) *out.add_frames() = to_wire(f);
   return out;
 }
@@ -266,10 +304,25 @@ class JobServiceImpl final : public pb::JobService::Service {
       o->set_job_id(c_.submit(from_wire(first.spec()), caller));
     });
   }
-  Status ListJobs(ServerContext* ctx, const pb::ListJobsRequest*,
+  // A page of jobs: at most the limit asked (100 by default, 1000 at most) and about 3 MiB, so
+  // the answer stays under gRPC's 4 MiB message limit whatever the jobs hold.
+  Status ListJobs(ServerContext* ctx, const pb::ListJobsRequest* r,
                   pb::ListJobsResponse* o) override {
     return guarded(g_, ctx, Access::Client, "ListJobs", [&](const Caller& caller) {
-      for (const JobStatus& s : c_.list(caller)) *o->add_jobs() = to_wire(s);
+      size_t limit = r->limit() == 0 ? 100 : std::min<size_t>(r->limit(), 1000);
+      bool more = false;
+      std::vector<JobStatus> page = c_.list(caller, limit, r->after(), &more);
+      size_t bytes = 0;
+      for (size_t i = 0; i < page.size(); ++i) {
+        pb::JobStatus s = to_wire(page[i]);
+        bytes += s.ByteSizeLong();
+        if (i > 0 && bytes > (3u << 20)) {
+          more = true;
+          break;
+        }
+        *o->add_jobs() = std::move(s);
+      }
+      if (more && o->jobs_size() > 0) o->set_next_after(o->jobs(o->jobs_size() - 1).job_id());
     });
   }
   Status GetJob(ServerContext* ctx, const pb::JobRef* r, pb::JobStatus* o) override {
@@ -358,6 +411,7 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
       std::optional<TaskRef> task = parse_task_id(header.task_id());
       if (!task) bad_request("task_id '" + header.task_id().substr(0, 64) + "' is malformed");
       c_.check_upload(header.worker_id(), header.lease_id(), *task, caller);
+      UploadSlot slot(*this, header.worker_id());
       ChunkAssembler chunks(o_.max_buffer_bytes);
       while (r->Read(&msg)) {
         if (!msg.has_chunk()) bad_request("only chunks may follow the header");
@@ -375,9 +429,35 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
   }
 
  private:
+  // One of a worker's concurrent uploads (a worker sends one at a time, two while retrying);
+  // refused with RESOURCE_EXHAUSTED over kUploadsPerWorker, so one worker id cannot hold many
+  // buffers in memory at once.
+  static constexpr int kUploadsPerWorker = 2;
+  class UploadSlot {
+   public:
+    UploadSlot(WorkerServiceImpl& s, const std::string& worker) : s_(s), worker_(worker) {
+      std::lock_guard lock(s_.uploads_mu_);
+      if (s_.uploads_[worker_] >= kUploadsPerWorker)
+        throw CoordinatorError(ErrorCode::ResourceExhausted, "worker " + worker_ + " already has " +
+                                                                 std::to_string(kUploadsPerWorker) +
+                                                                 " uploads in flight");
+      ++s_.uploads_[worker_];
+    }
+    ~UploadSlot() {
+      std::lock_guard lock(s_.uploads_mu_);
+      if (--s_.uploads_[worker_] == 0) s_.uploads_.erase(worker_);
+    }
+
+   private:
+    WorkerServiceImpl& s_;
+    std::string worker_;
+  };
+
   Coordinator& c_;
   const CoordinatorOptions& o_;
   const Gate& g_;
+  std::mutex uploads_mu_;
+  std::map<std::string, int> uploads_;
 };
 
 // Whether a listen address only reaches this machine: 127.0.0.0/8, ::1, localhost, a Unix
@@ -399,7 +479,8 @@ struct CoordinatorServer::Impl {
   std::unique_ptr<JobServiceImpl> jobs;
   std::unique_ptr<WorkerServiceImpl> workers;
   std::unique_ptr<grpc::Server> server;
-  int port = 0;
+  std::unique_ptr<grpc::Server> health_server;  // --health-listen: the health service alone
+  int port = 0, health_port = 0;
 };
 
 CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
@@ -411,18 +492,19 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
         " without --token-file: anyone who reaches it could submit, cancel and upload results. "
         "Give --token-file (docs/security.md) or listen on a loopback address (127.0.0.1:PORT)");
   impl_->options = o;
-  impl_->gate = std::make_unique<Gate>(o.token_file);
+  impl_->gate = std::make_unique<Gate>(o.token_file, !o.tls_client_ca.empty());
   CoreOptions core;
   core.state_dir = o.state_dir;
   core.lease_seconds = o.lease_seconds;
   core.window_frames = o.window_frames;
+  core.limits = o.limits;
   impl_->core = std::make_unique<Coordinator>(core);
   impl_->jobs = std::make_unique<JobServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
   impl_->workers = std::make_unique<WorkerServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder b;
-  b.AddListeningPort(o.listen, grpc::InsecureServerCredentials(), &impl_->port);
+  b.AddListeningPort(o.listen, server_credentials(o), &impl_->port);
   b.RegisterService(impl_->jobs.get());
   b.RegisterService(impl_->workers.get());
   // Workers ping every keepalive_seconds (a third of the lease); allow it.
@@ -434,11 +516,21 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   impl_->server = b.BuildAndStart();
   if (!impl_->server || impl_->port == 0)
     throw std::runtime_error("coordinator: cannot listen on " + o.listen);
+  if (!o.health_listen.empty()) {
+    grpc::ServerBuilder hb;  // no services of ours: the default health service alone
+    hb.AddListeningPort(o.health_listen, grpc::InsecureServerCredentials(), &impl_->health_port);
+    hb.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+    impl_->health_server = hb.BuildAndStart();
+    if (!impl_->health_server || impl_->health_port == 0)
+      throw std::runtime_error("coordinator: cannot listen on --health-listen " + o.health_listen);
+  }
 }
 
 CoordinatorServer::~CoordinatorServer() { shutdown(); }
 
 int CoordinatorServer::port() const { return impl_->port; }
+
+int CoordinatorServer::health_port() const { return impl_->health_port; }
 
 void CoordinatorServer::reload_tokens() { impl_->gate->reload(); }
 
@@ -448,6 +540,7 @@ void CoordinatorServer::shutdown() {
   if (!impl_ || !impl_->server) return;
   impl_->core->shut_down();
   impl_->server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  if (impl_->health_server) impl_->health_server->Shutdown();
 }
 
 int run_coordinator(const CoordinatorOptions& o) {
@@ -462,6 +555,11 @@ int run_coordinator(const CoordinatorOptions& o) {
                o.state_dir,
                o.token_file.empty() ? std::string("no token file: loopback only, no authentication")
                                     : "tokens from " + o.token_file);
+  spdlog::info("transport: {}{}", o.tls_cert.empty() ? "plaintext" : "TLS",
+               o.tls_client_ca.empty() ? "" : ", client certificates required for workers");
+  if (!o.health_listen.empty())
+    spdlog::info("health service alone, plaintext, on {} (health port {})", o.health_listen,
+                 server.health_port());
   int sig = 0;
   for (;;) {
     sigwait(&set, &sig);

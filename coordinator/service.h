@@ -8,6 +8,8 @@
 #include <memory>
 #include <string>
 
+#include "coordinator/core.h"
+
 namespace rf {
 
 struct CoordinatorOptions {
@@ -16,8 +18,14 @@ struct CoordinatorOptions {
   // Accepted tokens (farm/auth.h), re-read on SIGHUP. Without one every call is admitted as an
   // admin, and the coordinator listens on loopback only.
   std::string token_file;
+  // TLS (PEM files): the server's certificate chain and key; with a client CA, client
+  // certificates are verified when sent and the worker methods require one (mutual TLS).
+  std::string tls_cert, tls_key, tls_client_ca;
+  // A second, plaintext listener serving only the health service (for probes without TLS).
+  std::string health_listen;
   double lease_seconds = 30;
   uint32_t window_frames = 4;
+  JobLimits limits;                        // per job (core.h)
   uint64_t max_blob_bytes = 1ull << 30;    // one scene asset
   uint64_t max_bundle_bytes = 4ull << 30;  // all assets of one submit
   uint64_t max_buffer_bytes = 4ull << 30;  // one task's sample buffer
@@ -29,9 +37,10 @@ class CoordinatorServer {
   // with a message naming the address or file on failure.
   explicit CoordinatorServer(const CoordinatorOptions& options);
   ~CoordinatorServer();
-  int port() const;  // the bound port (useful with --listen HOST:0)
-  void wait();       // until shutdown() is called
-  void shutdown();   // stops accepting, ends streams, waits for handlers
+  int port() const;         // the bound port (useful with --listen HOST:0)
+  int health_port() const;  // --health-listen's bound port (0 without it)
+  void wait();              // until shutdown() is called
+  void shutdown();          // stops accepting, ends streams, waits for handlers
   // Re-reads the token file; on an error keeps the tokens it has and rethrows.
   void reload_tokens();
 

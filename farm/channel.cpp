@@ -1,10 +1,16 @@
 #include "farm/channel.h"
 
+#include "farm/auth.h"
+
 #include <grpcpp/support/client_interceptor.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
 
 namespace rf {
 
@@ -39,8 +45,52 @@ class TokenInterceptorFactory final : public grpc::experimental::ClientIntercept
 
 }  // namespace
 
+namespace {
+
+std::string read_pem(const std::string& path, const char* what) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error(path + ": cannot read the " + std::string(what));
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+std::string from_env(std::string value, const char* var) {
+  if (value.empty())
+    if (const char* env = std::getenv(var)) value = env;
+  return value;
+}
+
+}  // namespace
+
+ClientCredentials load_client_credentials(const std::string& token_file, std::string ca,
+                                          std::string cert, std::string key) {
+  ClientCredentials c;
+  c.token = client_token(token_file);
+  ca = from_env(ca, "RAYFARM_TLS_CA");
+  cert = from_env(cert, "RAYFARM_TLS_CERT");
+  key = from_env(key, "RAYFARM_TLS_KEY");
+  if (cert.empty() != key.empty())
+    throw std::runtime_error("a TLS client certificate needs its key, and a key its certificate");
+  if (!cert.empty() && ca.empty())
+    throw std::runtime_error("a TLS client certificate needs the coordinator's CA (--tls-ca)");
+  if (!ca.empty()) c.tls_ca = read_pem(ca, "TLS CA certificate");
+  if (!cert.empty()) c.tls_cert = read_pem(cert, "TLS client certificate");
+  if (!key.empty()) c.tls_key = read_pem(key, "TLS client key");
+  return c;
+}
+
+std::shared_ptr<grpc::ChannelCredentials> channel_credentials(const ClientCredentials& c) {
+  if (c.tls_ca.empty()) return grpc::InsecureChannelCredentials();
+  grpc::SslCredentialsOptions o;
+  o.pem_root_certs = c.tls_ca;
+  o.pem_private_key = c.tls_key;
+  o.pem_cert_chain = c.tls_cert;
+  return grpc::SslCredentials(o);
+}
+
 std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
-                                                   const std::string& token,
+                                                   const ClientCredentials& creds,
                                                    int keepalive_seconds) {
   grpc::ChannelArguments args;
   if (keepalive_seconds > 0) {
@@ -52,9 +102,10 @@ std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
   std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
-  if (!token.empty()) interceptors.push_back(std::make_unique<TokenInterceptorFactory>(token));
+  if (!creds.token.empty())
+    interceptors.push_back(std::make_unique<TokenInterceptorFactory>(creds.token));
   return grpc::experimental::CreateCustomChannelWithInterceptors(
-      address, grpc::InsecureChannelCredentials(), args, std::move(interceptors));
+      address, channel_credentials(creds), args, std::move(interceptors));
 }
 
 void set_deadline(grpc::ClientContext& ctx, double seconds, bool wait_for_ready) {

@@ -55,6 +55,7 @@ JobSpec from_wire(const pb::JobSpec& spec) {
   s.overrides = to_scene_overrides(spec.overrides());
   s.priority = spec.priority();
   s.tile_size = spec.tile_size();
+  s.build_id = spec.build_id();
   return s;
 }
 
@@ -68,6 +69,7 @@ pb::JobSpec to_wire(const JobSpec& s) {
     f->set_sha256(e.sha256);
   }
   spec.set_frames(s.frames);
+  spec.set_build_id(s.build_id);
   *spec.mutable_overrides() = to_wire_overrides(s.overrides);
   spec.set_priority(s.priority);
   spec.set_tile_size(s.tile_size);

@@ -38,14 +38,16 @@ void drain(grpc::CompletionQueue& cq) {
   }
 }
 
-std::shared_ptr<grpc::Channel> channel_to(const std::string& address) {
-  return grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+std::shared_ptr<grpc::Channel> channel_to(const std::string& address,
+                                          std::shared_ptr<grpc::ChannelCredentials> creds) {
+  return grpc::CreateChannel(address, creds ? creds : grpc::InsecureChannelCredentials());
 }
 
 }  // namespace
 
-std::string check_health(const std::string& address, const std::string& service, double timeout) {
-  auto stub = health::Health::NewStub(channel_to(address));
+std::string check_health(const std::string& address, const std::string& service, double timeout,
+                         std::shared_ptr<grpc::ChannelCredentials> creds) {
+  auto stub = health::Health::NewStub(channel_to(address, creds));
   grpc::ClientContext ctx;
   set_deadline(ctx, timeout);
   health::HealthCheckRequest request;
@@ -67,10 +69,11 @@ std::string check_health(const std::string& address, const std::string& service,
   }
 }
 
-std::vector<std::string> list_services(const std::string& address, double timeout) {
+std::vector<std::string> list_services(const std::string& address, double timeout,
+                                       std::shared_ptr<grpc::ChannelCredentials> creds) {
   grpc::TemplatedGenericStub<reflection::ServerReflectionRequest,
                              reflection::ServerReflectionResponse>
-      stub(channel_to(address));
+      stub(channel_to(address, creds));
   grpc::ClientContext ctx;
   set_deadline(ctx, timeout);
   grpc::CompletionQueue cq;

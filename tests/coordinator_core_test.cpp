@@ -16,6 +16,7 @@
 #include <set>
 
 #include "engine/buffer_file.h"
+#include "engine/build_info.h"
 #include "engine/digest.h"
 #include "engine/render.h"
 #include "engine/scene.h"
@@ -51,6 +52,7 @@ class CoreBench {
     o.lease_seconds = 10;
     o.instance = instance;
     o.clock = [this] { return now; };
+    o.limits = limits;
     core_ = std::make_unique<Coordinator>(o);
   }
 
@@ -61,11 +63,11 @@ class CoreBench {
   std::string worker(const std::string& name, const Caller& caller = {}) {
     auto it = workers_.find(name);
     if (it != workers_.end()) return it->second;
-    return workers_[name] = core_->register_worker({name, 1, "test", "test"}, caller).worker_id;
+    return workers_[name] = core_->register_worker({name, 1, build_id(), "test"}, caller).worker_id;
   }
 
   // Uploads the scene's bundle and submits a job of `passes` passes of frame 1.
-  std::string submit(uint32_t passes, const Caller& caller = {}) {
+  std::string submit(uint32_t passes, const Caller& caller = {}, const std::string& pin = "") {
     std::string scene = test::source_dir() + "/" + kScene;
     JobSpec spec;
     spec.name = "cornell";
@@ -79,6 +81,7 @@ class CoreBench {
     spec.overrides.passes = passes;
     spec.overrides.spp = kSamplesPerPass * passes;
     spec.tile_size = 8;
+    spec.build_id = pin;
     return core_->submit(spec, caller);
   }
 
@@ -111,6 +114,7 @@ class CoreBench {
   }
 
   double now = 0;
+  JobLimits limits;  // for the next start()
 
  private:
   // The header a worker's renderer puts on the task's buffer (the engine's calls in one place).
@@ -123,6 +127,17 @@ class CoreBench {
   std::unique_ptr<Coordinator> core_;
   std::map<std::string, std::string> workers_;
 };
+
+// The message a call is refused with; "" when it is not refused.
+template <class F>
+std::string refusal_message(F&& f) {
+  try {
+    f();
+  } catch (const CoordinatorError& e) {
+    return e.what();
+  }
+  return "";
+}
 
 // The code a call is refused with; nothing when it is not refused.
 template <class F>
@@ -454,6 +469,113 @@ TEST(CoordinatorCore, ASecondCoordinatorOnTheSameStateDirectoryIsRefused) {
         << e.what();
   }
   bench.start("B");  // the lock is released with the first coordinator
+}
+
+// A job over a limit is refused at submit with the limit's name, and leaves nothing behind.
+TEST(CoordinatorCore, JobsOverALimitAreRefusedNamingTheLimit) {
+  CoreBench bench("core-limits");
+  struct Case {
+    const char* limit;
+    uint64_t value;
+    ErrorCode code;
+  };
+  // The bench's job: 16x16 pixels, 4 tiles, 8 tasks at 2 passes, spp 8, name "cornell" and 3
+  // bundle files.
+  for (Case c : {Case{"pixels_per_frame", 255, ErrorCode::ResourceExhausted},
+                 Case{"tiles_per_frame", 3, ErrorCode::ResourceExhausted},
+                 Case{"tasks_per_job", 7, ErrorCode::ResourceExhausted},
+                 Case{"spp", 7, ErrorCode::ResourceExhausted},
+                 Case{"name_bytes", 6, ErrorCode::InvalidArgument},
+                 Case{"bundle_files", 2, ErrorCode::ResourceExhausted}}) {
+    bench.limits = JobLimits{};
+    ASSERT_TRUE(bench.limits.set(c.limit, c.value));
+    bench.start("A");
+    size_t jobs = bench.core().list().size();
+    std::string why;
+    try {
+      bench.submit(2);
+    } catch (const CoordinatorError& e) {
+      why = e.what();
+      EXPECT_EQ(e.code, c.code) << c.limit;
+    }
+    EXPECT_NE(why.find(c.limit), std::string::npos) << c.limit << ": '" << why << "'";
+    EXPECT_EQ(bench.core().list().size(), jobs) << "a refused job leaves nothing behind";
+    ASSERT_TRUE(bench.limits.set(c.limit, c.value + 1));
+    bench.start("A");
+    std::string job;
+    EXPECT_NO_THROW(job = bench.submit(2)) << c.limit << " at the job's own size";
+    if (!job.empty()) bench.core().cancel(job);
+  }
+  EXPECT_FALSE(bench.limits.set("no_such_limit", 1));
+}
+
+// A stored job the coordinator cannot restore (here: over a limit lowered since) is marked
+// failed with the reason; the other jobs are served and complete. It stays failed after.
+TEST(CoordinatorCore, AJobThatCannotBeRestoredIsFailedAndTheOthersAreServed) {
+  CoreBench bench("core-restore-failed");
+  std::string big = bench.submit(2), small = bench.submit(1);  // 8 and 4 tasks
+  bench.limits.tasks_per_job = 4;
+  bench.start("B");
+  JobStatus s = bench.core().status(big);
+  EXPECT_EQ(s.state, JobState::Failed);
+  EXPECT_NE(s.error.find("tasks_per_job"), std::string::npos) << s.error;
+  EXPECT_TRUE(s.frames.empty());
+  EXPECT_EQ(bench.core().list().size(), 2u);
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 1.0f));
+  EXPECT_EQ(bench.core().status(small).state, JobState::Completed);
+  bench.limits = JobLimits{};
+  bench.start("C");
+  EXPECT_EQ(bench.core().status(big).state, JobState::Failed);
+  EXPECT_EQ(bench.core().status(small).state, JobState::Completed);
+}
+
+// A job merges results of one build: the first merged result's, or the one its submitter pins.
+// A result of another build is refused, and a worker of another build gets none of its tasks.
+TEST(CoordinatorCore, AJobMergesResultsOfOneBuildOnly) {
+  CoreBench bench("core-build");
+  std::string job = bench.submit(1);
+  TaskAssignment a = bench.lease(), b = bench.lease();
+  EXPECT_TRUE(bench.complete(a, 1.0f));
+  EXPECT_EQ(bench.core().status(job).build_id, build_id());
+  SampleBuffer other = bench.result_buffer(b, 1.0f);
+  other.header.build_id = "rayfarm-0.0.1+old";
+  EXPECT_EQ(refusal([&] {
+              bench.core().complete({bench.worker("w"), b.lease_id, b.task, encode_buffer(other)});
+            }),
+            ErrorCode::FailedPrecondition);
+  std::string old = bench.core().register_worker({"old", 1, "rayfarm-0.0.1+old", "x"}).worker_id;
+  LeaseResult none = bench.core().lease(old);
+  EXPECT_FALSE(none.task);
+  EXPECT_TRUE(none.no_more_work) << "another build's job is not this worker's work";
+  EXPECT_TRUE(bench.complete(b, 1.0f));
+  for (int i = 0; i < 2; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 1.0f));
+  bench.start("B");
+  EXPECT_EQ(bench.core().status(job).build_id, build_id()) << "the pin is stored";
+
+  // Pinned by its submitter: only the old build's worker gets its tasks.
+  std::string pinned = bench.submit(1, {}, "rayfarm-0.0.1+old");
+  EXPECT_EQ(bench.core().status(pinned).build_id, "rayfarm-0.0.1+old");
+  EXPECT_FALSE(bench.core().lease(bench.worker("w")).task);
+  std::optional<TaskAssignment> t = bench.core().lease(old).task;
+  ASSERT_TRUE(t);
+  EXPECT_EQ(t->task.job_id, pinned);
+}
+
+// The job list comes in pages: at most `limit` jobs after a given job, and whether more follow.
+TEST(CoordinatorCore, TheJobListComesInPages) {
+  CoreBench bench("core-pages");
+  std::vector<std::string> jobs;
+  for (int i = 0; i < 5; ++i) jobs.push_back(bench.submit(1));
+  bool more = false;
+  std::vector<JobStatus> page = bench.core().list({}, 2, "", &more);
+  ASSERT_EQ(page.size(), 2u);
+  EXPECT_EQ(page[1].job_id, jobs[1]);
+  EXPECT_TRUE(more);
+  page = bench.core().list({}, 2, jobs[3], &more);
+  ASSERT_EQ(page.size(), 1u);
+  EXPECT_EQ(page[0].job_id, jobs[4]);
+  EXPECT_FALSE(more);
+  EXPECT_EQ(refusal([&] { bench.core().list({}, 2, "j999999"); }), ErrorCode::NotFound);
 }
 
 }  // namespace

@@ -11,12 +11,14 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <thread>
 
 #include "engine/digest.h"
 #include "farm/auth.h"
+#include "farm/channel.h"
 #include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
 #include "tests/support/farm.h"
@@ -387,6 +389,151 @@ TEST(Security, LoopbackOnlyWithoutTokensAndOneCoordinatorPerStateDirectoryAndPor
                           "--state-dir", dir + "/anywhere", "--token-file", dir + "/tokens"},
                          dir + "/anywhere.log");
   EXPECT_TRUE(anywhere.wait_for_log("listening on 0.0.0.0:0", 20)) << anywhere.log();
+}
+
+// The careless submit of the issue: 16384x16384 pixels in 8-pixel tiles (4.2 million tasks
+// per pass) is refused at submit naming the limit, the coordinator's memory does not move, and
+// it keeps serving and restarts cleanly. `status` pages its list.
+TEST(Security, AHugeJobIsRefusedNamingItsLimitAndStatusPages) {
+  Farm farm("security-limits");
+  long before = rss_kib(farm.coordinator().pid());
+  test::CommandResult huge =
+      farm.client("submit scenes/cornell-box/scene.json --res 16384x16384 --tile-size 8");
+  EXPECT_EQ(huge.exit_code, 1) << huge.output;
+  EXPECT_NE(huge.output.find("RESOURCE_EXHAUSTED"), std::string::npos) << huge.output;
+  EXPECT_NE(huge.output.find("pixels_per_frame"), std::string::npos) << huge.output;
+  long after = rss_kib(farm.coordinator().pid());
+  EXPECT_LT(after - before, 32 * 1024) << "RSS " << before << " -> " << after << " KiB";
+  test::CommandResult tiles =
+      farm.client("submit scenes/cornell-box/scene.json --res 4096x4096 --tile-size 8");
+  EXPECT_NE(tiles.output.find("tiles_per_frame"), std::string::npos) << tiles.output;
+
+  std::vector<std::string> jobs;
+  for (int i = 0; i < 3; ++i) jobs.push_back(farm.submit(kJob + " --frames 1"));
+  test::CommandResult page = farm.client("status --limit 2");
+  EXPECT_EQ(page.exit_code, 0) << page.output;
+  EXPECT_NE(page.output.find(jobs[1]), std::string::npos) << page.output;
+  EXPECT_EQ(page.output.find(jobs[2]), std::string::npos) << page.output;
+  EXPECT_NE(page.output.find("status --after " + jobs[1]), std::string::npos) << page.output;
+  test::CommandResult rest = farm.client("status --after " + jobs[1]);
+  EXPECT_NE(rest.output.find(jobs[2]), std::string::npos) << rest.output;
+  EXPECT_EQ(rest.output.find(jobs[0]), std::string::npos) << rest.output;
+  farm.restart_coordinator();
+  EXPECT_EQ(farm.client("status").exit_code, 0);
+  EXPECT_EQ(check_health(farm.address()), "SERVING");
+}
+
+std::string file_text(const std::string& path) {
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// A throwaway CA, made by the test with OpenSSL's command line: a server certificate for
+// localhost / 127.0.0.1 and a worker certificate signed by it, and a worker certificate signed
+// by another CA.
+struct TestPki {
+  std::string ca, server_cert, server_key, worker_cert, worker_key, rogue_cert, rogue_key;
+};
+
+TestPki make_pki(const std::string& dir) {
+  const std::string key = "-newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes";
+  std::string script =
+      "set -e; cd " + dir +
+      "; exec 2>pki.log"
+      "; openssl req -x509 " +
+      key +
+      " -keyout ca.key -out ca.pem -days 2 -subj '/CN=test CA'"
+      "; openssl req -x509 " +
+      key +
+      " -keyout other.key -out other.pem -days 2 -subj '/CN=other'"
+      "; printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\\n' > server.ext"
+      "; openssl req " +
+      key +
+      " -keyout server.key -out server.csr -subj '/CN=localhost'"
+      "; openssl x509 -req -in server.csr -CA ca.pem -CAkey ca.key -CAcreateserial -days 2"
+      " -extfile server.ext -out server.pem"
+      "; openssl req " +
+      key +
+      " -keyout worker.key -out worker.csr -subj '/CN=worker'"
+      "; openssl x509 -req -in worker.csr -CA ca.pem -CAkey ca.key -CAcreateserial -days 2"
+      " -out worker.pem"
+      "; openssl req " +
+      key +
+      " -keyout rogue.key -out rogue.csr -subj '/CN=rogue'"
+      "; openssl x509 -req -in rogue.csr -CA other.pem -CAkey other.key -CAcreateserial -days 2"
+      " -out rogue.pem";
+  test::CommandResult r = test::run_command("bash -c \"" + script + "\"");
+  EXPECT_EQ(r.exit_code, 0) << r.output << file_text(dir + "/pki.log");
+  return {dir + "/ca.pem",     dir + "/server.pem", dir + "/server.key", dir + "/worker.pem",
+          dir + "/worker.key", dir + "/rogue.pem",  dir + "/rogue.key"};
+}
+
+grpc::StatusCode register_with(const std::string& address, const ClientCredentials& creds) {
+  auto stub = pb::WorkerService::NewStub(coordinator_channel(address, creds));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  pb::RegisterRequest req;
+  req.set_hostname("probe");
+  pb::RegisterResponse resp;
+  return stub->Register(&ctx, req, &resp).error_code();
+}
+
+// TLS with mutual TLS for workers: a plaintext client cannot talk to the coordinator; a client
+// that checks the server against the CA submits, fetches and watches with its token; a worker
+// without a client certificate is UNAUTHENTICATED, one with a certificate from another CA fails
+// the handshake, and one with a certificate from the CA renders the job to the local image. The
+// plaintext health listener answers probes and serves nothing else.
+TEST(Security, TlsWithClientCertificatesForWorkersAndAPlaintextHealthPort) {
+  std::string dir = test::make_temp_dir("security-tls");
+  TestPki pki = make_pki(dir);
+  Token client = make_token(dir, "client", "--role client --tenant shot1");
+  Token worker = make_token(dir, "worker", "--role worker --tenant farm");
+  write_token_file(dir + "/tokens", {&client, &worker});
+  Farm farm("security-tls-farm", 30, dir + "/tokens",
+            {"--tls-cert", pki.server_cert, "--tls-key", pki.server_key, "--tls-client-ca", pki.ca,
+             "--health-listen", "127.0.0.1:0"});
+  farm.client_token_file = client.file;
+  test::CommandResult plain = farm.client("status");
+  EXPECT_NE(plain.exit_code, 0) << plain.output;
+  farm.client_args = " --tls-ca " + pki.ca;
+  EXPECT_EQ(farm.client("status").exit_code, 0);
+  std::string job = farm.submit(kJob + " --frames 1");
+
+  const std::string ca = file_text(pki.ca);
+  EXPECT_EQ(register_with(farm.address(), {worker.token, ca, "", ""}),
+            grpc::StatusCode::UNAUTHENTICATED)
+      << "a worker without a client certificate";
+  EXPECT_EQ(register_with(farm.address(),
+                          {worker.token, ca, file_text(pki.rogue_cert), file_text(pki.rogue_key)}),
+            grpc::StatusCode::UNAVAILABLE)
+      << "a client certificate from another CA fails the handshake";
+  EXPECT_EQ(register_with(farm.address(), {worker.token, "", "", ""}),
+            grpc::StatusCode::UNAVAILABLE)
+      << "plaintext to a TLS port";
+
+  farm.worker_token_file = worker.file;
+  farm.worker_args = {"--exit-when-idle", "--tls-ca",  pki.ca,        "--tls-cert",
+                      pki.worker_cert,    "--tls-key", pki.worker_key};
+  farm.worker({});
+  EXPECT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  test::expect_same_image(farm.fetched(job, 1), farm.local(kJob, 1));
+
+  std::smatch m;
+  std::string log = farm.coordinator().log();
+  ASSERT_TRUE(std::regex_search(log, m, std::regex("health port ([0-9]+)"))) << log;
+  std::string health = "127.0.0.1:" + m[1].str();
+  EXPECT_EQ(check_health(health), "SERVING");
+  auto on_health = pb::JobService::NewStub(coordinator_channel(health, {client.token, "", "", ""}));
+  grpc::ClientContext ctx;
+  pb::ListJobsResponse resp;
+  EXPECT_EQ(on_health->ListJobs(&ctx, pb::ListJobsRequest{}, &resp).error_code(),
+            grpc::StatusCode::UNIMPLEMENTED);
+  test::CommandResult probe = test::run_command(test::rayfarm_binary() + " health " +
+                                                farm.address() + " --tls-ca " + pki.ca);
+  EXPECT_EQ(probe.exit_code, 0) << probe.output;
 }
 
 }  // namespace

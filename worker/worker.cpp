@@ -127,7 +127,7 @@ class Worker {
 // Pings at most a third of the lease apart (the coordinator's keepalive_seconds), so a partition
 // is noticed within one lease.
 void Worker::connect(int keepalive_seconds) {
-  channel_ = coordinator_channel(o_.coordinator, o_.token, keepalive_seconds);
+  channel_ = coordinator_channel(o_.coordinator, o_.creds, keepalive_seconds);
   stub_ = pb::WorkerService::NewStub(channel_);
 }
 

@@ -13,12 +13,14 @@
 
 #include <string>
 
+#include "farm/channel.h"
+
 namespace rf {
 
 struct WorkerOptions {
   std::string coordinator = "127.0.0.1:7070";
-  std::string token;      // a worker (or admin) token; "" when the coordinator needs none
-  std::string cache_dir;  // default: $XDG_CACHE_HOME/rayfarm or ~/.cache/rayfarm
+  ClientCredentials creds;  // token and TLS material (farm/channel.h)
+  std::string cache_dir;    // default: $XDG_CACHE_HOME/rayfarm or ~/.cache/rayfarm
   double drain_seconds = 60;
   bool exit_when_idle = false;
   double idle_poll_seconds = 1;

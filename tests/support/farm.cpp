@@ -30,8 +30,12 @@ void expect_same_image(const std::string& farm, const std::string& local) {
                      << " values";
 }
 
-Farm::Farm(const std::string& tag, double lease_seconds, const std::string& token_file)
-    : dir_(make_temp_dir(tag)), lease_seconds_(lease_seconds), token_file_(token_file) {
+Farm::Farm(const std::string& tag, double lease_seconds, const std::string& token_file,
+           const std::vector<std::string>& coordinator_args)
+    : dir_(make_temp_dir(tag)),
+      lease_seconds_(lease_seconds),
+      token_file_(token_file),
+      coordinator_args_(coordinator_args) {
   start_coordinator(0);
 }
 
@@ -40,6 +44,7 @@ void Farm::start_coordinator(int port) {
       rayfarm_binary(), "coordinator",   "--listen",        "127.0.0.1:" + std::to_string(port),
       "--state-dir",    dir_ + "/state", "--lease-seconds", std::to_string(lease_seconds_)};
   if (!token_file_.empty()) argv.insert(argv.end(), {"--token-file", token_file_});
+  argv.insert(argv.end(), coordinator_args_.begin(), coordinator_args_.end());
   coordinator_ =
       std::make_unique<Process>(argv, dir_ + "/coordinator" + std::to_string(starts_++) + ".log");
   std::smatch m;
@@ -64,6 +69,7 @@ Process& Farm::worker(const std::vector<std::string>& extra) {
   std::vector<std::string> argv{rayfarm_binary(), "worker",      "--coordinator",
                                 address(),        "--cache-dir", dir_ + "/cache"};
   if (!worker_token_file.empty()) argv.insert(argv.end(), {"--token-file", worker_token_file});
+  argv.insert(argv.end(), worker_args.begin(), worker_args.end());
   argv.insert(argv.end(), extra.begin(), extra.end());
   workers_.push_back(
       std::make_unique<Process>(argv, dir_ + "/worker" + std::to_string(workers_.size()) + ".log"));
@@ -71,7 +77,8 @@ Process& Farm::worker(const std::vector<std::string>& extra) {
 }
 
 CommandResult Farm::client(const std::string& args) const {
-  std::string token = client_token_file.empty() ? "" : " --token-file " + client_token_file;
+  std::string token =
+      (client_token_file.empty() ? "" : " --token-file " + client_token_file) + client_args;
   return run_command("cd " + source_dir() + " && " + rayfarm_binary() + " " + args +
                      " --coordinator " + address() + token);
 }
@@ -79,7 +86,8 @@ CommandResult Farm::client(const std::string& args) const {
 std::string Farm::submit(const std::string& args) const {
   // The job id is stdout alone (run_command adds 2>&1 outside the braces; the importers'
   // warnings go to stderr).
-  std::string token = client_token_file.empty() ? "" : " --token-file " + client_token_file;
+  std::string token =
+      (client_token_file.empty() ? "" : " --token-file " + client_token_file) + client_args;
   CommandResult r = run_command("cd " + source_dir() + " && { " + rayfarm_binary() + " submit " +
                                 args + " --coordinator " + address() + token + " 2>/dev/null; }");
   EXPECT_EQ(r.exit_code, 0) << r.output;
@@ -110,7 +118,7 @@ std::string Farm::fetched(const std::string& job, uint32_t frame) const {
 }
 
 std::shared_ptr<grpc::Channel> Farm::channel(const std::string& token) const {
-  return coordinator_channel(address(), token);
+  return coordinator_channel(address(), ClientCredentials{token, "", "", ""});
 }
 
 std::string register_worker(pb::WorkerService::Stub& stub, const std::string& hostname) {

@@ -26,7 +26,8 @@ class Farm {
   // A coordinator with this lease time; with a token file, it authenticates every call, and
   // client() and worker() show the tokens in client_token_file / worker_token_file.
   explicit Farm(const std::string& tag, double lease_seconds = 30,
-                const std::string& coordinator_token_file = "");
+                const std::string& coordinator_token_file = "",
+                const std::vector<std::string>& coordinator_args = {});
 
   void start_coordinator(int port);  // and waits until it logs its port
   // SIGKILLs the coordinator and starts it again on the same port and state directory.
@@ -50,11 +51,14 @@ class Farm {
   std::shared_ptr<grpc::Channel> channel(const std::string& token = "") const;
 
   std::string client_token_file, worker_token_file;
+  std::string client_args;               // appended to every client command (e.g. --tls-ca)
+  std::vector<std::string> worker_args;  // appended to every worker's command line
 
  private:
   std::string dir_;
   double lease_seconds_;
   std::string token_file_;
+  std::vector<std::string> coordinator_args_;
   int port_ = 0, starts_ = 0;
   mutable int local_count_ = 0;
   std::unique_ptr<Process> coordinator_;
