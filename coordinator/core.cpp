@@ -77,7 +77,7 @@ FramePlan plan_frame(const Scene& scene, uint32_t frame, int tile_size) {
 }
 
 // Every file of the spec's bundle has a safe path and a digest whose content was uploaded.
-void check_bundle(const JobSpec& spec, const BlobStore& blobs) {
+void check_bundle(const JobSpec& spec, const std::function<bool(const std::string&)>& uploaded) {
   for (const BundleEntry& f : spec.files) {
     try {
       check_bundle_path(f.path);
@@ -87,7 +87,7 @@ void check_bundle(const JobSpec& spec, const BlobStore& blobs) {
     if (!is_sha256_hex(f.sha256))
       refuse(ErrorCode::InvalidArgument,
              "files: '" + f.path + "' has no valid SHA-256 (64 lower-case hex digits)");
-    if (!blobs.has(f.sha256))
+    if (!uploaded(f.sha256))
       refuse(ErrorCode::InvalidArgument,
              "files: the content of '" + f.path + "' (" + f.sha256 + ") was not uploaded");
   }
@@ -220,7 +220,7 @@ Coordinator::~Coordinator() = default;
 
 // Validates a spec against the stored blobs and makes the job's record.
 std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_t seq,
-                                                  const JobSpec& spec) {
+                                                  const JobSpec& spec, const Caller& caller) {
   auto job = std::make_shared<JobRecord>();
   job->id = id;
   job->seq = seq;
@@ -228,7 +228,7 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
   check_limits(spec);
   job->build_id = spec.build_id;
-  check_bundle(spec, blobs_);
+  check_bundle(spec, [&](const std::string& d) { return blob_visible(d, caller); });
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
   try {
     blobs_.materialize(spec.files, bundle_dir);
@@ -427,17 +427,32 @@ bool Coordinator::build_ok(const JobRecord& job, const std::string& build_id) co
 // ---------------------------------------------------------------------------------------------
 // Jobs
 
-std::vector<std::string> Coordinator::missing_blobs(const std::vector<std::string>& sha256) const {
+bool Coordinator::blob_visible(const std::string& sha256, const Caller& caller) const {
+  if (!blobs_.has(sha256)) return false;
+  if (caller.all_tenants) return true;
+  std::lock_guard lock(mu_);
+  return store_.blob_tenant(caller.tenant, sha256);
+}
+
+std::vector<std::string> Coordinator::missing_blobs(const std::vector<std::string>& sha256,
+                                                    const Caller& caller) const {
   std::vector<std::string> missing;
   for (const std::string& d : sha256) {
     if (!is_sha256_hex(d))
       refuse(ErrorCode::InvalidArgument, "'" + d + "' is not a SHA-256 (64 lower-case hex)");
-    if (!blobs_.has(d)) missing.push_back(d);
+    if (!blob_visible(d, caller)) missing.push_back(d);
   }
   return missing;
 }
 
-std::string Coordinator::put_blob(std::string_view bytes) { return blobs_.put(bytes); }
+std::string Coordinator::put_blob(std::string_view bytes, const Caller& caller) {
+  std::string digest = blobs_.put(bytes);
+  if (!caller.tenant.empty()) {
+    std::lock_guard lock(mu_);
+    store_.add_blob_tenant(caller.tenant, digest);
+  }
+  return digest;
+}
 
 std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   uint64_t seq;
@@ -450,7 +465,7 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   std::string id = buf;
   std::shared_ptr<JobRecord> job;
   try {
-    job = build_job(id, seq, spec);
+    job = build_job(id, seq, spec, caller);
   } catch (...) {
     std::error_code ec;  // a refused job leaves nothing behind
     fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
@@ -791,6 +806,8 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   } catch (const CoordinatorError& e) {
     spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(r.task),
                  r.worker_id, e.what());
+    std::lock_guard lock(mu_);
+    scheduler_.refuse_result(r.lease_id, now());  // counted against the worker, not the job
     throw;
   }
   std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame

@@ -175,8 +175,13 @@ class Coordinator {
 
   // ---- Jobs. A caller without all_tenants sees only its tenant's jobs: another tenant's job is
   // refused with PermissionDenied, and list() leaves them out.
-  std::vector<std::string> missing_blobs(const std::vector<std::string>& sha256) const;
-  std::string put_blob(std::string_view bytes);  // one uploaded bundle file; returns its digest
+  // Blobs are scoped per tenant: for a caller without all_tenants, a blob its tenant never
+  // uploaded is missing (and a bundle may not name it), so a digest query reveals nothing of
+  // other tenants' uploads.
+  std::vector<std::string> missing_blobs(const std::vector<std::string>& sha256,
+                                         const Caller& caller = {}) const;
+  // One uploaded bundle file, recorded for the caller's tenant; returns its digest.
+  std::string put_blob(std::string_view bytes, const Caller& caller = {});
   // Checks the spec against the stored blobs (every frame's scene parsed with the job's
   // overrides, so a bad scene is refused now, not by a worker later) and queues the job under
   // the caller's tenant.
@@ -219,7 +224,9 @@ class Coordinator {
 
  private:
   double now() const { return options_.clock(); }
-  std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec);
+  std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec,
+                                       const Caller& caller = {});
+  bool blob_visible(const std::string& sha256, const Caller& caller) const;
   void add_frames(JobRecord& job, const std::string& bundle_dir);
   void restore(const StoredJob& stored);
   // A stored job that cannot be restored: kept, failed with the reason, with no frames.

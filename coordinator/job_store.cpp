@@ -127,6 +127,9 @@ JobStore::JobStore(const std::string& path) : path_(path) {
       "CREATE TABLE IF NOT EXISTS leases (id TEXT PRIMARY KEY, job_id TEXT NOT NULL, frame "
       "INTEGER NOT NULL, pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL)");
   exec("CREATE INDEX IF NOT EXISTS leases_job ON leases (job_id)");
+  exec(
+      "CREATE TABLE IF NOT EXISTS blob_tenants (tenant TEXT NOT NULL, sha256 TEXT NOT NULL, "
+      "PRIMARY KEY (tenant, sha256)) WITHOUT ROWID");
 }
 
 JobStore::~JobStore() { sqlite3_close(db_); }
@@ -215,6 +218,17 @@ std::vector<JobStore::StoredWorker> JobStore::workers() const {
   std::vector<StoredWorker> out;
   while (s.step()) out.push_back({s.text(0), s.text(1), s.text(2)});
   return out;
+}
+
+void JobStore::add_blob_tenant(const std::string& tenant, const std::string& sha256) {
+  Stmt s(db_, "INSERT OR IGNORE INTO blob_tenants (tenant, sha256) VALUES (?,?)", path_);
+  s.bind(tenant).bind(sha256).step();
+}
+
+bool JobStore::blob_tenant(const std::string& tenant, const std::string& sha256) const {
+  Stmt s(db_, "SELECT 1 FROM blob_tenants WHERE tenant = ? AND sha256 = ?", path_);
+  s.bind(tenant).bind(sha256);
+  return s.step();
 }
 
 void JobStore::set_build(const std::string& id, const std::string& build) {

@@ -79,6 +79,10 @@ class JobStore {
   void insert_worker(const StoredWorker& worker);
   std::vector<StoredWorker> workers() const;
   void set_build(const std::string& job_id, const std::string& build_id);
+
+  // Which tenants uploaded a blob: a client sees a blob as present only once its tenant did.
+  void add_blob_tenant(const std::string& tenant, const std::string& sha256);
+  bool blob_tenant(const std::string& tenant, const std::string& sha256) const;
   void insert_lease(const StoredLease& lease);
   std::vector<StoredLease> leases(const std::string& job_id) const;
   void delete_leases(const std::string& job_id);  // the job ended

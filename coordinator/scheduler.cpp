@@ -174,6 +174,22 @@ LeaseOutcome Scheduler::fail(const std::string& lease_id, const std::string& mes
   return LeaseOutcome::Ok;
 }
 
+void Scheduler::refuse_result(const std::string& lease_id, double now) {
+  expire(now);
+  auto it = leases_.find(lease_id);
+  if (it == leases_.end()) return;
+  LeaseState& l = it->second;
+  JobState* j = job(l.task.job_id);
+  if (j) ++j->worker_failures[l.worker_id];
+  if (!l.live) return;
+  l.live = false;
+  TaskState& t = tasks_[l.task];
+  t.leases.erase(lease_id);
+  FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
+  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
+    queue_.insert(l.task);
+}
+
 bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,
                               const std::string& message) {
   JobState* j = job(ref.job_id);

@@ -74,6 +74,10 @@ class Scheduler {
   // The worker could not render the task (or, handed_back, will not: it is shutting down).
   LeaseOutcome fail(const std::string& lease_id, const std::string& message, bool handed_back,
                     double now);
+  // A result sent under this lease was refused (it did not match its task): the lease ends, the
+  // task is queued again, and the refusal counts against the lease's worker in the job (toward
+  // giving it no more of the job's tasks), never against the task or the job.
+  void refuse_result(const std::string& lease_id, double now);
   // The frame needs no more passes from `first_unneeded_pass` on (noise target met, or done):
   // those tasks leave the queue, their leases end, and the frame's window slot frees when no
   // needed task remains.

@@ -254,7 +254,7 @@ void to_wire(const TaskAssignment& a, pb::Task* t) {
 
 // Submit's stream after the spec: blobs as chunk runs, each starting at offset 0.
 void receive_blobs(Coordinator& core, grpc::ServerReaderInterface<pb::SubmitRequest>* reader,
-                   const CoordinatorOptions& o) {
+                   const CoordinatorOptions& o, const Caller& caller) {
   std::optional<ChunkAssembler> blob;
   uint64_t bundle_bytes = 0;
   auto finish_blob = [&] {
@@ -266,7 +266,7 @@ void receive_blobs(Coordinator& core, grpc::ServerReaderInterface<pb::SubmitRequ
       throw CoordinatorError(
           ErrorCode::ResourceExhausted,
           "bundle is over the limit of " + std::to_string(o.max_bundle_bytes) + " bytes");
-    core.put_blob(bytes);
+    core.put_blob(bytes, caller);
     blob.reset();
   };
   pb::SubmitRequest msg;
@@ -289,8 +289,8 @@ class JobServiceImpl final : public pb::JobService::Service {
 
   Status MissingBlobs(ServerContext* ctx, const pb::MissingBlobsRequest* r,
                       pb::MissingBlobsResponse* o) override {
-    return guarded(g_, ctx, Access::Client, "MissingBlobs", [&](const Caller&) {
-      for (std::string& d : c_.missing_blobs({r->sha256().begin(), r->sha256().end()}))
+    return guarded(g_, ctx, Access::Client, "MissingBlobs", [&](const Caller& caller) {
+      for (std::string& d : c_.missing_blobs({r->sha256().begin(), r->sha256().end()}, caller))
         o->add_sha256(std::move(d));
     });
   }
@@ -300,7 +300,7 @@ class JobServiceImpl final : public pb::JobService::Service {
       pb::SubmitRequest first;
       if (!r->Read(&first) || !first.has_spec())
         bad_request("the first message of Submit must be the job spec");
-      receive_blobs(c_, r, o_);
+      receive_blobs(c_, r, o_, caller);
       o->set_job_id(c_.submit(from_wire(first.spec()), caller));
     });
   }

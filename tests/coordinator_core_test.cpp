@@ -74,7 +74,7 @@ class CoreBench {
     spec.scene_path = "scene.json";
     spec.files = bundle_of_scene(scene);
     for (const BundleEntry& f : spec.files)
-      core_->put_blob(read_file_bytes((fs::path(scene).parent_path() / f.path).string()));
+      core_->put_blob(read_file_bytes((fs::path(scene).parent_path() / f.path).string()), caller);
     spec.frames = "1";
     spec.overrides.width = 16;
     spec.overrides.height = 16;
@@ -404,11 +404,11 @@ TEST(CoordinatorCore, OnlyTheLeaseHolderMayCompleteRenewOrFailItsTask) {
 
 // A result that could not come from one honest pass of its task is refused before it is merged:
 // a non-finite sum, a negative sum of squares, a pixel with one sample too many, an absurd
-// core_seconds. The frame is then made of the honest result alone.
+// core_seconds. Its lease ends and the task is queued again at once; the frame is then made of
+// honest results alone.
 TEST(CoordinatorCore, ResultsWithWrongCountsOrNonFiniteSumsAreRefused) {
   CoreBench bench("core-bad-results");
   std::string job = bench.submit(1);
-  TaskAssignment a = bench.lease();
   std::vector<std::function<void(SampleBuffer&)>> damage = {
       [](SampleBuffer& b) { b.sum[5] = std::nan(""); },
       [](SampleBuffer& b) { b.batch_sum[0] = INFINITY; },
@@ -416,20 +416,49 @@ TEST(CoordinatorCore, ResultsWithWrongCountsOrNonFiniteSumsAreRefused) {
       [](SampleBuffer& b) { b.count[7] += 1; },
       [](SampleBuffer& b) { b.header.core_seconds = 1e308; },
   };
+  TaskRef first;
   for (size_t i = 0; i < damage.size(); ++i) {
+    std::string name = "bad" + std::to_string(i);
+    TaskAssignment a = bench.lease(name);
+    if (i == 0) first = a.task;
+    EXPECT_EQ(a.task, first) << "a refused task is queued again at once";
     SampleBuffer b = bench.result_buffer(a, 1.0f);
     damage[i](b);
     EXPECT_EQ(refusal([&] {
-                bench.core().complete({bench.worker("w"), a.lease_id, a.task, encode_buffer(b)});
+                bench.core().complete({bench.worker(name), a.lease_id, a.task, encode_buffer(b)});
               }),
               ErrorCode::InvalidArgument)
         << "damage " << i;
+    EXPECT_EQ(refusal([&] { bench.core().renew(bench.worker(name), a.lease_id); }),
+              ErrorCode::FailedPrecondition)
+        << "the refused result's lease ended";
   }
-  EXPECT_TRUE(bench.complete(a, 2.0f));
-  for (int i = 0; i < 3; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 2.0f));
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease("good"), 2.0f, "good"));
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
   SampleBuffer frame = bench.image(job);
-  EXPECT_EQ(frame.estimate(a.rect.x0, a.rect.y0)[0], 2.0f);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) ASSERT_EQ(frame.estimate(x, y)[0], 2.0f) << x << "," << y;
   EXPECT_LT(frame.header.core_seconds, 1.0);
+}
+
+// Refused results count against the worker that sent them, never against the job: after 3, the
+// worker gets no more of the job's tasks, and the job runs on and completes.
+TEST(CoordinatorCore, AWorkerWhoseResultsAreRefusedGetsNoMoreOfTheJob) {
+  CoreBench bench("core-refused-worker");
+  std::string job = bench.submit(2);
+  for (int i = 0; i < 3; ++i) {
+    TaskAssignment a = bench.lease("liar");
+    SampleBuffer b = bench.result_buffer(a, 1.0f);
+    b.sum[0] = std::nan("");
+    EXPECT_EQ(refusal([&] {
+                bench.core().complete({bench.worker("liar"), a.lease_id, a.task, encode_buffer(b)});
+              }),
+              ErrorCode::InvalidArgument);
+  }
+  EXPECT_FALSE(bench.core().lease(bench.worker("liar")).task);
+  EXPECT_EQ(bench.core().status(job).state, JobState::Running);
+  for (int i = 0; i < 8; ++i) EXPECT_TRUE(bench.complete(bench.lease("good"), 1.0f, "good"));
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
 }
 
 // A client token sees its tenant's jobs only: another tenant's job is refused (status, watch,
@@ -449,6 +478,18 @@ TEST(CoordinatorCore, ClientsSeeOnlyTheirTenantsJobs) {
   EXPECT_TRUE(core.list(shot2).empty());
   EXPECT_EQ(core.list(shot1).size(), 1u);
   EXPECT_EQ(core.list(admin).size(), 1u);
+  // Blobs are scoped per tenant: shot2 sees none of shot1's uploads and cannot name them.
+  std::vector<std::string> digests;
+  for (const BundleEntry& f : bundle_of_scene(test::source_dir() + "/" + kScene))
+    digests.push_back(f.sha256);
+  EXPECT_TRUE(core.missing_blobs(digests, shot1).empty());
+  EXPECT_EQ(core.missing_blobs(digests, shot2).size(), digests.size());
+  EXPECT_TRUE(core.missing_blobs(digests, admin).empty());
+  JobSpec borrowed;
+  borrowed.scene_path = "scene.json";
+  borrowed.files = bundle_of_scene(test::source_dir() + "/" + kScene);
+  EXPECT_EQ(refusal([&] { core.submit(borrowed, shot2); }), ErrorCode::InvalidArgument);
+  EXPECT_NO_THROW(bench.submit(1, shot2)) << "once shot2 uploads them itself";
   bench.start("B");
   EXPECT_EQ(refusal([&] { bench.core().status(job, shot2); }), ErrorCode::PermissionDenied);
   EXPECT_EQ(bench.core().status(job, admin).tenant, "shot1");

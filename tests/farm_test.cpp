@@ -469,7 +469,8 @@ TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
   gap.erase(gap.begin() + 1);
   st = complete_with(*workers, me, task, gap);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
-  {  // Renewing: an unknown lease, then one that ended (handed back).
+  {  // Renewing an unknown lease; renewing or handing back the lease whose result was refused
+     // (a refused result ends its lease and queues the task again).
     grpc::ClientContext c1, c2, c3;
     pb::RenewRequest rr;
     rr.set_worker_id(me);
@@ -482,7 +483,8 @@ TEST(Farm, BadRequestsGetTheirStatusCodesAndTheCoordinatorKeepsServing) {
     fr.set_task_id(task.task_id());
     fr.set_handed_back(true);
     pb::FailResponse fresp;
-    ASSERT_TRUE(workers->FailTask(&c2, fr, &fresp).ok());
+    st = workers->FailTask(&c2, fr, &fresp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << st.error_message();
     rr.set_lease_id(task.lease_id());
     st = workers->RenewLease(&c3, rr, &rresp);
     EXPECT_EQ(st.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << st.error_message();
