@@ -42,6 +42,11 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
         }
       },
       "a per-job limit, NAME=VALUE (docs/security.md; repeatable)");
+  coord
+      ->add_option("--verify-fraction", co->verify_fraction,
+                   "render this fraction of tasks on two workers and merge only bit-identical "
+                   "results; a third settles a disagreement and the outvoted worker is refused")
+      ->check(CLI::Range(0.0, 1.0));
   coord->add_option("--tls-cert", co->tls_cert, "serve TLS with this certificate chain (PEM)");
   coord->add_option("--tls-key", co->tls_key, "the key of --tls-cert (PEM)");
   coord->add_option("--tls-client-ca", co->tls_client_ca,

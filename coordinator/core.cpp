@@ -652,6 +652,8 @@ void Coordinator::check_worker(const std::string& worker_id, const Caller& calle
   auto it = workers_.find(worker_id);
   if (it == workers_.end())
     refuse(ErrorCode::NotFound, "no worker '" + clip(worker_id) + "' registered; register first");
+  if (auto o = outvoted_.find(worker_id); o != outvoted_.end())
+    refuse(ErrorCode::PermissionDenied, "worker " + worker_id + " is refused: " + o->second);
   if (it->second.principal != caller.principal) {
     spdlog::warn("refused: {} called as worker {}, registered by {}", caller.principal, worker_id,
                  it->second.principal);
@@ -821,6 +823,10 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     scheduler_.complete(r.lease_id, r.task, now());
     return false;
   }
+  if (verified(r.task)) {
+    std::lock_guard lock(mu_);
+    if (!verify(*job, r, buffer)) return true;  // taken, and held until another result agrees
+  }
   // Durable first: the task's result, then the database, then the answer.
   try {
     f->checkpoint->save_task(r.task.pass, r.task.tile, buffer);
@@ -839,6 +845,46 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   publish_frame(*job, *f);
   if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
   return true;
+}
+
+bool Coordinator::verified(const TaskRef& task) const {
+  double f = options_.verify_fraction;
+  if (f <= 0) return false;
+  if (f >= 1) return true;
+  // A fixed choice per task, so a restart verifies the same tasks.
+  uint64_t h = std::stoull(sha256_hex(task_id_text(task)).substr(0, 15), nullptr, 16);
+  return double(h) / double(uint64_t(1) << 60) < f;
+}
+
+bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer& buffer) {
+  std::vector<std::pair<std::string, SampleBuffer>>& held = verifying_[r.task];
+  for (const auto& [worker, other] : held) {
+    if (worker == r.worker_id || !same_samples(other, buffer)) continue;
+    for (const auto& [liar, theirs] : held) {
+      if (same_samples(theirs, buffer)) continue;
+      std::string why = "its result of task " + task_id_text(r.task) +
+                        " differed from those of workers " + worker + " and " + r.worker_id;
+      outvoted_[liar] = why;
+      spdlog::error("worker {} (registered by {}) outvoted: {}; it is refused from now on", liar,
+                    workers_.at(liar).principal, why);
+    }
+    verifying_.erase(r.task);
+    return true;
+  }
+  held.emplace_back(r.worker_id, buffer);
+  if (held.size() >= 3) {  // three workers, no two agreeing: not a liar, the engine is not
+    std::string why = "task " + task_id_text(r.task) + ": the results of " +
+                      std::to_string(held.size()) +
+                      " workers all differ, against the determinism contract";
+    verifying_.erase(r.task);
+    scheduler_.cancel_job(job.id);
+    set_state(job, JobState::Failed, why);
+    return false;
+  }
+  spdlog::info("task {}: result of {} held until another worker's agrees", task_id_text(r.task),
+               r.worker_id);
+  scheduler_.verify_again(r.lease_id, now());
+  return false;
 }
 
 void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {

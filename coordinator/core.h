@@ -155,6 +155,10 @@ struct CoreOptions {
   uint32_t window_frames = 4;
   int max_failures = 3;  // workers a task may fail on, and tasks a worker may fail, per job
   JobLimits limits;
+  // The fraction of tasks rendered twice, on different workers, and merged only when the two
+  // results are bit-identical (the determinism contract); a third worker settles a disagreement
+  // and the outvoted worker is refused from then on. 0: none.
+  double verify_fraction = 0;
   // Distinguishes this run's lease and worker ids from an earlier run's; empty: made up from
   // the time and process id.
   std::string instance;
@@ -232,6 +236,10 @@ class Coordinator {
   // A stored job that cannot be restored: kept, failed with the reason, with no frames.
   void restore_failed(const StoredJob& stored, const std::string& why);
   void check_limits(const JobSpec& spec) const;
+  bool verified(const TaskRef& task) const;
+  // A verified task's result: true when it agrees with another worker's (merge it now); false
+  // when it is held (the task goes to another worker) or the job failed.          // under mu_
+  bool verify(JobRecord& job, const TaskResult& r, const SampleBuffer& buffer);
   // Whether the job merges results of this build (its pin, or any while none is known).
   bool build_ok(const JobRecord& job, const std::string& build_id) const;  // under mu_
   void resume_frame(JobRecord& job, FrameRecord& f);
@@ -268,6 +276,10 @@ class Coordinator {
     std::string build_id;   // the build it said it runs
   };
   std::map<std::string, WorkerRecord> workers_;
+  // Verification (CoreOptions::verify_fraction): each selected task's results so far, one per
+  // worker, until two agree; and the workers outvoted, with why.
+  std::map<TaskRef, std::vector<std::pair<std::string, SampleBuffer>>> verifying_;
+  std::map<std::string, std::string> outvoted_;
   uint64_t next_seq_ = 1, next_worker_ = 1;
 };
 

@@ -90,7 +90,8 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
          it != queue_.end() && it->job_id == j->id; ++it) {
       auto w = window.find(it->frame);
       if (w == window.end()) continue;
-      if (tasks_[*it].failed_workers.count(worker_id)) continue;
+      const TaskState& ts = tasks_[*it];
+      if (ts.failed_workers.count(worker_id) || ts.excluded.count(worker_id)) continue;
       std::tuple<uint32_t, size_t, uint32_t> key{it->pass, w->second, it->tile};
       if (!best || key < best_key) best = &*it, best_key = key;
     }
@@ -185,6 +186,21 @@ void Scheduler::refuse_result(const std::string& lease_id, double now) {
   l.live = false;
   TaskState& t = tasks_[l.task];
   t.leases.erase(lease_id);
+  FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
+  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
+    queue_.insert(l.task);
+}
+
+void Scheduler::verify_again(const std::string& lease_id, double now) {
+  expire(now);
+  auto it = leases_.find(lease_id);
+  if (it == leases_.end()) return;
+  LeaseState& l = it->second;
+  TaskState& t = tasks_[l.task];
+  t.excluded.insert(l.worker_id);
+  l.live = false;
+  t.leases.erase(lease_id);
+  JobState* j = job(l.task.job_id);
   FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
   if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
     queue_.insert(l.task);

@@ -78,6 +78,9 @@ class Scheduler {
   // task is queued again, and the refusal counts against the lease's worker in the job (toward
   // giving it no more of the job's tasks), never against the task or the job.
   void refuse_result(const std::string& lease_id, double now);
+  // A result sent under this lease is held until another worker's agrees (verification): the
+  // lease ends and the task is queued again for any worker but those that sent one.
+  void verify_again(const std::string& lease_id, double now);
   // The frame needs no more passes from `first_unneeded_pass` on (noise target met, or done):
   // those tasks leave the queue, their leases end, and the frame's window slot frees when no
   // needed task remains.
@@ -94,7 +97,8 @@ class Scheduler {
     bool done = false, stopped = false;
     std::set<std::string> failed_workers;
     std::vector<std::string> messages;
-    std::set<std::string> leases;  // live leases of this task
+    std::set<std::string> leases;    // live leases of this task
+    std::set<std::string> excluded;  // workers that sent a result held for verification
   };
   struct FrameState {
     uint32_t frame;

@@ -498,6 +498,7 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   core.lease_seconds = o.lease_seconds;
   core.window_frames = o.window_frames;
   core.limits = o.limits;
+  core.verify_fraction = o.verify_fraction;
   impl_->core = std::make_unique<Coordinator>(core);
   impl_->jobs = std::make_unique<JobServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
   impl_->workers = std::make_unique<WorkerServiceImpl>(*impl_->core, impl_->options, *impl_->gate);

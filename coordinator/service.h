@@ -26,6 +26,7 @@ struct CoordinatorOptions {
   double lease_seconds = 30;
   uint32_t window_frames = 4;
   JobLimits limits;                        // per job (core.h)
+  double verify_fraction = 0;              // CoreOptions::verify_fraction
   uint64_t max_blob_bytes = 1ull << 30;    // one scene asset
   uint64_t max_bundle_bytes = 4ull << 30;  // all assets of one submit
   uint64_t max_buffer_bytes = 4ull << 30;  // one task's sample buffer

@@ -237,4 +237,11 @@ std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass) {
   return "";
 }
 
+bool same_samples(const SampleBuffer& a, const SampleBuffer& b) {
+  return a.rect == b.rect && a.header.passes == b.header.passes && a.count == b.count &&
+         a.sum == b.sum && a.sum_sq == b.sum_sq && a.batch_sum == b.batch_sum &&
+         a.batch_sum_sq == b.batch_sum_sq && a.splat == b.splat && a.light_paths == b.light_paths &&
+         a.aov == b.aov && a.nonfinite_samples == b.nonfinite_samples;
+}
+
 }  // namespace rf

@@ -163,4 +163,9 @@ void splat_to_film(SplatTarget& target, Vec2 raster, RGB value);
 // uploads before they are merged.
 std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass);
 
+// Whether two buffers hold the same samples, bit for bit: every plane and count, ignoring the
+// provenance that may differ between honest renders (core_seconds, isa). The determinism
+// contract makes two renders of one task by one build equal in this sense.
+bool same_samples(const SampleBuffer& a, const SampleBuffer& b);
+
 }  // namespace rf

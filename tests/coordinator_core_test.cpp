@@ -53,6 +53,7 @@ class CoreBench {
     o.instance = instance;
     o.clock = [this] { return now; };
     o.limits = limits;
+    o.verify_fraction = verify_fraction;
     core_ = std::make_unique<Coordinator>(o);
   }
 
@@ -115,6 +116,7 @@ class CoreBench {
 
   double now = 0;
   JobLimits limits;  // for the next start()
+  double verify_fraction = 0;
 
  private:
   // The header a worker's renderer puts on the task's buffer (the engine's calls in one place).
@@ -617,6 +619,39 @@ TEST(CoordinatorCore, TheJobListComesInPages) {
   EXPECT_EQ(page[0].job_id, jobs[4]);
   EXPECT_FALSE(more);
   EXPECT_EQ(refusal([&] { bench.core().list({}, 2, "j999999"); }), ErrorCode::NotFound);
+}
+
+// --verify-fraction 1: every task is rendered by two workers and merged only when their results
+// are bit-identical. A worker that sends a plausible wrong result (finite, the right counts) is
+// outvoted by a third and refused from then on; the image is the honest one.
+TEST(CoordinatorCore, VerificationMergesOnlyAgreeingResultsAndRefusesTheOutvotedWorker) {
+  CoreBench bench("core-verify");
+  bench.verify_fraction = 1;
+  bench.start("A");
+  std::string job = bench.submit(1);
+  TaskAssignment lie = bench.lease("liar");
+  EXPECT_TRUE(bench.complete(lie, 5.0f, "liar")) << "taken, held for verification";
+  EXPECT_EQ(bench.core().status(job).frames[0].progress.passes_merged, 0u);
+  TaskAssignment a = bench.lease("a");
+  EXPECT_EQ(a.task, lie.task) << "the held task goes to another worker first";
+  EXPECT_TRUE(bench.complete(a, 1.0f, "a"));
+  TaskAssignment c = bench.lease("c");
+  EXPECT_EQ(c.task, lie.task) << "a disagreement needs a third worker";
+  EXPECT_TRUE(bench.complete(c, 1.0f, "c"));
+  EXPECT_EQ(refusal([&] { bench.core().lease(bench.worker("liar")); }),
+            ErrorCode::PermissionDenied);
+  // The other three tasks, each by two honest workers.
+  for (int i = 0; i < 3; ++i) {
+    TaskAssignment x = bench.lease("a");
+    EXPECT_TRUE(bench.complete(x, 1.0f, "a"));
+    TaskAssignment y = bench.lease("c");
+    ASSERT_EQ(x.task, y.task);
+    EXPECT_TRUE(bench.complete(y, 1.0f, "c"));
+  }
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
+  SampleBuffer frame = bench.image(job);
+  for (int y = 0; y < 16; ++y)
+    for (int x = 0; x < 16; ++x) ASSERT_EQ(frame.estimate(x, y)[0], 1.0f) << x << "," << y;
 }
 
 }  // namespace

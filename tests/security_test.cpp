@@ -536,5 +536,25 @@ TEST(Security, TlsWithClientCertificatesForWorkersAndAPlaintextHealthPort) {
   EXPECT_EQ(probe.exit_code, 0) << probe.output;
 }
 
+// --verify-fraction with real workers: about half the tasks are rendered by both workers, the
+// pairs agree bit for bit (the determinism contract), and the image equals the local render.
+TEST(Security, VerifiedTasksOnTwoRealWorkersGiveTheLocalImage) {
+  Farm farm("security-verify", 30, "", {"--verify-fraction", "0.5"});
+  const std::string args = kJob + " --tile-size 16";
+  std::string job = farm.submit(args + " --frames 1");
+  farm.worker();
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  test::expect_same_image(farm.fetched(job, 1), farm.local(args, 1));
+  std::string log = farm.coordinator().log();
+  size_t held = 0;
+  for (size_t p = 0; (p = log.find("held until another worker", p)) != std::string::npos; ++p)
+    ++held;
+  EXPECT_GE(held, 2u) << "16 tasks at fraction 0.5 were verified";
+  EXPECT_LE(held, 14u);
+  EXPECT_EQ(log.find("outvoted"), std::string::npos) << log;
+}
+
 }  // namespace
 }  // namespace rf
