@@ -36,8 +36,26 @@ void Scheduler::add_job(const std::string& job_id, const std::vector<uint32_t>& 
 }
 
 void Scheduler::end_task_leases(TaskState& t) {
-  for (const std::string& id : t.leases) leases_[id].live = false;
+  for (const std::string& id : t.leases) {
+    LeaseState& l = leases_[id];
+    expiry_.erase({l.expires_at, id});
+    l.live = false;
+  }
   t.leases.clear();
+}
+
+void Scheduler::end_lease(const std::string& id, LeaseState& l) {
+  if (l.live) expiry_.erase({l.expires_at, id});
+  l.live = false;
+  tasks_[l.task].leases.erase(id);
+}
+
+void Scheduler::requeue_if_needed(const TaskRef& ref) {
+  TaskState& t = tasks_[ref];
+  JobState* j = job(ref.job_id);
+  FrameState* f = j ? frame_of(*j, ref.frame) : nullptr;
+  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, ref.pass))
+    queue_.insert(ref);
 }
 
 void Scheduler::cancel_job(const std::string& job_id) {
@@ -56,15 +74,11 @@ void Scheduler::drop_job_tasks(const std::string& job_id) {
 }
 
 void Scheduler::expire(double now) {
-  for (auto& [id, l] : leases_) {
-    if (!l.live || l.expires_at > now) continue;
-    l.live = false;
-    TaskState& t = tasks_[l.task];
-    t.leases.erase(id);
-    JobState* j = job(l.task.job_id);
-    FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
-    if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
-      queue_.insert(l.task);
+  while (!expiry_.empty() && expiry_.begin()->first <= now) {
+    std::string id = expiry_.begin()->second;
+    LeaseState& l = leases_.at(id);
+    end_lease(id, l);
+    requeue_if_needed(l.task);
   }
 }
 
@@ -84,22 +98,26 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
     std::map<uint32_t, size_t> window;  // frame -> position in the job
     for (size_t i = 0; i < j->frames.size() && window.size() < options_.window_frames; ++i)
       if (j->frames[i].open_tasks > 0) window[j->frames[i].frame] = i;
+    // Each open frame's first queued task this worker may get (the queue orders a frame's
+    // tasks by pass, then tile), then the least by (pass, position in the job, tile).
     const TaskRef* best = nullptr;
     std::tuple<uint32_t, size_t, uint32_t> best_key{};
-    for (auto it = queue_.lower_bound(TaskRef{j->id, 0, 0, 0});
-         it != queue_.end() && it->job_id == j->id; ++it) {
-      auto w = window.find(it->frame);
-      if (w == window.end()) continue;
-      const TaskState& ts = tasks_[*it];
-      if (ts.failed_workers.count(worker_id) || ts.excluded.count(worker_id)) continue;
-      std::tuple<uint32_t, size_t, uint32_t> key{it->pass, w->second, it->tile};
-      if (!best || key < best_key) best = &*it, best_key = key;
+    for (const auto& [frame, position] : window) {
+      for (auto it = queue_.lower_bound(TaskRef{j->id, frame, 0, 0});
+           it != queue_.end() && it->job_id == j->id && it->frame == frame; ++it) {
+        const TaskState& ts = tasks_[*it];
+        if (ts.failed_workers.count(worker_id) || ts.excluded.count(worker_id)) continue;
+        std::tuple<uint32_t, size_t, uint32_t> key{it->pass, position, it->tile};
+        if (!best || key < best_key) best = &*it, best_key = key;
+        break;
+      }
     }
     if (!best) continue;
     TaskRef ref = *best;
     queue_.erase(ref);
     std::string id = options_.lease_prefix + std::to_string(++next_lease_);
     leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
+    expiry_.insert({now + options_.lease_seconds, id});
     tasks_[ref].leases.insert(id);
     return Lease{id, ref, now + options_.lease_seconds};
   }
@@ -111,7 +129,9 @@ LeaseOutcome Scheduler::renew(const std::string& lease_id, double now) {
   auto it = leases_.find(lease_id);
   if (it == leases_.end()) return LeaseOutcome::NotFound;
   if (!it->second.live) return LeaseOutcome::Ended;
+  expiry_.erase({it->second.expires_at, lease_id});
   it->second.expires_at = now + options_.lease_seconds;
+  expiry_.insert({it->second.expires_at, lease_id});
   return LeaseOutcome::Ok;
 }
 
@@ -119,8 +139,7 @@ CompleteOutcome Scheduler::complete(const std::string& lease_id, double now) {
   expire(now);
   auto it = leases_.find(lease_id);
   if (it == leases_.end()) return CompleteOutcome::NotFound;
-  it->second.live = false;
-  tasks_[it->second.task].leases.erase(lease_id);
+  end_lease(lease_id, it->second);
   return complete_task(it->second.task);
 }
 
@@ -164,14 +183,10 @@ LeaseOutcome Scheduler::fail(const std::string& lease_id, const std::string& mes
   if (it == leases_.end()) return LeaseOutcome::NotFound;
   if (!it->second.live) return LeaseOutcome::Ended;
   LeaseState& l = it->second;
-  l.live = false;
-  TaskState& t = tasks_[l.task];
-  t.leases.erase(lease_id);
+  end_lease(lease_id, l);
   JobState* j = job(l.task.job_id);
   if (!handed_back && j && count_failure(l.task, l.worker_id, message)) return LeaseOutcome::Ok;
-  FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
-  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
-    queue_.insert(l.task);
+  requeue_if_needed(l.task);
   return LeaseOutcome::Ok;
 }
 
@@ -183,12 +198,8 @@ void Scheduler::refuse_result(const std::string& lease_id, double now) {
   JobState* j = job(l.task.job_id);
   if (j) ++j->worker_failures[l.worker_id];
   if (!l.live) return;
-  l.live = false;
-  TaskState& t = tasks_[l.task];
-  t.leases.erase(lease_id);
-  FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
-  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
-    queue_.insert(l.task);
+  end_lease(lease_id, l);
+  requeue_if_needed(l.task);
 }
 
 void Scheduler::verify_again(const std::string& lease_id, double now) {
@@ -196,14 +207,9 @@ void Scheduler::verify_again(const std::string& lease_id, double now) {
   auto it = leases_.find(lease_id);
   if (it == leases_.end()) return;
   LeaseState& l = it->second;
-  TaskState& t = tasks_[l.task];
-  t.excluded.insert(l.worker_id);
-  l.live = false;
-  t.leases.erase(lease_id);
-  JobState* j = job(l.task.job_id);
-  FrameState* f = j ? frame_of(*j, l.task.frame) : nullptr;
-  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, l.task.pass))
-    queue_.insert(l.task);
+  tasks_[l.task].excluded.insert(l.worker_id);
+  end_lease(lease_id, l);
+  requeue_if_needed(l.task);
 }
 
 bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,

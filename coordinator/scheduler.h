@@ -123,6 +123,9 @@ class Scheduler {
   };
 
   void expire(double now);
+  void end_lease(const std::string& lease_id, LeaseState& lease);  // ends it if live
+  // Queues the task again when it is still needed and no live lease holds it.
+  void requeue_if_needed(const TaskRef& task);
   CompleteOutcome complete_task(const TaskRef& ref);
   // Counts a failure of `ref` on `worker_id`; true if it failed the job.
   bool count_failure(const TaskRef& ref, const std::string& worker_id, const std::string& message);
@@ -136,7 +139,8 @@ class Scheduler {
   std::map<std::string, JobState> jobs_;
   std::map<TaskRef, TaskState> tasks_;
   std::map<std::string, LeaseState> leases_;
-  std::set<TaskRef> queue_;  // needed, not done, not leased
+  std::set<std::pair<double, std::string>> expiry_;  // live leases by expiry time
+  std::set<TaskRef> queue_;                          // needed, not done, not leased
   uint64_t next_order_ = 0, next_lease_ = 0;
 };
 
