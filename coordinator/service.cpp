@@ -13,12 +13,11 @@
 
 #include <chrono>
 #include <ctime>
-#include <fstream>
 #include <mutex>
 #include <optional>
-#include <sstream>
 
 #include "coordinator/core.h"
+#include "engine/digest.h"  // read_file_bytes
 #include "farm/auth.h"
 #include "farm/chunking.h"
 #include "farm/convert.h"
@@ -137,15 +136,6 @@ class Gate {
   std::shared_ptr<const TokenTable> table_;
 };
 
-std::string read_pem(const std::string& path, const char* flag) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-    throw std::runtime_error(std::string("coordinator: ") + flag + " " + path + ": cannot read it");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 // TLS server credentials from the options' PEM files, or plaintext when none is given.
 std::shared_ptr<grpc::ServerCredentials> server_credentials(const CoordinatorOptions& o) {
   if (o.tls_cert.empty() && o.tls_key.empty() && o.tls_client_ca.empty())
@@ -156,9 +146,8 @@ std::shared_ptr<grpc::ServerCredentials> server_credentials(const CoordinatorOpt
   grpc::SslServerCredentialsOptions ssl(o.tls_client_ca.empty()
                                             ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
                                             : GRPC_SSL_REQUEST_CLIENT_CERTIFICATE_AND_VERIFY);
-  if (!o.tls_client_ca.empty()) ssl.pem_root_certs = read_pem(o.tls_client_ca, "--tls-client-ca");
-  ssl.pem_key_cert_pairs.push_back(
-      {read_pem(o.tls_key, "--tls-key"), read_pem(o.tls_cert, "--tls-cert")});
+  if (!o.tls_client_ca.empty()) ssl.pem_root_certs = read_file_bytes(o.tls_client_ca);
+  ssl.pem_key_cert_pairs.push_back({read_file_bytes(o.tls_key), read_file_bytes(o.tls_cert)});
   return grpc::SslServerCredentials(ssl);
 }
 

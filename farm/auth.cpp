@@ -6,7 +6,6 @@
 #include <cctype>
 #include <cstdlib>
 #include <ctime>
-#include <fstream>
 #include <sstream>
 
 #include "engine/digest.h"
@@ -110,11 +109,13 @@ TokenTable TokenTable::parse(const std::string& text, const std::string& name) {
 }
 
 TokenTable TokenTable::load(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw TokenFileError(path + ": cannot read the token file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse(text.str(), path);
+  std::string text;
+  try {
+    text = read_file_bytes(path);
+  } catch (const std::runtime_error& e) {
+    throw TokenFileError(std::string(e.what()) + " (the token file)");
+  }
+  return parse(text, path);
 }
 
 TokenTable::Check TokenTable::check(std::string_view token, int64_t now_unix,
@@ -161,11 +162,7 @@ std::string client_token(const std::string& token_file) {
     const char* env = std::getenv("RAYFARM_TOKEN");
     return env ? trim(env) : std::string();
   }
-  std::ifstream in(file, std::ios::binary);
-  if (!in) throw std::runtime_error(file + ": cannot read the token file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  std::string token = trim(text.str());
+  std::string token = trim(read_file_bytes(file));
   if (token.empty()) throw std::runtime_error(file + ": the token file is empty");
   if (token.find_first_of(" \t\r\n") != std::string::npos)
     throw std::runtime_error(file + ": holds more than one word; it must hold the token alone");

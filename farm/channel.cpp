@@ -1,5 +1,6 @@
 #include "farm/channel.h"
 
+#include "engine/digest.h"  // read_file_bytes
 #include "farm/auth.h"
 
 #include <grpcpp/support/client_interceptor.h>
@@ -8,8 +9,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
 
 namespace rf {
@@ -47,14 +46,6 @@ class TokenInterceptorFactory final : public grpc::experimental::ClientIntercept
 
 namespace {
 
-std::string read_pem(const std::string& path, const char* what) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(path + ": cannot read the " + std::string(what));
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 std::string from_env(std::string value, const char* var) {
   if (value.empty())
     if (const char* env = std::getenv(var)) value = env;
@@ -74,9 +65,9 @@ ClientCredentials load_client_credentials(const std::string& token_file, std::st
     throw std::runtime_error("a TLS client certificate needs its key, and a key its certificate");
   if (!cert.empty() && ca.empty())
     throw std::runtime_error("a TLS client certificate needs the coordinator's CA (--tls-ca)");
-  if (!ca.empty()) c.tls_ca = read_pem(ca, "TLS CA certificate");
-  if (!cert.empty()) c.tls_cert = read_pem(cert, "TLS client certificate");
-  if (!key.empty()) c.tls_key = read_pem(key, "TLS client key");
+  if (!ca.empty()) c.tls_ca = read_file_bytes(ca);
+  if (!cert.empty()) c.tls_cert = read_file_bytes(cert);
+  if (!key.empty()) c.tls_key = read_file_bytes(key);
   return c;
 }
 
