@@ -155,6 +155,7 @@ struct FrameRecord {
   // reported), and when the frame's first task was leased in this run.
   FrameProgress progress;
   double first_lease_at = -1;
+  bool leases_dropped = false;  // its lease rows were deleted when it was done
 };
 
 struct JobRecord {
@@ -211,8 +212,10 @@ Coordinator::Coordinator(CoreOptions o)
       scheduler_(SchedulerOptions{options_.lease_seconds, options_.max_failures,
                                   options_.window_frames, options_.instance + "-L"}) {
   next_seq_ = store_.next_seq();
-  for (const JobStore::StoredWorker& w : store_.workers())
+  for (const JobStore::StoredWorker& w : store_.workers()) {
     workers_[w.id] = {w.principal, w.build_id};
+    if (!w.refused.empty()) outvoted_[w.id] = w.refused;
+  }
   for (const StoredJob& j : store_.jobs()) restore(j);
 }
 
@@ -338,9 +341,7 @@ void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
                    e.what());
     }
   }
-  for (uint32_t p = 0; p < f.acc->passes_merged(); ++p)
-    for (uint32_t t = 0; t < job.tiles.size(); ++t)
-      scheduler_.mark_done(TaskRef{job.id, f.number, p, t});
+  scheduler_.mark_passes_done(job.id, f.number, f.acc->passes_merged());
   if (f.acc->passes_merged() > 0) f.checkpoint->save_prefix(f.acc->frame());
   publish_frame(job, f);
 }
@@ -363,9 +364,13 @@ void Coordinator::restore(const StoredJob& stored) {
       scheduler_.cancel_job(job->id);
     } else {
       // Leases from before the restart, ended: their holders' late results are still accepted.
-      for (const StoredLease& l : store_.leases(job->id))
+      store_.for_each_lease(job->id, [&](const StoredLease& l) {
         scheduler_.restore_lease(l.lease_id, TaskRef{job->id, l.frame, l.pass, l.tile},
                                  l.worker_id);
+      });
+      // Refused results before the restart still count against their workers.
+      for (const std::string& worker : store_.refused_workers(job->id))
+        scheduler_.restore_refusal(job->id, worker);
       // Failures before the restart still count toward failing a task (and skipping a worker).
       for (const JobStore::TaskFailure& e : store_.failures(job->id))
         scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id,
@@ -536,7 +541,11 @@ void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
   if (f.acc)
     f.progress = frame_progress(f.acc->frame(), job.passes, f.acc->done(),
                                 f.acc->stopped_on_target(), job.noise_target, -1);
-  if (f.progress.done) scheduler_.stop_frame(job.id, f.number, f.progress.passes_merged);
+  if (f.progress.done) {
+    scheduler_.stop_frame(job.id, f.number, f.progress.passes_merged);
+    if (!f.leases_dropped) store_.delete_leases(job.id, f.number);  // no late result is needed
+    f.leases_dropped = true;
+  }
   bool all_done = true;
   for (auto& g : job.frames) all_done &= g->progress.done;
   if (all_done && !terminal(job.state)) set_state(job, JobState::Completed, "");
@@ -548,7 +557,12 @@ void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) 
   job.state = s;
   job.error = err;
   store_.set_state(job.id, int(s), err);
-  if (terminal(s)) store_.delete_leases(job.id);
+  if (terminal(s)) {
+    store_.delete_leases(job.id);
+    scheduler_.cancel_job(job.id);  // frees its tasks and leases (a no-op once all are done)
+    for (auto it = verifying_.begin(); it != verifying_.end();)
+      it = it->first.job_id == job.id ? verifying_.erase(it) : std::next(it);
+  }
   if (terminal(s))
     spdlog::info("job {} {}{}", job.id, job_state_name(s), err.empty() ? "" : ": " + err);
   ++version_;
@@ -662,9 +676,13 @@ void Coordinator::check_worker(const std::string& worker_id, const Caller& calle
   }
 }
 
-void Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
+bool Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
                               const TaskRef* task) const {
   std::string holder = scheduler_.lease_worker(lease_id);
+  // A lease whose record is gone ended with its task settled (done, stopped, or its job over):
+  // nothing sent under it will be merged, whoever sends it.
+  if (holder.empty() && (scheduler_.retired(lease_id) || (task && scheduler_.settled(*task))))
+    return false;
   if (holder.empty()) refuse(ErrorCode::NotFound, "no lease '" + clip(lease_id) + "'");
   if (holder != worker_id) {
     spdlog::warn("refused: worker {} used lease {}, held by {}", worker_id, lease_id, holder);
@@ -675,6 +693,7 @@ void Coordinator::check_lease(const std::string& worker_id, const std::string& l
                  task_id_text(*task), lease_id, task_id_text(*scheduler_.lease_task(lease_id)));
     refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is for another task");
   }
+  return true;
 }
 
 LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& caller) {
@@ -777,7 +796,7 @@ bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core
   return true;
 }
 
-void Coordinator::check_upload(const std::string& worker_id, const std::string& lease_id,
+bool Coordinator::check_upload(const std::string& worker_id, const std::string& lease_id,
                                const TaskRef& task, const Caller& caller) const {
   std::lock_guard lock(mu_);
   check_worker(worker_id, caller);
@@ -785,11 +804,11 @@ void Coordinator::check_upload(const std::string& worker_id, const std::string& 
   if (!job->by_number.count(task.frame) || task.tile >= job->tiles.size() ||
       task.pass >= job->passes)
     refuse(ErrorCode::NotFound, "job " + job->id + " has no task " + task_id_text(task));
-  check_lease(worker_id, lease_id, &task);
+  return check_lease(worker_id, lease_id, &task) && !scheduler_.settled(task);
 }
 
 bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
-  check_upload(r.worker_id, r.lease_id, r.task, caller);
+  if (!check_upload(r.worker_id, r.lease_id, r.task, caller)) return false;  // not needed
   std::shared_ptr<JobRecord> job;
   FrameRecord* f = nullptr;
   {
@@ -810,6 +829,8 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
                  r.worker_id, e.what());
     std::lock_guard lock(mu_);
     scheduler_.refuse_result(r.lease_id, now());  // counted against the worker, not the job
+    store_.result_refused(r.task.job_id, r.task.frame, r.task.pass, r.task.tile, r.worker_id,
+                          e.what());
     throw;
   }
   std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
@@ -865,6 +886,7 @@ bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer
       std::string why = "its result of task " + task_id_text(r.task) +
                         " differed from those of workers " + worker + " and " + r.worker_id;
       outvoted_[liar] = why;
+      store_.refuse_worker(liar, why);
       spdlog::error("worker {} (registered by {}) outvoted: {}; it is refused from now on", liar,
                     workers_.at(liar).principal, why);
     }

@@ -131,14 +131,15 @@ struct TaskFailureReport {
 };
 
 // What one job may ask for, checked at submit: a job over a limit is refused naming it
-// (RESOURCE_EXHAUSTED for sizes, INVALID_ARGUMENT for strings). The coordinator keeps a record
-// per task (frames x passes x tiles) and, per open frame (CoreOptions::window_frames of them),
-// an accumulator of about 104 bytes per pixel (more with AOVs): the defaults bound one job to
-// 100k task records and 1.7 GB per open frame. `rayfarm coordinator --limit NAME=VALUE` sets them.
+// (RESOURCE_EXHAUSTED for sizes, INVALID_ARGUMENT for strings). The coordinator keeps a tile
+// rectangle per tile, a record per task in flight only (scheduler.h) and, per open frame
+// (CoreOptions::window_frames of them), an accumulator of about 104 bytes per pixel (more with AOVs): the defaults bound one job to
+// 10 million tasks (a bit each while their frame is open, a row each once done) and 1.7 GB per
+// open frame. `rayfarm coordinator --limit NAME=VALUE` sets them.
 struct JobLimits {
   uint64_t pixels_per_frame = 4096ull * 4096;
   uint64_t tiles_per_frame = 4096;
-  uint64_t tasks_per_job = 100000;
+  uint64_t tasks_per_job = 10000000;
   uint64_t frames_per_job = 10000;
   uint64_t spp = uint64_t(1) << 20;
   uint64_t name_bytes = 256;   // the job's name
@@ -214,7 +215,9 @@ class Coordinator {
   // Whether an upload may start: the job and task exist and the caller's worker holds the
   // task's lease (current, or expired with the task not yet done). Called on an upload's header,
   // before any of its bytes are buffered; complete() checks again.
-  void check_upload(const std::string& worker_id, const std::string& lease_id, const TaskRef& task,
+  // False when the task is settled (done, stopped, its job ended): the upload is not needed,
+  // and is answered accepted = false without reading it.
+  bool check_upload(const std::string& worker_id, const std::string& lease_id, const TaskRef& task,
                     const Caller& caller = {}) const;
   // True when the result was merged; false when another result for the task came first, or the
   // task is no longer needed (stopped frame, ended job). The result is durable before this
@@ -257,8 +260,9 @@ class Coordinator {
   std::shared_ptr<JobRecord> find_for(const std::string& id, const Caller& caller) const;
   // The worker's registration checked against the caller; throws if unknown or not theirs.
   void check_worker(const std::string& worker_id, const Caller& caller) const;  // under mu_
-  // The lease is known and held by worker_id (and for `task` when given).         // under mu_
-  void check_lease(const std::string& worker_id, const std::string& lease_id,
+  // The lease is known and held by worker_id (and for `task` when given): true; false when it  // under mu_
+  // is retired (ended with its task settled); throws otherwise.
+  bool check_lease(const std::string& worker_id, const std::string& lease_id,
                    const TaskRef* task) const;
 
   CoreOptions options_;

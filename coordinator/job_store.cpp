@@ -123,10 +123,18 @@ JobStore::JobStore(const std::string& path) : path_(path) {
   exec(
       "CREATE TABLE IF NOT EXISTS workers (id TEXT PRIMARY KEY, principal TEXT NOT NULL, build "
       "TEXT NOT NULL DEFAULT '', registered INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
+  columns.clear();
+  {
+    Stmt s(db_, "SELECT name FROM pragma_table_info('workers')", path_);
+    while (s.step()) columns.insert(s.text(0));
+  }
+  if (!columns.count("refused"))
+    exec("ALTER TABLE workers ADD COLUMN refused TEXT NOT NULL DEFAULT ''");
   exec(
       "CREATE TABLE IF NOT EXISTS leases (id TEXT PRIMARY KEY, job_id TEXT NOT NULL, frame "
       "INTEGER NOT NULL, pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL)");
-  exec("CREATE INDEX IF NOT EXISTS leases_job ON leases (job_id)");
+  exec("DROP INDEX IF EXISTS leases_job");
+  exec("CREATE INDEX IF NOT EXISTS leases_job_frame ON leases (job_id, frame)");
   exec(
       "CREATE TABLE IF NOT EXISTS blob_tenants (tenant TEXT NOT NULL, sha256 TEXT NOT NULL, "
       "PRIMARY KEY (tenant, sha256)) WITHOUT ROWID");
@@ -214,10 +222,15 @@ void JobStore::insert_worker(const StoredWorker& w) {
 }
 
 std::vector<JobStore::StoredWorker> JobStore::workers() const {
-  Stmt s(db_, "SELECT id, principal, build FROM workers", path_);
+  Stmt s(db_, "SELECT id, principal, build, refused FROM workers", path_);
   std::vector<StoredWorker> out;
-  while (s.step()) out.push_back({s.text(0), s.text(1), s.text(2)});
+  while (s.step()) out.push_back({s.text(0), s.text(1), s.text(2), s.text(3)});
   return out;
+}
+
+void JobStore::refuse_worker(const std::string& id, const std::string& why) {
+  Stmt s(db_, "UPDATE workers SET refused = ? WHERE id = ?", path_);
+  s.bind(why).bind(id).step();
 }
 
 void JobStore::add_blob_tenant(const std::string& tenant, const std::string& sha256) {
@@ -257,20 +270,55 @@ void JobStore::insert_lease(const StoredLease& l) {
   exec("PRAGMA synchronous=FULL");
 }
 
-std::vector<StoredLease> JobStore::leases(const std::string& job_id) const {
+void JobStore::for_each_lease(const std::string& job_id,
+                              const std::function<void(const StoredLease&)>& f) const {
   Stmt s(db_, "SELECT id, frame, pass, tile, worker FROM leases WHERE job_id = ? ORDER BY rowid",
          path_);
   s.bind(job_id);
-  std::vector<StoredLease> out;
   while (s.step())
-    out.push_back({s.text(0), job_id, uint32_t(s.integer(1)), uint32_t(s.integer(2)),
-                   uint32_t(s.integer(3)), s.text(4)});
+    f({s.text(0), job_id, uint32_t(s.integer(1)), uint32_t(s.integer(2)), uint32_t(s.integer(3)),
+       s.text(4)});
+}
+
+std::vector<StoredLease> JobStore::leases(const std::string& job_id) const {
+  std::vector<StoredLease> out;
+  for_each_lease(job_id, [&](const StoredLease& l) { out.push_back(l); });
   return out;
 }
 
 void JobStore::delete_leases(const std::string& job_id) {
   Stmt s(db_, "DELETE FROM leases WHERE job_id = ?", path_);
   s.bind(job_id).step();
+}
+
+void JobStore::delete_leases(const std::string& job_id, uint32_t frame) {
+  Stmt s(db_, "DELETE FROM leases WHERE job_id = ? AND frame = ?", path_);
+  s.bind(job_id).bind(int64_t(frame)).step();
+}
+
+// task_events.done: 1 done, 0 failed, 2 result refused.
+void JobStore::result_refused(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
+                              const std::string& worker, const std::string& why) {
+  Stmt s(db_,
+         "INSERT INTO task_events (job_id, frame, pass, tile, worker, done, message) VALUES "
+         "(?,?,?,?,?,2,?)",
+         path_);
+  s.bind(id)
+      .bind(int64_t(frame))
+      .bind(int64_t(pass))
+      .bind(int64_t(tile))
+      .bind(worker)
+      .bind(why)
+      .step();
+}
+
+std::vector<std::string> JobStore::refused_workers(const std::string& id) const {
+  Stmt s(db_, "SELECT worker FROM task_events WHERE job_id = ? AND done = 2 ORDER BY rowid",
+         path_);
+  s.bind(id);
+  std::vector<std::string> out;
+  while (s.step()) out.push_back(s.text(0));
+  return out;
 }
 
 std::vector<JobStore::TaskFailure> JobStore::failures(const std::string& id) const {

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -75,8 +76,10 @@ class JobStore {
   // those late results be rendered again.
   struct StoredWorker {
     std::string id, principal, build_id;
+    std::string refused;  // why it is refused for good (outvoted), or empty
   };
   void insert_worker(const StoredWorker& worker);
+  void refuse_worker(const std::string& worker_id, const std::string& why);
   std::vector<StoredWorker> workers() const;
   void set_build(const std::string& job_id, const std::string& build_id);
 
@@ -84,14 +87,23 @@ class JobStore {
   void add_blob_tenant(const std::string& tenant, const std::string& sha256);
   bool blob_tenant(const std::string& tenant, const std::string& sha256) const;
   void insert_lease(const StoredLease& lease);
+  // The job's lease rows in the order written, one at a time (a large job may have many).
+  void for_each_lease(const std::string& job_id,
+                      const std::function<void(const StoredLease&)>& f) const;
   std::vector<StoredLease> leases(const std::string& job_id) const;
   void delete_leases(const std::string& job_id);  // the job ended
+  void delete_leases(const std::string& job_id, uint32_t frame);  // the frame is done
 
   struct TaskFailure {
     uint32_t frame, pass, tile;
     std::string worker_id, message;
   };
   std::vector<TaskFailure> failures(const std::string& job_id) const;  // in the order recorded
+  // A worker's result refused (it did not match its task): counted against the worker in the
+  // job, never against the task.
+  void result_refused(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
+                      const std::string& worker_id, const std::string& why);
+  std::vector<std::string> refused_workers(const std::string& job_id) const;  // one per refusal
   uint64_t tasks_done(const std::string& job_id) const;
 
  private:

@@ -10,67 +10,134 @@ Scheduler::JobState* Scheduler::job(const std::string& id) {
   return it == jobs_.end() ? nullptr : &it->second;
 }
 
+const Scheduler::JobState* Scheduler::job(const std::string& id) const {
+  auto it = jobs_.find(id);
+  return it == jobs_.end() ? nullptr : &it->second;
+}
+
 Scheduler::FrameState* Scheduler::frame_of(JobState& j, uint32_t frame) {
-  for (FrameState& f : j.frames)
-    if (f.frame == frame) return &f;
-  return nullptr;
+  auto it = j.frame_index.find(frame);
+  return it == j.frame_index.end() ? nullptr : &j.frames[it->second];
+}
+
+const Scheduler::FrameState* Scheduler::frame_of(const JobState& j, uint32_t frame) const {
+  auto it = j.frame_index.find(frame);
+  return it == j.frame_index.end() ? nullptr : &j.frames[it->second];
+}
+
+std::pair<Scheduler::JobState*, Scheduler::FrameState*> Scheduler::locate(const TaskRef& ref) {
+  JobState* j = job(ref.job_id);
+  FrameState* f = j ? frame_of(*j, ref.frame) : nullptr;
+  if (!f || ref.pass >= j->passes || ref.tile >= j->tiles) return {nullptr, nullptr};
+  return {j, f};
+}
+
+std::pair<const Scheduler::JobState*, const Scheduler::FrameState*> Scheduler::locate(
+    const TaskRef& ref) const {
+  const JobState* j = job(ref.job_id);
+  const FrameState* f = j ? frame_of(*j, ref.frame) : nullptr;
+  if (!f || ref.pass >= j->passes || ref.tile >= j->tiles) return {nullptr, nullptr};
+  return {j, f};
 }
 
 bool Scheduler::needed(const JobState& j, const FrameState& f, uint32_t pass) const {
   return !j.failed && !j.cancelled && pass < f.passes_needed;
 }
 
+bool Scheduler::is_done(const FrameState& f, uint64_t number) const {
+  if (f.open_tasks == 0) return true;  // every needed task is (the others are never asked)
+  return !f.done.empty() && f.done[number];
+}
+
 void Scheduler::add_job(const std::string& job_id, const std::vector<uint32_t>& frames,
                         uint32_t tiles, uint32_t passes, int priority) {
   JobState& j = jobs_[job_id];
-  j = JobState{job_id, priority, next_order_++, tiles, passes, {}, {}, false, false, {}};
+  j = JobState{job_id, priority, next_order_++, tiles, passes, {}, {}, {}, false, false, {}};
+  j.frames.reserve(frames.size());
   for (uint32_t f : frames) {
-    j.frames.push_back({f, passes, tiles * passes});
-    for (uint32_t p = 0; p < passes; ++p)
-      for (uint32_t t = 0; t < tiles; ++t) {
-        TaskRef ref{job_id, f, p, t};
-        tasks_[ref] = TaskState{};
-        queue_.insert(ref);
-      }
+    j.frame_index[f] = j.frames.size();
+    j.frames.push_back({f, passes, uint64_t(tiles) * passes});
   }
 }
 
-void Scheduler::end_task_leases(TaskState& t) {
-  for (const std::string& id : t.leases) {
-    LeaseState& l = leases_[id];
-    expiry_.erase({l.expires_at, id});
-    l.live = false;
+bool Scheduler::excluded(const TaskRef& ref, const std::string& worker_id) const {
+  auto it = tasks_.find(ref);
+  return it != tasks_.end() &&
+         (it->second.failed_workers.count(worker_id) || it->second.excluded.count(worker_id));
+}
+
+std::optional<uint64_t> Scheduler::first_for(const JobState& j, FrameState& f,
+                                             const std::string& worker_id) {
+  uint64_t limit = uint64_t(f.passes_needed) * j.tiles;
+  auto ref_of = [&](uint64_t n) { return TaskRef{j.id, f.frame, uint32_t(n / j.tiles),
+                                                 uint32_t(n % j.tiles)}; };
+  std::optional<uint64_t> best;
+  for (uint64_t n : f.waiting)
+    if (!excluded(ref_of(n), worker_id)) {
+      best = n;
+      break;
+    }
+  // Done tasks at the front of the fresh ones are passed for good.
+  while (f.fresh < limit && is_done(f, f.fresh)) ++f.fresh, --f.done_ahead;
+  for (uint64_t n = f.fresh; n < limit && (!best || n < *best); ++n) {
+    if (is_done(f, n) || excluded(ref_of(n), worker_id)) continue;
+    best = n;
+    break;
   }
-  t.leases.clear();
+  return best;
 }
 
 void Scheduler::end_lease(const std::string& id, LeaseState& l) {
   if (l.live) expiry_.erase({l.expires_at, id});
   l.live = false;
-  tasks_[l.task].leases.erase(id);
+  auto t = tasks_.find(l.task);
+  if (t != tasks_.end() && t->second.leases.erase(id)) t->second.ended.insert(id);
+}
+
+void Scheduler::forget_task(const TaskRef& ref) {
+  auto t = tasks_.find(ref);
+  if (t == tasks_.end()) return;
+  for (const std::set<std::string>* ids : {&t->second.leases, &t->second.ended})
+    for (const std::string& id : *ids) {
+      auto l = leases_.find(id);
+      if (l == leases_.end()) continue;
+      if (l->second.live) expiry_.erase({l->second.expires_at, id});
+      leases_.erase(l);
+    }
+  tasks_.erase(t);
+}
+
+void Scheduler::forget_tasks_from(const JobState& j, uint32_t frame, uint32_t first_pass) {
+  std::vector<TaskRef> refs;
+  for (auto it = tasks_.lower_bound(TaskRef{j.id, frame, first_pass, 0});
+       it != tasks_.end() && it->first.job_id == j.id && it->first.frame == frame; ++it)
+    refs.push_back(it->first);
+  for (const TaskRef& r : refs) forget_task(r);
 }
 
 void Scheduler::requeue_if_needed(const TaskRef& ref) {
-  TaskState& t = tasks_[ref];
-  JobState* j = job(ref.job_id);
-  FrameState* f = j ? frame_of(*j, ref.frame) : nullptr;
-  if (!t.done && !t.stopped && t.leases.empty() && f && needed(*j, *f, ref.pass))
-    queue_.insert(ref);
+  auto [j, f] = locate(ref);
+  if (!f || !needed(*j, *f, ref.pass)) return;
+  uint64_t n = uint64_t(ref.pass) * j->tiles + ref.tile;
+  if (is_done(*f, n)) return;
+  auto t = tasks_.find(ref);
+  if (t != tasks_.end() && !t->second.leases.empty()) return;
+  if (n < f->fresh) f->waiting.insert(n);
 }
 
 void Scheduler::cancel_job(const std::string& job_id) {
   JobState* j = job(job_id);
   if (!j) return;
   j->cancelled = true;
-  drop_job_tasks(job_id);
+  drop_job_tasks(*j);
 }
 
-void Scheduler::drop_job_tasks(const std::string& job_id) {
-  for (auto it = queue_.lower_bound(TaskRef{job_id, 0, 0, 0});
-       it != queue_.end() && it->job_id == job_id;)
-    it = queue_.erase(it);
-  for (auto& [ref, t] : tasks_)
-    if (ref.job_id == job_id) end_task_leases(t);
+void Scheduler::drop_job_tasks(JobState& j) {
+  for (FrameState& f : j.frames) {
+    forget_tasks_from(j, f.frame, 0);
+    f.done = {};
+    f.waiting = {};
+  }
 }
 
 void Scheduler::expire(double now) {
@@ -94,27 +161,35 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
   for (JobState* j : order) {
     auto wf = j->worker_failures.find(worker_id);
     if (wf != j->worker_failures.end() && wf->second >= options_.max_failures) continue;
-    // The window: the first window_frames frames (in job order) that still need tasks.
-    std::map<uint32_t, size_t> window;  // frame -> position in the job
-    for (size_t i = 0; i < j->frames.size() && window.size() < options_.window_frames; ++i)
-      if (j->frames[i].open_tasks > 0) window[j->frames[i].frame] = i;
-    // Each open frame's first queued task this worker may get (the queue orders a frame's
-    // tasks by pass, then tile), then the least by (pass, position in the job, tile).
-    const TaskRef* best = nullptr;
+    // The window: the first window_frames frames (in job order) that still need tasks. Each
+    // one's first task this worker may get (a frame's tasks are numbered by pass, then tile),
+    // then the least by (pass, position in the job, tile).
+    FrameState* best = nullptr;
+    uint64_t best_number = 0;
     std::tuple<uint32_t, size_t, uint32_t> best_key{};
-    for (const auto& [frame, position] : window) {
-      for (auto it = queue_.lower_bound(TaskRef{j->id, frame, 0, 0});
-           it != queue_.end() && it->job_id == j->id && it->frame == frame; ++it) {
-        const TaskState& ts = tasks_[*it];
-        if (ts.failed_workers.count(worker_id) || ts.excluded.count(worker_id)) continue;
-        std::tuple<uint32_t, size_t, uint32_t> key{it->pass, position, it->tile};
-        if (!best || key < best_key) best = &*it, best_key = key;
-        break;
-      }
+    size_t open = 0;
+    for (size_t i = 0; i < j->frames.size() && open < options_.window_frames; ++i) {
+      FrameState& f = j->frames[i];
+      if (f.open_tasks == 0) continue;
+      ++open;
+      std::optional<uint64_t> n = first_for(*j, f, worker_id);
+      if (!n) continue;
+      std::tuple<uint32_t, size_t, uint32_t> key{uint32_t(*n / j->tiles), i,
+                                                 uint32_t(*n % j->tiles)};
+      if (!best || key < best_key) best = &f, best_number = *n, best_key = key;
     }
     if (!best) continue;
-    TaskRef ref = *best;
-    queue_.erase(ref);
+    FrameState& f = *best;
+    if (best_number < f.fresh) {
+      f.waiting.erase(best_number);
+    } else {  // fresh tasks passed over (excluded for this worker) wait for the others
+      for (uint64_t n = f.fresh; n < best_number; ++n)
+        if (!is_done(f, n)) f.waiting.insert(n);
+        else --f.done_ahead;
+      f.fresh = best_number + 1;
+    }
+    TaskRef ref{j->id, f.frame, uint32_t(best_number / j->tiles),
+                uint32_t(best_number % j->tiles)};
     std::string id = options_.lease_prefix + std::to_string(++next_lease_);
     leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
     expiry_.insert({now + options_.lease_seconds, id});
@@ -124,10 +199,24 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
   return std::nullopt;
 }
 
+bool Scheduler::retired(const std::string& lease_id) const {
+  const std::string& p = options_.lease_prefix;
+  if (lease_id.size() <= p.size() || lease_id.size() > p.size() + 19 ||
+      lease_id.compare(0, p.size(), p) != 0 || leases_.count(lease_id))
+    return false;
+  uint64_t n = 0;
+  for (size_t i = p.size(); i < lease_id.size(); ++i) {
+    char c = lease_id[i];
+    if (c < '0' || c > '9' || (i == p.size() && c == '0')) return false;
+    n = n * 10 + uint64_t(c - '0');
+  }
+  return n >= 1 && n <= next_lease_;
+}
+
 LeaseOutcome Scheduler::renew(const std::string& lease_id, double now) {
   expire(now);
   auto it = leases_.find(lease_id);
-  if (it == leases_.end()) return LeaseOutcome::NotFound;
+  if (it == leases_.end()) return retired(lease_id) ? LeaseOutcome::Ended : LeaseOutcome::NotFound;
   if (!it->second.live) return LeaseOutcome::Ended;
   expiry_.erase({it->second.expires_at, lease_id});
   it->second.expires_at = now + options_.lease_seconds;
@@ -138,36 +227,55 @@ LeaseOutcome Scheduler::renew(const std::string& lease_id, double now) {
 CompleteOutcome Scheduler::complete(const std::string& lease_id, double now) {
   expire(now);
   auto it = leases_.find(lease_id);
-  if (it == leases_.end()) return CompleteOutcome::NotFound;
+  if (it == leases_.end())
+    return retired(lease_id) ? CompleteOutcome::Duplicate : CompleteOutcome::NotFound;
+  TaskRef task = it->second.task;
   end_lease(lease_id, it->second);
-  return complete_task(it->second.task);
+  return complete_task(task);
 }
 
 CompleteOutcome Scheduler::complete(const std::string& lease_id, const TaskRef& task, double now) {
   auto it = leases_.find(lease_id);
   if (it != leases_.end() && it->second.task == task) return complete(lease_id, now);
   expire(now);
-  if (!tasks_.count(task)) return CompleteOutcome::NotFound;
+  if (!locate(task).first) return CompleteOutcome::NotFound;
   return complete_task(task);
 }
 
 CompleteOutcome Scheduler::complete_task(const TaskRef& ref) {
-  TaskState& t = tasks_[ref];
-  JobState* j = job(ref.job_id);
-  FrameState* f = j ? frame_of(*j, ref.frame) : nullptr;
-  if (t.done || t.stopped || !f || !needed(*j, *f, ref.pass)) return CompleteOutcome::Duplicate;
+  auto [j, f] = locate(ref);
+  if (!f || !needed(*j, *f, ref.pass)) return CompleteOutcome::Duplicate;
+  uint64_t n = uint64_t(ref.pass) * j->tiles + ref.tile;
+  if (is_done(*f, n)) return CompleteOutcome::Duplicate;
   // First result wins, whichever lease it came from; the task's other leases end.
-  t.done = true;
-  end_task_leases(t);
-  queue_.erase(ref);
-  --f->open_tasks;
+  forget_task(ref);
+  f->waiting.erase(n);
+  if (f->done.empty()) f->done.assign(uint64_t(j->passes) * j->tiles, false);
+  f->done[n] = true;
+  if (n >= f->fresh) ++f->done_ahead;
+  if (--f->open_tasks == 0) {  // the frame is done: nothing of it is needed any more
+    forget_tasks_from(*j, f->frame, 0);
+    f->done = {};
+    f->waiting = {};
+  }
   return CompleteOutcome::Accepted;
 }
 
 void Scheduler::mark_done(const TaskRef& ref) {
-  auto it = tasks_.find(ref);
-  if (it == tasks_.end() || it->second.done) return;
-  complete_task(ref);
+  if (locate(ref).first) complete_task(ref);
+}
+
+void Scheduler::mark_passes_done(const std::string& job_id, uint32_t frame, uint32_t passes) {
+  JobState* j = job(job_id);
+  if (!j) return;
+  for (uint32_t p = 0; p < std::min(passes, j->passes); ++p)
+    for (uint32_t t = 0; t < j->tiles; ++t) mark_done(TaskRef{job_id, frame, p, t});
+}
+
+bool Scheduler::settled(const TaskRef& ref) const {
+  auto [j, f] = locate(ref);
+  return !f || !needed(*j, *f, ref.pass) ||
+         is_done(*f, uint64_t(ref.pass) * j->tiles + ref.tile);
 }
 
 std::optional<TaskRef> Scheduler::lease_task(const std::string& lease_id) const {
@@ -180,10 +288,10 @@ LeaseOutcome Scheduler::fail(const std::string& lease_id, const std::string& mes
                              bool handed_back, double now) {
   expire(now);
   auto it = leases_.find(lease_id);
-  if (it == leases_.end()) return LeaseOutcome::NotFound;
+  if (it == leases_.end()) return retired(lease_id) ? LeaseOutcome::Ended : LeaseOutcome::NotFound;
   if (!it->second.live) return LeaseOutcome::Ended;
-  LeaseState& l = it->second;
-  end_lease(lease_id, l);
+  LeaseState l = it->second;
+  end_lease(lease_id, it->second);
   JobState* j = job(l.task.job_id);
   if (!handed_back && j && count_failure(l.task, l.worker_id, message)) return LeaseOutcome::Ok;
   requeue_if_needed(l.task);
@@ -198,8 +306,13 @@ void Scheduler::refuse_result(const std::string& lease_id, double now) {
   JobState* j = job(l.task.job_id);
   if (j) ++j->worker_failures[l.worker_id];
   if (!l.live) return;
+  TaskRef task = l.task;
   end_lease(lease_id, l);
-  requeue_if_needed(l.task);
+  requeue_if_needed(task);
+}
+
+void Scheduler::restore_refusal(const std::string& job_id, const std::string& worker_id) {
+  if (JobState* j = job(job_id)) ++j->worker_failures[worker_id];
 }
 
 void Scheduler::verify_again(const std::string& lease_id, double now) {
@@ -207,17 +320,19 @@ void Scheduler::verify_again(const std::string& lease_id, double now) {
   auto it = leases_.find(lease_id);
   if (it == leases_.end()) return;
   LeaseState& l = it->second;
-  tasks_[l.task].excluded.insert(l.worker_id);
+  TaskRef task = l.task;
+  tasks_[task].excluded.insert(l.worker_id);
   end_lease(lease_id, l);
-  requeue_if_needed(l.task);
+  requeue_if_needed(task);
 }
 
 bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,
                               const std::string& message) {
-  JobState* j = job(ref.job_id);
-  auto it = tasks_.find(ref);
-  if (!j || it == tasks_.end() || j->failed) return false;
-  TaskState& t = it->second;
+  auto [j, f] = locate(ref);
+  if (!f || j->failed || !needed(*j, *f, ref.pass) ||
+      is_done(*f, uint64_t(ref.pass) * j->tiles + ref.tile))
+    return false;
+  TaskState& t = tasks_[ref];
   t.failed_workers.insert(worker_id);
   t.messages.push_back(worker_id + ": " + message);
   ++j->worker_failures[worker_id];
@@ -227,7 +342,7 @@ bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,
              " tile " + std::to_string(ref.tile) + " failed on " +
              std::to_string(t.failed_workers.size()) + " workers:";
   for (const std::string& m : t.messages) j->error += "\n  " + m;
-  drop_job_tasks(j->id);
+  drop_job_tasks(*j);
   return true;
 }
 
@@ -238,8 +353,9 @@ std::string Scheduler::lease_worker(const std::string& lease_id) const {
 
 void Scheduler::restore_lease(const std::string& lease_id, const TaskRef& task,
                               const std::string& worker_id) {
-  if (!tasks_.count(task)) return;
+  if (settled(task)) return;  // nothing more to accept under it
   leases_[lease_id] = LeaseState{task, worker_id, 0, false};
+  tasks_[task].ended.insert(lease_id);
 }
 
 void Scheduler::restore_failure(const TaskRef& ref, const std::string& worker_id,
@@ -251,16 +367,22 @@ void Scheduler::stop_frame(const std::string& job_id, uint32_t frame, uint32_t f
   JobState* j = job(job_id);
   FrameState* f = j ? frame_of(*j, frame) : nullptr;
   if (!f || first_unneeded >= f->passes_needed) return;
-  for (uint32_t p = first_unneeded; p < f->passes_needed; ++p)
-    for (uint32_t tile = 0; tile < j->tiles; ++tile) {
-      TaskRef ref{job_id, frame, p, tile};
-      TaskState& t = tasks_[ref];
-      if (!t.done) --f->open_tasks;
-      t.stopped = true;
-      end_task_leases(t);
-      queue_.erase(ref);
-    }
+  uint64_t limit = uint64_t(first_unneeded) * j->tiles;
+  uint64_t old_limit = uint64_t(f->passes_needed) * j->tiles;
+  if (f->open_tasks > 0) {
+    for (uint64_t n = limit; n < old_limit; ++n)
+      if (!is_done(*f, n)) --f->open_tasks;
+  }
+  forget_tasks_from(*j, frame, first_unneeded);
+  f->waiting.erase(f->waiting.lower_bound(limit), f->waiting.end());
   f->passes_needed = first_unneeded;
+  f->done_ahead = 0;
+  for (uint64_t n = f->fresh; n < limit; ++n)
+    if (is_done(*f, n)) ++f->done_ahead;
+  if (f->open_tasks == 0) {
+    f->done = {};
+    f->waiting = {};
+  }
 }
 
 bool Scheduler::job_failed(const std::string& job_id) const {
@@ -284,6 +406,19 @@ bool Scheduler::work_left_for(const std::string& worker_id, const JobFilter& may
   return false;
 }
 
-size_t Scheduler::queued_tasks() const { return queue_.size(); }
+uint64_t Scheduler::queued_in(const JobState& j, const FrameState& f) const {
+  if (f.open_tasks == 0) return 0;
+  uint64_t limit = uint64_t(f.passes_needed) * j.tiles;
+  uint64_t fresh = std::min(f.fresh, limit);
+  return f.waiting.size() + (limit - fresh - std::min(f.done_ahead, limit - fresh));
+}
+
+size_t Scheduler::queued_tasks() const {
+  uint64_t n = 0;
+  for (const auto& [id, j] : jobs_)
+    if (!j.failed && !j.cancelled)
+      for (const FrameState& f : j.frames) n += queued_in(j, f);
+  return size_t(n);
+}
 
 }  // namespace rf

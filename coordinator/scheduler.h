@@ -10,6 +10,12 @@
 // ones are answered accepted = false, and the task's other leases end. A task that fails on
 // max_failures different workers fails its job; a worker that fails max_failures tasks of a job
 // gets no more of them. A task handed back (worker shutting down) is re-queued without counting.
+//
+// Memory is bounded by what is in flight, not by the job's size: a task exists as its number
+// in its frame (pass * tiles + tile) until it is handed out; a frame holds one bit per task
+// while it is open; tasks with leases, failures or held results have a record, and records and
+// leases go when their task is done, its pass is stopped or its job ends. A lease id of this
+// run whose record is gone is "retired": it ended and its task needs nothing more from it.
 #pragma once
 
 #include <cstdint>
@@ -62,6 +68,13 @@ class Scheduler {
   CompleteOutcome complete(const std::string& lease_id, const TaskRef& task, double now);
   // Restoring from checkpoints: the task's result is already merged or stored.
   void mark_done(const TaskRef& task);
+  // Restoring from checkpoints: passes [0, passes) of the frame are merged.
+  void mark_passes_done(const std::string& job_id, uint32_t frame, uint32_t passes);
+  // The task is done or not needed (or its job ended): a result for it would not be merged.
+  bool settled(const TaskRef& task) const;
+  // A lease id handed out by this scheduler whose record is gone: it ended, and its task is
+  // settled. Renewing it answers Ended, completing it Duplicate.
+  bool retired(const std::string& lease_id) const;
   std::optional<TaskRef> lease_task(const std::string& lease_id) const;
   std::string lease_worker(const std::string& lease_id) const;  // "" for an unknown lease
   // Restoring from the job store: a lease handed out before a restart, ended (its task is
@@ -78,6 +91,8 @@ class Scheduler {
   // task is queued again, and the refusal counts against the lease's worker in the job (toward
   // giving it no more of the job's tasks), never against the task or the job.
   void refuse_result(const std::string& lease_id, double now);
+  // Restoring from the job store: a refused result recorded before a restart counts as before.
+  void restore_refusal(const std::string& job_id, const std::string& worker_id);
   // A result sent under this lease is held until another worker's agrees (verification): the
   // lease ends and the task is queued again for any worker but those that sent one.
   void verify_again(const std::string& lease_id, double now);
@@ -91,19 +106,27 @@ class Scheduler {
   // Queued or leased tasks this worker could still get (for --exit-when-idle).
   bool work_left_for(const std::string& worker_id, const JobFilter& may = {}) const;
   size_t queued_tasks() const;
+  // Records held (tasks with leases, failures or exclusions; leases): for tests of the bound.
+  size_t task_records() const { return tasks_.size(); }
+  size_t lease_records() const { return leases_.size(); }
 
  private:
-  struct TaskState {
-    bool done = false, stopped = false;
+  struct TaskState {  // only for tasks with something to remember
     std::set<std::string> failed_workers;
     std::vector<std::string> messages;
     std::set<std::string> leases;    // live leases of this task
+    std::set<std::string> ended;     // its ended leases, kept for their holders' late results
     std::set<std::string> excluded;  // workers that sent a result held for verification
   };
   struct FrameState {
     uint32_t frame;
     uint32_t passes_needed;  // tasks of passes >= this are not needed
-    uint32_t open_tasks;     // needed tasks not done
+    uint64_t open_tasks;     // needed tasks not done
+    // Tasks numbered >= fresh (number = pass * tiles + tile) were never handed out: they wait
+    // in number order unless done (restored from a checkpoint; done_ahead counts those).
+    uint64_t fresh = 0, done_ahead = 0;
+    std::vector<bool> done;      // by number, while the frame is open and has a done task
+    std::set<uint64_t> waiting;  // numbered below fresh, queued again
   };
   struct JobState {
     std::string id;
@@ -111,6 +134,7 @@ class Scheduler {
     uint64_t order;
     uint32_t tiles, passes;
     std::vector<FrameState> frames;
+    std::map<uint32_t, size_t> frame_index;  // frame number -> position in frames
     std::map<std::string, int> worker_failures;
     bool failed = false, cancelled = false;
     std::string error;
@@ -129,18 +153,31 @@ class Scheduler {
   CompleteOutcome complete_task(const TaskRef& ref);
   // Counts a failure of `ref` on `worker_id`; true if it failed the job.
   bool count_failure(const TaskRef& ref, const std::string& worker_id, const std::string& message);
-  void drop_job_tasks(const std::string& job_id);
-  void end_task_leases(TaskState& t);
+  void drop_job_tasks(JobState& j);
+  // Ends the task's leases and forgets them and the task's record.
+  void forget_task(const TaskRef& ref);
+  // Forgets every task record (and its leases) of the frame from pass `first_pass` on.
+  void forget_tasks_from(const JobState& j, uint32_t frame, uint32_t first_pass);
   bool needed(const JobState& j, const FrameState& f, uint32_t pass) const;
+  bool is_done(const FrameState& f, uint64_t number) const;
+  // The frame's first task this worker may get, as its number, or none.
+  std::optional<uint64_t> first_for(const JobState& j, FrameState& f,
+                                    const std::string& worker_id);
+  bool excluded(const TaskRef& ref, const std::string& worker_id) const;
+  uint64_t queued_in(const JobState& j, const FrameState& f) const;
   JobState* job(const std::string& id);
+  const JobState* job(const std::string& id) const;
   FrameState* frame_of(JobState& j, uint32_t frame);
+  const FrameState* frame_of(const JobState& j, uint32_t frame) const;
+  // The task's job and frame, if the task is one of a known job's.
+  std::pair<JobState*, FrameState*> locate(const TaskRef& ref);
+  std::pair<const JobState*, const FrameState*> locate(const TaskRef& ref) const;
 
   SchedulerOptions options_;
   std::map<std::string, JobState> jobs_;
   std::map<TaskRef, TaskState> tasks_;
   std::map<std::string, LeaseState> leases_;
   std::set<std::pair<double, std::string>> expiry_;  // live leases by expiry time
-  std::set<TaskRef> queue_;                          // needed, not done, not leased
   uint64_t next_order_ = 0, next_lease_ = 0;
 };
 

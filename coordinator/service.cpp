@@ -399,7 +399,10 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
       const pb::CompleteHeader header = msg.header();
       std::optional<TaskRef> task = parse_task_id(header.task_id());
       if (!task) bad_request("task_id '" + header.task_id().substr(0, 64) + "' is malformed");
-      c_.check_upload(header.worker_id(), header.lease_id(), *task, caller);
+      if (!c_.check_upload(header.worker_id(), header.lease_id(), *task, caller)) {
+        o->set_accepted(false);  // the task needs nothing more: answered without reading on
+        return;
+      }
       UploadSlot slot(*this, header.worker_id());
       ChunkAssembler chunks(o_.max_buffer_bytes);
       while (r->Read(&msg)) {

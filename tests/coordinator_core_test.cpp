@@ -444,7 +444,7 @@ TEST(CoordinatorCore, ResultsWithWrongCountsOrNonFiniteSumsAreRefused) {
 }
 
 // Refused results count against the worker that sent them, never against the job: after 3, the
-// worker gets no more of the job's tasks, and the job runs on and completes.
+// worker gets no more of the job's tasks (across a restart), and the job runs on and completes.
 TEST(CoordinatorCore, AWorkerWhoseResultsAreRefusedGetsNoMoreOfTheJob) {
   CoreBench bench("core-refused-worker");
   std::string job = bench.submit(2);
@@ -459,6 +459,8 @@ TEST(CoordinatorCore, AWorkerWhoseResultsAreRefusedGetsNoMoreOfTheJob) {
   }
   EXPECT_FALSE(bench.core().lease(bench.worker("liar")).task);
   EXPECT_EQ(bench.core().status(job).state, JobState::Running);
+  bench.start("B");  // the refusals are stored: a restart does not forgive them
+  EXPECT_FALSE(bench.core().lease(bench.worker("liar")).task);
   for (int i = 0; i < 8; ++i) EXPECT_TRUE(bench.complete(bench.lease("good"), 1.0f, "good"));
   EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
 }
@@ -638,6 +640,9 @@ TEST(CoordinatorCore, VerificationMergesOnlyAgreeingResultsAndRefusesTheOutvoted
   TaskAssignment c = bench.lease("c");
   EXPECT_EQ(c.task, lie.task) << "a disagreement needs a third worker";
   EXPECT_TRUE(bench.complete(c, 1.0f, "c"));
+  EXPECT_EQ(refusal([&] { bench.core().lease(bench.worker("liar")); }),
+            ErrorCode::PermissionDenied);
+  bench.start("B");  // stored with the worker's registration: still refused after a restart
   EXPECT_EQ(refusal([&] { bench.core().lease(bench.worker("liar")); }),
             ErrorCode::PermissionDenied);
   // The other three tasks, each by two honest workers.

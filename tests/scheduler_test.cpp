@@ -103,6 +103,89 @@ TEST(Scheduler, CancelEndsEverything) {
   EXPECT_EQ(s.queued_tasks(), 0u);
 }
 
+// Memory follows what is in flight, not the job's size: a job of 100 million tasks is added at
+// once, and a task has a record only while it is leased (or remembers a failure or a held
+// result). Records and leases go when the task is done, its pass is stopped or its job ends;
+// a lease id whose record went is answered as ended.
+TEST(Scheduler, TasksExistOnlyWhileInFlight) {
+  Scheduler s({30, 3, 4});
+  s.add_job("big", {0, 1, 2, 3}, /*tiles=*/1'000'000, /*passes=*/25, 0);  // 10^8 tasks
+  EXPECT_EQ(s.queued_tasks(), 100'000'000u);
+  EXPECT_EQ(s.task_records(), 0u);
+  std::vector<Lease> held;
+  for (int i = 0; i < 1000; ++i) held.push_back(*s.lease("w", 0));
+  EXPECT_EQ(held[999].task, (TaskRef{"big", 0, 0, 999})) << "pass 0 of frame 0 first";
+  EXPECT_EQ(s.task_records(), 1000u);
+  EXPECT_EQ(s.lease_records(), 1000u);
+  EXPECT_EQ(s.queued_tasks(), 100'000'000u - 1000);
+  for (const Lease& l : held) EXPECT_EQ(s.complete(l.lease_id, 1), CompleteOutcome::Accepted);
+  EXPECT_EQ(s.task_records(), 0u);
+  EXPECT_EQ(s.lease_records(), 0u);
+  EXPECT_EQ(s.queued_tasks(), 100'000'000u - 1000);
+  EXPECT_EQ(s.renew(held[0].lease_id, 2), LeaseOutcome::Ended) << "retired, not unknown";
+  EXPECT_EQ(s.complete(held[0].lease_id, 2), CompleteOutcome::Duplicate);
+  EXPECT_EQ(s.fail(held[0].lease_id, "late", false, 2), LeaseOutcome::Ended);
+  EXPECT_TRUE(s.retired(held[0].lease_id));
+  EXPECT_FALSE(s.retired("L1000000")) << "never handed out";
+  EXPECT_FALSE(s.retired("M1"));
+  EXPECT_TRUE(s.settled(held[0].task));
+  EXPECT_FALSE(s.settled(TaskRef{"big", 0, 0, 999'999}));
+  auto expired = s.lease("w", 3);  // expires at 33 and is queued again
+  ASSERT_TRUE(expired);
+  EXPECT_EQ(expired->task, (TaskRef{"big", 0, 0, 1000}));
+  EXPECT_EQ(s.task_records(), 1u);
+  EXPECT_EQ(s.lease("v", 40)->task, expired->task) << "expired: first in line again";
+  EXPECT_EQ(s.complete(expired->lease_id, 41), CompleteOutcome::Accepted) << "the late result";
+  EXPECT_EQ(s.task_records(), 0u);
+  EXPECT_EQ(s.lease_records(), 0u) << "both leases of the task went with it";
+  s.cancel_job("big");
+  EXPECT_EQ(s.queued_tasks(), 0u);
+}
+
+TEST(Scheduler, RestoredDoneTasksAndFailuresAmongFreshTasks) {
+  Scheduler s({30, 3, 1});
+  s.add_job("j", {5}, /*tiles=*/4, /*passes=*/2, 0);
+  s.mark_done({"j", 5, 0, 1});
+  s.mark_done({"j", 5, 1, 2});
+  s.restore_failure({"j", 5, 0, 2}, "w", "boom");
+  EXPECT_EQ(s.queued_tasks(), 6u);
+  std::vector<TaskRef> got;
+  while (auto l = s.lease("w", 0)) got.push_back(l->task);
+  // Tile 1 of pass 0 is done, tile 2 failed on w before: w gets the rest in order.
+  std::vector<TaskRef> want = {{"j", 5, 0, 0}, {"j", 5, 0, 3}, {"j", 5, 1, 0}, {"j", 5, 1, 1},
+                               {"j", 5, 1, 3}};
+  EXPECT_EQ(got, want);
+  EXPECT_EQ(s.queued_tasks(), 1u) << "tile 2 of pass 0 waits for another worker";
+  auto other = s.lease("v", 0);
+  ASSERT_TRUE(other);
+  EXPECT_EQ(other->task, (TaskRef{"j", 5, 0, 2}));
+  s.mark_passes_done("j", 5, 2);
+  EXPECT_FALSE(s.work_left_for("w"));
+  EXPECT_EQ(s.lease_records(), 0u);
+  EXPECT_EQ(s.task_records(), 0u);
+}
+
+TEST(Scheduler, StopFrameCountsOnlyTheNeededTasksAsQueued) {
+  Scheduler s({30, 3, 4});
+  s.add_job("j", {0}, /*tiles=*/3, /*passes=*/4, 0);
+  s.mark_done({"j", 0, 3, 0});  // a task of a pass about to be stopped
+  s.mark_done({"j", 0, 1, 1});
+  EXPECT_EQ(s.queued_tasks(), 10u);
+  auto a = s.lease("w", 0);
+  s.stop_frame("j", 0, 2);
+  EXPECT_EQ(s.queued_tasks(), 4u) << "passes 0 and 1 less the leased and the done task";
+  int leased = 0;
+  while (auto l = s.lease("w", 0)) {
+    EXPECT_LT(l->task.pass, 2u);
+    EXPECT_EQ(s.complete(l->lease_id, 0), CompleteOutcome::Accepted);
+    ++leased;
+  }
+  EXPECT_EQ(leased, 4);
+  EXPECT_TRUE(s.work_left_for("w")) << "the first lease is still out";
+  EXPECT_EQ(s.complete(a->lease_id, 1), CompleteOutcome::Accepted);
+  EXPECT_FALSE(s.work_left_for("w"));
+}
+
 // Restarts: results of leases issued before a coordinator restart.
 
 TEST(SchedulerRestart, ResultOfALeaseFromBeforeARestartCountsOnce) {

@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <iostream>
 #include <functional>
 #include <map>
 #include <regex>
@@ -421,6 +422,67 @@ TEST(Security, AHugeJobIsRefusedNamingItsLimitAndStatusPages) {
   farm.restart_coordinator();
   EXPECT_EQ(farm.client("status").exit_code, 0);
   EXPECT_EQ(check_health(farm.address()), "SERVING");
+}
+
+// The same job admitted by raised limits: 16384x16384 pixels in 8-pixel tiles, 4 passes, is
+// 16.8 million tasks. The coordinator makes a task only as it is handed out, so admitting the
+// job, handing out and failing hundreds of its tasks, cancelling it and restarting keep its RSS
+// within a bound (stated below) instead of the ~21 GB of task records made up front before.
+// Merging results of such a frame would still need its accumulator, 104 bytes a pixel per
+// pass in flight: pixels_per_frame is the limit that bounds that, and is not raised lightly.
+TEST(Security, AHugeJobAdmittedByRaisedLimitsIsHeldInBoundedMemory) {
+  Farm farm("security-huge", 30, "",
+            {"--limit", "pixels_per_frame=268435456", "--limit", "tiles_per_frame=4194304",
+             "--limit", "tasks_per_job=20000000"});
+  long before = rss_kib(farm.coordinator().pid());
+  std::string job = farm.submit(
+      "scenes/cornell-box/scene.json --res 16384x16384 --tile-size 8 --spp 4 --passes 4");
+  long submitted = rss_kib(farm.coordinator().pid());
+
+  auto stub = pb::WorkerService::NewStub(farm.channel());
+  std::string worker = test::register_worker(*stub, "huge");
+  std::vector<pb::Task> held;
+  for (int i = 0; i < 300; ++i) {
+    std::optional<pb::Task> task = test::lease_task(*stub, worker);
+    ASSERT_TRUE(task);
+    held.push_back(*task);
+  }
+  EXPECT_EQ(held[0].task_id(), job + "/0/0/0");
+  EXPECT_EQ(held[299].task_id(), job + "/0/0/299");
+  for (const pb::Task& task : held) {  // handed back: queued again, not counted as failures
+    grpc::ClientContext ctx;
+    pb::FailRequest fr;
+    fr.set_worker_id(worker);
+    fr.set_lease_id(task.lease_id());
+    fr.set_task_id(task.task_id());
+    fr.set_message("draining");
+    fr.set_handed_back(true);
+    pb::FailResponse fresp;
+    ASSERT_TRUE(stub->FailTask(&ctx, fr, &fresp).ok());
+  }
+  std::optional<pb::Task> again = test::lease_task(*stub, worker);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->task_id(), job + "/0/0/0") << "a handed-back task is first in line again";
+  long leased = rss_kib(farm.coordinator().pid());
+  test::CommandResult status = farm.client("status " + job);
+  EXPECT_EQ(status.exit_code, 0) << status.output;
+  EXPECT_EQ(farm.client("cancel " + job).exit_code, 0);
+  long cancelled = rss_kib(farm.coordinator().pid());
+  farm.restart_coordinator();
+  long restarted = rss_kib(farm.coordinator().pid());
+  EXPECT_EQ(farm.client("status " + job).exit_code, 0);
+  EXPECT_EQ(check_health(farm.address()), "SERVING");
+  // The bound: the job's 4.2 million tile rectangles (16 bytes each, 64 MiB) held once, with
+  // room for a transient second copy while the frame is planned; nothing per task.
+  const long bound = 160 * 1024;
+  std::ostringstream figures;
+  figures << "RSS KiB: start " << before << ", submitted " << submitted << ", 300 leases "
+          << leased << ", cancelled " << cancelled << ", restarted " << restarted;
+  std::cout << figures.str() << "\n";
+  EXPECT_LT(submitted - before, bound) << figures.str();
+  EXPECT_LT(leased - before, bound) << figures.str();
+  EXPECT_LT(cancelled - before, bound) << figures.str();
+  EXPECT_LT(restarted, before + bound) << figures.str();
 }
 
 std::string file_text(const std::string& path) {
