@@ -605,13 +605,21 @@ std::optional<JobStatus> Coordinator::next_status(const std::string& id, uint64_
 }
 
 void Coordinator::cancel(const std::string& id, const Caller& caller) {
-  std::lock_guard lock(mu_);
-  std::shared_ptr<JobRecord> job = find_for(id, caller);
-  if (terminal(job->state))
-    refuse(ErrorCode::FailedPrecondition,
-           "job " + id + " has already ended (" + job_state_name(job->state) + ")");
-  scheduler_.cancel_job(id);
-  set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
+  std::shared_ptr<JobRecord> job;
+  {
+    std::lock_guard lock(mu_);
+    job = find_for(id, caller);
+    if (terminal(job->state))
+      refuse(ErrorCode::FailedPrecondition,
+             "job " + id + " has already ended (" + job_state_name(job->state) + ")");
+    scheduler_.cancel_job(id);
+    set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
+  }
+  // Its merged passes are in the checkpoints (fetch reads them there): the accumulators go.
+  for (auto& f : job->frames) {
+    std::lock_guard frame_lock(f->m);
+    f->acc.reset();
+  }
 }
 
 FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame,
@@ -835,7 +843,11 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   }
   std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
   if (!f->acc) {
-    if (f->progress.done) return false;  // merged and checkpointed already
+    {
+      std::lock_guard lock(mu_);
+      // Merged and checkpointed already, or its job ended meanwhile.
+      if (f->progress.done || scheduler_.settled(r.task)) return false;
+    }
     f->acc =
         std::make_unique<FrameAccumulator>(f->base, job->tiles, job->splats, job->merge_options());
   }
