@@ -70,7 +70,13 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       "on SIGTERM, finish the task in flight if done within this, else hand it back");
   worker->add_flag("--exit-when-idle", wo->exit_when_idle,
                    "exit once the coordinator has no queued or leased work left");
-  worker->add_option("--max-tasks", wo->max_tasks, "exit after this many tasks");
+  worker->add_option("--max-tasks", wo->max_tasks, "exit after this many tasks")
+      ->check(CLI::NonNegativeNumber);
+  worker
+      ->add_option("--give-up-after", wo->give_up_after,
+                   "exit 1 after this many seconds without an answer from the coordinator "
+                   "(default: keep waiting; for batch schedulers)")
+      ->check(CLI::NonNegativeNumber);
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)");
   add_credential_options(*worker, shared);
   out.push_back({worker,

@@ -174,6 +174,47 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
     expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 
+// A graceful stop (SIGTERM) of the coordinator, gone for 3 s, then back: the workers (one
+// busy, one idle, no --exit-when-idle) neither exit nor fail their tasks; they wait for it and
+// finish the job, whose image equals the local render. Before, each exited 1 with
+// "lease: CANCELLED". A worker with --give-up-after exits 1 saying why once no coordinator
+// answers for that long.
+TEST(Farm, WorkersWaitThroughAGracefulCoordinatorStopAndGiveUpOnlyWhenTold) {
+  Farm farm("farm-sigterm", /*lease_seconds=*/3);
+  const std::string job_args = kCornell + " --spp 512 --passes 32 --res 64x64";
+  std::string job = farm.submit(job_args + " --tile-size 32");
+  Process& busy = farm.worker({});
+  Process& idle = farm.worker({});
+  Process& quitter = farm.worker({"--give-up-after", "2"});
+  nlohmann::json s;
+  for (int i = 0; i < 3000; ++i) {
+    s = farm.status(job);
+    if (s["frames"][0]["passes_merged"].get<int>() >= 2) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_NE(s["state"], "completed") << "the job ended before the stop; it needs to be longer";
+  farm.restart_coordinator(SIGTERM, /*pause=*/4);
+  EXPECT_EQ(quitter.wait(20), 1) << quitter.log();
+  EXPECT_NE(quitter.log().find("--give-up-after"), std::string::npos) << quitter.log();
+  ASSERT_TRUE(busy.running()) << busy.log();
+  ASSERT_TRUE(idle.running()) << idle.log();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  EXPECT_TRUE(busy.running()) << busy.log();
+  EXPECT_TRUE(idle.running()) << idle.log();
+  nlohmann::json done = farm.status(job);
+  EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 512.0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
+  // A second job after the restart goes to the same two workers.
+  std::string second = farm.submit(kCornell + " --spp 4 --passes 2 --res 32x32");
+  EXPECT_EQ(farm.client("watch " + second).exit_code, 0);
+  for (Process* w : {&busy, &idle}) {
+    EXPECT_EQ(w->log().find("] error:"), std::string::npos) << w->log();
+    w->signal(SIGTERM);
+    EXPECT_EQ(w->wait(30), 0) << w->log();
+  }
+}
+
 TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
   Farm farm("farm-noise");
   // At 64x64 and 4 spp per pass the Cornell box reaches relMSE 0.01 after roughly 10 passes.

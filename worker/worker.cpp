@@ -55,6 +55,29 @@ struct TaskFailure : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The coordinator refuses this worker's credentials: retrying cannot help.
+bool refused(const grpc::Status& s) {
+  return s.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
+         s.error_code() == grpc::StatusCode::PERMISSION_DENIED;
+}
+
+// The coordinator went away or could not take the call now (stopped: CANCELLED; restarting or
+// unreachable: UNAVAILABLE; slow: DEADLINE_EXCEEDED; busy: RESOURCE_EXHAUSTED, ABORTED): the
+// same call is worth making again later.
+bool coordinator_away(const grpc::Status& s) {
+  switch (s.error_code()) {
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+    case grpc::StatusCode::CANCELLED:
+    case grpc::StatusCode::ABORTED:
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+    case grpc::StatusCode::UNKNOWN:
+      return true;
+    default:
+      return false;
+  }
+}
+
 }  // namespace
 
 class Worker {
@@ -68,6 +91,7 @@ class Worker {
   int run();
 
  private:
+  int serve();  // run() after the signal thread started
   void connect(int keepalive_seconds);
   bool register_self();
   // Renders, then starts the upload; on a drain timeout hands the task back and exits.
@@ -80,6 +104,15 @@ class Worker {
   bool backoff(int attempt);
   bool sleep_unless_stopped(double seconds);
   bool stopping() const { return stop_.load(); }
+  // The coordinator answered: the --give-up-after clock starts again.
+  void heard_from_coordinator() { last_contact_ns_ = Clock::now().time_since_epoch().count(); }
+  // Throws once give_up_after seconds have passed without an answer from the coordinator.
+  void check_give_up(const grpc::Status& last);
+  // With --give-up-after: a thread that counts the time the channel is not connected (calls
+  // waiting for the coordinator to come back count as without it) and exits the process 1 once
+  // it reaches give_up_after. The task in flight is lost to this worker only: its lease expires
+  // and the coordinator, once back, hands it to another.
+  void start_give_up_watch();
   // This process's bundle layouts (hard links into the blob cache); the blobs stay cached.
   void remove_bundle_dirs() {
     std::error_code ec;
@@ -102,6 +135,7 @@ class Worker {
   std::mt19937 rng_;
 
   std::atomic<bool> stop_{false};
+  std::atomic<int64_t> last_contact_ns_{Clock::now().time_since_epoch().count()};
   Clock::time_point stop_at_;
   std::mutex m_;
   std::condition_variable cv_;
@@ -131,6 +165,40 @@ void Worker::connect(int keepalive_seconds) {
   stub_ = pb::WorkerService::NewStub(channel_);
 }
 
+void Worker::check_give_up(const grpc::Status& last) {
+  if (o_.give_up_after <= 0) return;
+  double silent =
+      std::chrono::duration<double>(Clock::now().time_since_epoch() -
+                                    Clock::duration(last_contact_ns_.load()))
+          .count();
+  if (silent < o_.give_up_after) return;
+  throw std::runtime_error("no answer from the coordinator at " + o_.coordinator + " for " +
+                           std::to_string(int(silent)) + " s (--give-up-after); last: " +
+                           last.error_message());
+}
+
+void Worker::start_give_up_watch() {
+  std::shared_ptr<grpc::Channel> channel = channel_;
+  std::thread([this, channel] {
+    for (;;) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(250));
+      if (channel->GetState(false) == GRPC_CHANNEL_READY) {
+        heard_from_coordinator();
+        continue;
+      }
+      double silent = std::chrono::duration<double>(Clock::now().time_since_epoch() -
+                                                    Clock::duration(last_contact_ns_.load()))
+                          .count();
+      if (silent < o_.give_up_after) continue;
+      spdlog::error("no coordinator at {} for {:.0f} s (--give-up-after); exiting", o_.coordinator,
+                    silent);
+      remove_bundle_dirs();
+      spdlog::shutdown();
+      std::_Exit(1);
+    }
+  }).detach();
+}
+
 bool Worker::backoff(int attempt) {
   return sleep_unless_stopped(backoff_seconds(attempt, 0.25, 15, rng_));
 }
@@ -156,13 +224,15 @@ bool Worker::register_self() {
     pb::RegisterResponse resp;
     grpc::Status s = stub_->Register(&ctx, req, &resp);
     if (s.ok()) {
+      heard_from_coordinator();
       worker_id_ = resp.worker_id();
       lease_seconds_ = std::max(1u, resp.lease_seconds());
       keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
       return true;
     }
-    if (!transient(s))
+    if (refused(s) || !coordinator_away(s))
       throw std::runtime_error("register with " + o_.coordinator + ": " + s.error_message());
+    check_give_up(s);
     if (attempt == 0)
       spdlog::warn("coordinator {} unreachable ({}); retrying", o_.coordinator, s.error_message());
     if (!backoff(attempt)) return false;
@@ -287,12 +357,21 @@ void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double cor
     if (ok) w->WritesDone();
     grpc::Status s = w->Finish();
     if (s.ok()) {
+      heard_from_coordinator();
       spdlog::info("task {}: {}", task.task_id(),
                    resp.accepted() ? "merged" : "not needed (another result was merged first)");
       return;
     }
-    if (!transient(s) || attempt >= 8) throw TaskFailure("upload: " + s.error_message());
-    spdlog::warn("task {}: upload failed ({}); retrying", task.task_id(), s.error_message());
+    // A coordinator that went away gets the result when it is back (a late result still counts
+    // while no one else's was merged), until --give-up-after.
+    if (!coordinator_away(s)) throw TaskFailure("upload: " + s.error_message());
+    try {
+      check_give_up(s);
+    } catch (const std::runtime_error& e) {
+      throw TaskFailure(e.what());
+    }
+    if (attempt == 0)
+      spdlog::warn("task {}: upload failed ({}); retrying", task.task_id(), s.error_message());
     if (!backoff(attempt)) throw TaskFailure("upload interrupted by shutdown");
   }
 }
@@ -407,9 +486,20 @@ int Worker::run() {
   });
   signal_thread_.detach();
 
+  try {
+    return serve();
+  } catch (...) {  // refused, or gave up: the upload in flight ends first (it gives up too)
+    finish_upload();
+    remove_bundle_dirs();
+    throw;
+  }
+}
+
+int Worker::serve() {
   connect(10);
   if (!register_self()) return 0;
   connect(int(keepalive_seconds_));
+  if (o_.give_up_after > 0) start_give_up_watch();
   spdlog::info("worker {} connected to {} (lease {:.0f} s), cache {}", worker_id_, o_.coordinator,
                lease_seconds_, cache_dir_);
   int tasks = 0, attempt = 0;
@@ -427,11 +517,18 @@ int Worker::run() {
       continue;
     }
     if (!s.ok()) {
-      if (!transient(s)) throw std::runtime_error("lease: " + s.error_message());
-      if (attempt == 0) spdlog::warn("lease: {}; retrying", s.error_message());
+      // Refused: exit with the reason. Anything else: the coordinator went away (a stop, a
+      // restart, a partition) or failed this call; wait for it, as long as --give-up-after.
+      if (refused(s)) throw std::runtime_error("lease: " + s.error_message());
+      check_give_up(s);
+      if (attempt == 0)
+        spdlog::warn("lease: {} (code {}); waiting for the coordinator", s.error_message(),
+                     int(s.error_code()));
       backoff(attempt++);
       continue;
     }
+    heard_from_coordinator();
+    if (attempt > 0) spdlog::info("coordinator {} is back", o_.coordinator);
     attempt = 0;
     if (!resp.has_task()) {
       if (uploader_.joinable()) {  // our own upload may be what the coordinator waits for

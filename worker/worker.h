@@ -25,9 +25,15 @@ struct WorkerOptions {
   bool exit_when_idle = false;
   double idle_poll_seconds = 1;
   int max_tasks = 0;  // exit after this many tasks (0: no limit); for tests and benches
+  // Exit 1 after this long without an answer from the coordinator (0: keep trying for ever).
+  double give_up_after = 0;
 };
 
-// Runs until signalled (or idle with exit_when_idle). Returns the process exit status.
+// Runs until signalled (or idle with exit_when_idle). A coordinator that goes away (stopped,
+// restarted, unreachable) is waited for with capped, jittered backoff; the worker exits only on
+// a signal, when idle with exit_when_idle, after give_up_after seconds without a coordinator,
+// or when the coordinator refuses it (UNAUTHENTICATED, PERMISSION_DENIED: throws with the
+// reason). Returns the process exit status.
 int run_worker(const WorkerOptions& options);
 
 }  // namespace rf

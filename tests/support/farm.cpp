@@ -59,9 +59,10 @@ void Farm::start_coordinator(int port) {
   port_ = std::stoi(m[1]);
 }
 
-void Farm::restart_coordinator() {
-  coordinator_->signal(SIGKILL);
-  coordinator_->wait(10);
+void Farm::restart_coordinator(int sig, double pause) {
+  coordinator_->signal(sig);
+  coordinator_->wait(30);
+  if (pause > 0) std::this_thread::sleep_for(std::chrono::duration<double>(pause));
   start_coordinator(port_);
 }
 

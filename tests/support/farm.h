@@ -5,6 +5,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include <csignal>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -30,8 +31,9 @@ class Farm {
                 const std::vector<std::string>& coordinator_args = {});
 
   void start_coordinator(int port);  // and waits until it logs its port
-  // SIGKILLs the coordinator and starts it again on the same port and state directory.
-  void restart_coordinator();
+  // Stops the coordinator with `sig` (SIGKILL: a crash; SIGTERM: a graceful stop), waits for it
+  // to exit, and starts it again on the same port and state directory after `pause` seconds.
+  void restart_coordinator(int sig = SIGKILL, double pause = 0);
 
   Process& worker(const std::vector<std::string>& extra = {"--exit-when-idle"});
   // A client command against this coordinator (run from the source tree), output 2>&1.
