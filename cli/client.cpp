@@ -6,9 +6,13 @@
 namespace rf::cli {
 
 void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
-  auto add_addr = [&](CLI::App* c) {
+  auto add_addr = [&](CLI::App* c, double* timeout) {
     c->add_option("--coordinator", shared.coordinator,
                   "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
+    c->add_option("--timeout", *timeout,
+                  "give up after this many seconds (watch: this long without an answer); calls "
+                  "answered UNAVAILABLE are retried until then (default 300)")
+        ->check(CLI::Range(0.001, 1e9));
     add_credential_options(*c, shared);
   };
   struct Args {
@@ -19,17 +23,20 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     StatusPage page;
     std::optional<uint32_t> fetch_frame;
     float fetch_exposure = 0;
+    double timeout = 300;
   };
   auto a = std::make_shared<Args>();
 
   // Read when the command runs, after parsing, so a bad token file is reported as such.
-  auto ep = [&shared] {
-    return Endpoint{shared.coordinator, load_client_credentials(shared.token_file, shared.tls_ca,
-                                                                shared.tls_cert, shared.tls_key)};
+  auto ep = [&shared, a] {
+    return Endpoint{shared.coordinator,
+                    load_client_credentials(shared.token_file, shared.tls_ca, shared.tls_cert,
+                                            shared.tls_key),
+                    a->timeout};
   };
 
   auto* submit = app.add_subcommand("submit", "submit a job; prints its id");
-  add_addr(submit);
+  add_addr(submit, &a->timeout);
   submit
       ->add_option("scene", a->submit.scene, "scene file, or a per-frame pattern (shot.####.json)")
       ->required();
@@ -48,7 +55,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                  }});
 
   auto* status = app.add_subcommand("status", "all jobs (or one), one line each");
-  add_addr(status);
+  add_addr(status, &a->timeout);
   status->add_option("job", a->job, "one job");
   status->add_flag("--json", a->json, "machine-readable");
   status->add_option("--limit", a->page.limit, "at most this many jobs (default: all)");
@@ -56,12 +63,12 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   out.push_back({status, [a, ep] { return cmd_status(ep(), a->job, a->json, a->page); }});
 
   auto* watch = app.add_subcommand("watch", "follow a job until it ends (exit 0: completed)");
-  add_addr(watch);
+  add_addr(watch, &a->timeout);
   watch->add_option("job", a->job, "job id")->required();
   out.push_back({watch, [a, ep] { return cmd_watch(ep(), a->job); }});
 
   auto* fetch = app.add_subcommand("fetch", "write a job's frames (EXR + PNG), also mid-job");
-  add_addr(fetch);
+  add_addr(fetch, &a->timeout);
   fetch->add_option("job", a->job, "job id")->required();
   fetch->add_option("-o,--output", a->fetch_dir, "output directory")->required();
   fetch->add_option("--frame", a->fetch_frame, "only this frame");
@@ -71,7 +78,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                  }});
 
   auto* cancel = app.add_subcommand("cancel", "cancel a job");
-  add_addr(cancel);
+  add_addr(cancel, &a->timeout);
   cancel->add_option("job", a->job, "job id")->required();
   out.push_back({cancel, [a, ep] { return cmd_cancel(ep(), a->job); }});
 

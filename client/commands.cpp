@@ -44,6 +44,59 @@ std::unique_ptr<pb::JobService::Stub> job_stub(const Endpoint& ep) {
   return pb::JobService::NewStub(coordinator_channel(ep.address, ep.creds));
 }
 
+using Clock = std::chrono::steady_clock;
+
+// The command's deadline, and the retries of its calls within it.
+class Retry {
+ public:
+  explicit Retry(const Endpoint& ep)
+      : end_(Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                std::chrono::duration<double>(ep.timeout))),
+        rng_(std::random_device{}()) {}
+
+  double left() const { return std::chrono::duration<double>(end_ - Clock::now()).count(); }
+
+  // call(ctx) with a deadline of per_call seconds (less if the command's ends sooner), again
+  // while it answers UNAVAILABLE and time is left. The last status.
+  template <class Call>
+  grpc::Status run(double per_call, Call&& call) {
+    for (int attempt = 0;; ++attempt) {
+      grpc::ClientContext ctx;
+      set_deadline(ctx, std::max(0.001, std::min(per_call, left())));
+      grpc::Status s = call(ctx);
+      if (!retry_after(s, attempt)) return s;
+    }
+  }
+
+  // After a call that answered s: sleeps and returns true if it should be made again.
+  bool retry_after(const grpc::Status& s, int attempt) {
+    if (s.error_code() != grpc::StatusCode::UNAVAILABLE) return false;
+    double wait = backoff_seconds(attempt, 0.1, 5, rng_);
+    if (left() <= wait) return false;
+    ++retries_;
+    std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+    return true;
+  }
+  int retries() const { return retries_; }
+
+ private:
+  Clock::time_point end_;
+  std::mt19937 rng_;
+  int retries_ = 0;
+};
+
+// 128 random bits in hex: one submit command's idempotency key.
+std::string new_request_id() {
+  std::random_device rd;
+  std::string out;
+  char buf[9];
+  for (int i = 0; i < 4; ++i) {
+    std::snprintf(buf, sizeof buf, "%08x", unsigned(rd()));
+    out += buf;
+  }
+  return out;
+}
+
 const char* code_name(grpc::StatusCode c) {
   switch (c) {
     case grpc::StatusCode::CANCELLED:
@@ -73,11 +126,14 @@ const char* code_name(grpc::StatusCode c) {
   }
 }
 
-void check(const grpc::Status& s, const std::string& what, const std::string& addr) {
+void check(const grpc::Status& s, const std::string& what, const std::string& addr,
+           const Retry* retry = nullptr) {
   if (s.ok()) return;
   std::string msg = what + ": " + code_name(s.error_code()) + ": " + s.error_message();
   if (s.error_code() == grpc::StatusCode::UNAVAILABLE)
     msg += " (is a coordinator running at " + addr + "?)";
+  if (retry && retry->retries() > 0)
+    msg += " (after " + std::to_string(retry->retries()) + " retries; --timeout)";
   throw FarmError(msg, s.error_code() == grpc::StatusCode::INVALID_ARGUMENT ||
                                s.error_code() == grpc::StatusCode::NOT_FOUND
                            ? 2
@@ -146,10 +202,10 @@ JobSpec job_spec(const SubmitArgs& a) {
 }
 
 // Streams the spec, then the bundle's files the coordinator lacks (each once), in chunks.
-std::string upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const fs::path& dir,
-                       std::set<std::string> missing, const std::string& addr) {
+grpc::Status upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const fs::path& dir,
+                        std::set<std::string> missing, double seconds, std::string* job_id) {
   grpc::ClientContext ctx;
-  set_deadline(ctx, 3600);
+  set_deadline(ctx, std::max(0.001, std::min(3600.0, seconds)));
   pb::SubmitResponse resp;
   auto w = stub.Submit(&ctx, &resp);
   pb::SubmitRequest first;
@@ -167,28 +223,40 @@ std::string upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const fs
     });
   }
   if (ok) w->WritesDone();
-  check(w->Finish(), "submit", addr);
-  return resp.job_id();
+  grpc::Status s = w->Finish();
+  *job_id = resp.job_id();
+  return s;
 }
 
 }  // namespace
 
+// Retried as a whole (blob query and upload) while the coordinator is unavailable; the request
+// id makes a retry whose first attempt did reach the coordinator get that attempt's job.
 int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
   const std::string& addr = ep.address;
   JobSpec spec = job_spec(a);
+  spec.request_id = new_request_id();
   pb::MissingBlobsRequest missing_req;
   for (const BundleEntry& f : spec.files) missing_req.add_sha256(f.sha256);
   auto stub = job_stub(ep);
-  pb::MissingBlobsResponse missing;
-  {
-    grpc::ClientContext ctx;
-    set_deadline(ctx, 30);
-    check(stub->MissingBlobs(&ctx, missing_req, &missing), "submit", addr);
+  Retry retry(ep);
+  for (int attempt = 0;; ++attempt) {
+    pb::MissingBlobsResponse missing;
+    check(retry.run(30,
+                    [&](grpc::ClientContext& ctx) {
+                      return stub->MissingBlobs(&ctx, missing_req, &missing);
+                    }),
+          "submit", addr, &retry);
+    std::string id;
+    grpc::Status s = upload_job(*stub, spec, fs::path(a.scene).parent_path(),
+                                {missing.sha256().begin(), missing.sha256().end()}, retry.left(),
+                                &id);
+    if (s.ok()) {
+      std::printf("%s\n", id.c_str());
+      return 0;
+    }
+    if (!retry.retry_after(s, attempt)) check(s, "submit", addr, &retry);
   }
-  std::string id = upload_job(*stub, spec, fs::path(a.scene).parent_path(),
-                              {missing.sha256().begin(), missing.sha256().end()}, addr);
-  std::printf("%s\n", id.c_str());
-  return 0;
 }
 
 namespace {
@@ -244,28 +312,27 @@ std::string job_line(const pb::JobStatus& j) {
 int cmd_status(const Endpoint& ep, const std::string& job, bool json, const StatusPage& page) {
   const std::string& addr = ep.address;
   auto stub = job_stub(ep);
+  Retry retry(ep);
   std::vector<pb::JobStatus> jobs;
   if (job.empty()) {  // page by page, up to page.limit jobs (all when 0)
     std::string after = page.after, next;
     do {
-      grpc::ClientContext ctx;
-      set_deadline(ctx, 30);
       pb::ListJobsRequest req;
       req.set_after(after);
       if (page.limit) req.set_limit(uint32_t(std::min<uint64_t>(page.limit - jobs.size(), 1000)));
       pb::ListJobsResponse resp;
-      check(stub->ListJobs(&ctx, req, &resp), "status", addr);
+      check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->ListJobs(&ctx, req, &resp); }),
+            "status", addr, &retry);
       jobs.insert(jobs.end(), resp.jobs().begin(), resp.jobs().end());
       next = after = resp.next_after();
     } while (!after.empty() && (page.limit == 0 || jobs.size() < page.limit));
     if (!next.empty()) std::fprintf(stderr, "more jobs follow: status --after %s\n", next.c_str());
   } else {
-    grpc::ClientContext ctx;
-    set_deadline(ctx, 30);
     pb::JobRef ref;
     ref.set_job_id(job);
     pb::JobStatus s;
-    check(stub->GetJob(&ctx, ref, &s), "status", addr);
+    check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->GetJob(&ctx, ref, &s); }),
+          "status", addr, &retry);
     jobs.push_back(s);
   }
   if (json) {
@@ -286,17 +353,19 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
   auto stub = job_stub(ep);
   std::map<uint32_t, std::string> last;
   std::mt19937 rng(std::random_device{}());
+  Clock::time_point lost = Clock::now();  // since when no update came (the start counts)
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
-    if (attempt > 0) ctx.set_wait_for_ready(true);  // reconnecting: wait for the coordinator
     pb::JobRef ref;
     ref.set_job_id(job);
     auto reader = stub->WatchJob(&ctx, ref);
     pb::JobStatus s;
     pb::JobState state = pb::JOB_STATE_UNSPECIFIED;
     std::string error;
+    bool heard = false;
     while (reader->Read(&s)) {
       attempt = 0;
+      heard = true;
       state = s.state();
       error = s.error();
       for (const pb::FrameStatus& f : s.frames()) {
@@ -322,10 +391,18 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
                   error.c_str());
       return state == pb::JOB_FAILED ? 1 : 3;
     }
-    // The stream broke (a coordinator restart, a partition): reconnect unless the job is gone.
+    // The stream broke (a coordinator stopped or restarting, a partition): reconnect unless the
+    // job is gone, for as long as --timeout from the last time the coordinator answered.
+    if (heard) lost = Clock::now();
     if (!st.ok() && st.error_code() != grpc::StatusCode::UNAVAILABLE &&
-        st.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED)
+        st.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED &&
+        st.error_code() != grpc::StatusCode::CANCELLED)
       check(st, "watch", addr);
+    double gone = std::chrono::duration<double>(Clock::now() - lost).count();
+    if (gone >= ep.timeout)
+      throw FarmError("watch: no answer from the coordinator at " + addr + " for " +
+                          std::to_string(int(gone)) + " s (--timeout): " + st.error_message(),
+                      1);
     if (attempt == 0)
       std::fprintf(stderr, "watch: connection lost (%s); reconnecting\n",
                    st.error_message().c_str());
@@ -338,13 +415,13 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
               std::optional<uint32_t> only_frame, float exposure) {
   const std::string& addr = ep.address;
   auto stub = job_stub(ep);
+  Retry retry(ep);
   pb::JobStatus status;
   {
-    grpc::ClientContext ctx;
-    set_deadline(ctx, 30);
     pb::JobRef ref;
     ref.set_job_id(job);
-    check(stub->GetJob(&ctx, ref, &status), "fetch", addr);
+    check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->GetJob(&ctx, ref, &status); }),
+          "fetch", addr, &retry);
   }
   fs::create_directories(out_dir);
   int written = 0;
@@ -354,19 +431,22 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
       std::fprintf(stderr, "frame %u: no complete pass yet; skipped\n", f.frame());
       continue;
     }
-    grpc::ClientContext ctx;
-    set_deadline(ctx, 600);
     pb::FetchRequest req;
     req.set_job_id(job);
     req.set_frame(f.frame());
-    auto reader = stub->FetchFrame(&ctx, req);
     ChunkAssembler chunks(uint64_t(64) << 30);
-    pb::FetchResponse r;
     std::string problem;
-    while (reader->Read(&r))
-      if (problem.empty() && chunks.add(r.chunk()) != ChunkAssembler::Status::Ok)
-        problem = chunks.error();
-    check(reader->Finish(), "fetch frame " + std::to_string(f.frame()), addr);
+    grpc::Status fs = retry.run(600, [&](grpc::ClientContext& ctx) {
+      chunks = ChunkAssembler(uint64_t(64) << 30);
+      problem.clear();
+      auto reader = stub->FetchFrame(&ctx, req);
+      pb::FetchResponse r;
+      while (reader->Read(&r))
+        if (problem.empty() && chunks.add(r.chunk()) != ChunkAssembler::Status::Ok)
+          problem = chunks.error();
+      return reader->Finish();
+    });
+    check(fs, "fetch frame " + std::to_string(f.frame()), addr, &retry);
     if (problem.empty() && chunks.finish() != ChunkAssembler::Status::Ok) problem = chunks.error();
     if (!problem.empty())
       throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
@@ -390,12 +470,17 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
 int cmd_cancel(const Endpoint& ep, const std::string& job) {
   const std::string& addr = ep.address;
   auto stub = job_stub(ep);
-  grpc::ClientContext ctx;
-  set_deadline(ctx, 30);
+  Retry retry(ep);
   pb::JobRef ref;
   ref.set_job_id(job);
   pb::CancelResponse resp;
-  check(stub->CancelJob(&ctx, ref, &resp), "cancel", addr);
+  grpc::Status s =
+      retry.run(30, [&](grpc::ClientContext& ctx) { return stub->CancelJob(&ctx, ref, &resp); });
+  // A retried cancel whose first attempt got through finds the job cancelled already.
+  bool done_before = retry.retries() > 0 &&
+                     s.error_code() == grpc::StatusCode::FAILED_PRECONDITION &&
+                     s.error_message().find("(cancelled)") != std::string::npos;
+  if (!done_before) check(s, "cancel", addr, &retry);
   std::fprintf(stderr, "job %s cancelled\n", job.c_str());
   return 0;
 }

@@ -21,9 +21,13 @@ struct FarmError : std::runtime_error {
 std::string default_coordinator();
 
 // A coordinator and how to show ourselves to it (farm/channel.h).
+// timeout: the command's overall deadline in seconds (--timeout). Calls answered UNAVAILABLE (the
+// coordinator is down, restarting or overloaded) are retried with capped, jittered backoff until
+// then; `watch` gives up once it has been disconnected that long.
 struct Endpoint {
   std::string address;
   ClientCredentials creds;
+  double timeout = 300;
 };
 
 struct SubmitArgs {

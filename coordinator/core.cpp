@@ -349,6 +349,7 @@ void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
 void Coordinator::restore(const StoredJob& stored) {
   std::optional<JobSpec> spec = decode_job_spec(stored.spec);
   if (!spec) return restore_failed(stored, "its stored spec does not parse");
+  if (!spec->request_id.empty()) requests_[{stored.tenant, spec->request_id}] = stored.id;
   std::shared_ptr<JobRecord> job;
   try {
     job = build_job(stored.id, stored.seq, *spec);
@@ -417,6 +418,7 @@ void Coordinator::check_limits(const JobSpec& spec) const {
   too_long("scene_path", spec.scene_path, l.path_bytes, "path_bytes");
   too_long("frames", spec.frames, l.path_bytes, "path_bytes");
   too_long("build_id", spec.build_id, l.name_bytes, "name_bytes");
+  too_long("request_id", spec.request_id, l.name_bytes, "name_bytes");
   if (spec.files.size() > l.bundle_files)
     refuse(ErrorCode::ResourceExhausted, "the bundle has " + std::to_string(spec.files.size()) +
                                              " files; the limit bundle_files is " +
@@ -459,10 +461,27 @@ std::string Coordinator::put_blob(std::string_view bytes, const Caller& caller) 
   return digest;
 }
 
+std::string Coordinator::submitted_before(const JobSpec& spec, const Caller& caller) const {
+  if (spec.request_id.empty()) return "";
+  auto it = requests_.find({caller.tenant, spec.request_id});
+  if (it == requests_.end()) return "";
+  std::shared_ptr<JobRecord> job = find(it->second);
+  if (job && encode_job_spec(job->spec) != encode_job_spec(spec))
+    refuse(ErrorCode::InvalidArgument, "request_id '" + clip(spec.request_id) +
+                                           "' already made job " + it->second +
+                                           " from a different spec");
+  return it->second;
+}
+
 std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   uint64_t seq;
   {
     std::lock_guard lock(mu_);
+    if (std::string id = submitted_before(spec, caller); !id.empty()) {
+      spdlog::info("submit by {} repeated request {}: job {}", caller.principal,
+                   clip(spec.request_id), id);
+      return id;
+    }
     seq = next_seq_++;
   }
   char buf[32];
@@ -479,6 +498,13 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   job->submitted_unix = int64_t(unix_now());
   job->tenant = caller.tenant;
   std::lock_guard lock(mu_);
+  // The same request, retried while this one was being built: the first to get here wins.
+  if (std::string first = submitted_before(spec, caller); !first.empty()) {
+    std::error_code ec;
+    fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
+    return first;
+  }
+  if (!spec.request_id.empty()) requests_[{caller.tenant, spec.request_id}] = id;
   store_.insert_job({id, seq, encode_job_spec(spec), int(JobState::Queued), "", job->submitted_unix,
                      0, caller.tenant});
   scheduler_.add_job(id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,

@@ -275,6 +275,10 @@ class Coordinator {
   bool closing_ = false;
   Scheduler scheduler_;
   std::map<std::string, std::shared_ptr<JobRecord>> jobs_;
+  // (tenant, request id) -> the job that submit made: a retried submit gets it again.
+  std::map<std::pair<std::string, std::string>, std::string> requests_;
+  // The job a (tenant, request id) already made, checked against this spec; "" if none. Under mu_.
+  std::string submitted_before(const JobSpec& spec, const Caller& caller) const;
   struct WorkerRecord {
     std::string principal;  // the identity that registered it
     std::string build_id;   // the build it said it runs

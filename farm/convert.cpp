@@ -56,6 +56,7 @@ JobSpec from_wire(const pb::JobSpec& spec) {
   s.priority = spec.priority();
   s.tile_size = spec.tile_size();
   s.build_id = spec.build_id();
+  s.request_id = spec.request_id();
   return s;
 }
 
@@ -70,6 +71,7 @@ pb::JobSpec to_wire(const JobSpec& s) {
   }
   spec.set_frames(s.frames);
   spec.set_build_id(s.build_id);
+  spec.set_request_id(s.request_id);
   *spec.mutable_overrides() = to_wire_overrides(s.overrides);
   spec.set_priority(s.priority);
   spec.set_tile_size(s.tile_size);

@@ -25,6 +25,7 @@ struct JobSpec {
   int priority = 0;                // higher first
   uint32_t tile_size = 0;          // pixels; 0: the coordinator's default
   std::string build_id;            // results only from this build; empty: the first result's
+  std::string request_id;          // the submit's idempotency key (client-made; may be empty)
 };
 
 // One task of a job: a pass of one tile (by its index in the frame's split) of one frame.

@@ -68,7 +68,8 @@ class CoreBench {
   }
 
   // Uploads the scene's bundle and submits a job of `passes` passes of frame 1.
-  std::string submit(uint32_t passes, const Caller& caller = {}, const std::string& pin = "") {
+  std::string submit(uint32_t passes, const Caller& caller = {}, const std::string& pin = "",
+                     const std::string& request_id = "") {
     std::string scene = test::source_dir() + "/" + kScene;
     JobSpec spec;
     spec.name = "cornell";
@@ -83,6 +84,7 @@ class CoreBench {
     spec.overrides.spp = kSamplesPerPass * passes;
     spec.tile_size = 8;
     spec.build_id = pin;
+    spec.request_id = request_id;
     return core_->submit(spec, caller);
   }
 
@@ -621,6 +623,23 @@ TEST(CoordinatorCore, TheJobListComesInPages) {
   EXPECT_EQ(page[0].job_id, jobs[4]);
   EXPECT_FALSE(more);
   EXPECT_EQ(refusal([&] { bench.core().list({}, 2, "j999999"); }), ErrorCode::NotFound);
+}
+
+// A submit retried with its request id (the client makes one per command) gets the job the
+// first attempt made, also after a restart; the same id with another spec is refused; ids are
+// per tenant; submits without one always make a job.
+TEST(CoordinatorCore, ARetriedSubmitWithItsRequestIdMakesOneJob) {
+  CoreBench bench("core-idempotent");
+  const Caller a{"t:a", "a", false}, b{"t:b", "b", false};
+  std::string first = bench.submit(2, a, "", "req-1");
+  EXPECT_EQ(bench.submit(2, a, "", "req-1"), first);
+  EXPECT_EQ(refusal([&] { bench.submit(3, a, "", "req-1"); }), ErrorCode::InvalidArgument);
+  std::string other = bench.submit(2, b, "", "req-1");
+  EXPECT_NE(other, first) << "another tenant's request id is its own";
+  EXPECT_NE(bench.submit(2, a), bench.submit(2, a)) << "no request id: a job each";
+  bench.start("B");
+  EXPECT_EQ(bench.submit(2, a, "", "req-1"), first) << "the request ids are restored";
+  EXPECT_EQ(bench.core().list({"t:admin", "", true}, 100, "").size(), 4u);
 }
 
 // --verify-fraction 1: every task is rendered by two workers and merged only when their results

@@ -14,11 +14,13 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <random>
 #include <regex>
+#include <set>
 #include <thread>
 
 #include "engine/buffer_file.h"
@@ -213,6 +215,55 @@ TEST(Farm, WorkersWaitThroughAGracefulCoordinatorStopAndGiveUpOnlyWhenTold) {
     w->signal(SIGTERM);
     EXPECT_EQ(w->wait(30), 0) << w->log();
   }
+}
+
+// Clients: 50 simultaneous submits all succeed and make 50 jobs (before, up to 12 failed
+// UNAVAILABLE); a submit made while the coordinator is down waits for it (retrying UNAVAILABLE)
+// and makes one job; without a coordinator, status and watch give up after --timeout, exit 1.
+TEST(Farm, ClientsRetryUnavailableWithinTheirTimeoutAndSubmitsAreNeverDoubled) {
+  Farm farm("farm-clients");
+  const std::string job = kCornell + " --spp 4 --passes 1 --res 16x16";
+  test::CommandResult many = test::run_command(
+      "cd " + test::source_dir() + " && for i in $(seq 50); do { " + test::rayfarm_binary() +
+      " submit " + job + " --coordinator " + farm.address() +
+      " > " + farm.dir() + "/submit-$i.out 2>&1; echo $? >> " + farm.dir() +
+      "/submit-codes; } & done; wait");
+  ASSERT_EQ(many.exit_code, 0) << many.output;
+  test::CommandResult codes = test::run_command("sort " + farm.dir() + "/submit-codes | uniq -c");
+  EXPECT_NE(codes.output.find("50 0"), std::string::npos) << codes.output;
+  std::set<std::string> ids;
+  for (int i = 1; i <= 50; ++i) {
+    std::ifstream in(farm.dir() + "/submit-" + std::to_string(i) + ".out");
+    std::string id;
+    in >> id;
+    ids.insert(id);
+  }
+  EXPECT_EQ(ids.size(), 50u);
+  test::CommandResult listed = farm.client("status --json");
+  EXPECT_EQ(nlohmann::json::parse(listed.output, nullptr, false).size(), 50u) << listed.output;
+
+  farm.stop_coordinator();
+  Process late({test::rayfarm_binary(), "submit", test::source_dir() + "/" + kCornell, "--spp",
+                "4", "--passes", "1", "--res", "16x16", "--coordinator", farm.address(),
+                "--timeout", "60"},
+               farm.dir() + "/late-submit.log");
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  EXPECT_TRUE(late.running()) << late.log();
+  farm.start_coordinator(farm.port());
+  EXPECT_EQ(late.wait(60), 0) << late.log();
+  listed = farm.client("status --json");
+  EXPECT_EQ(nlohmann::json::parse(listed.output, nullptr, false).size(), 51u) << listed.output;
+
+  farm.stop_coordinator();
+  auto t0 = std::chrono::steady_clock::now();
+  test::CommandResult status = farm.client("status --timeout 1");
+  test::CommandResult watch = farm.client("watch j000001 --timeout 1");
+  double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(status.exit_code, 1) << status.output;
+  EXPECT_NE(status.output.find("--timeout"), std::string::npos) << status.output;
+  EXPECT_EQ(watch.exit_code, 1) << watch.output;
+  EXPECT_NE(watch.output.find("--timeout"), std::string::npos) << watch.output;
+  EXPECT_LT(took, 10) << "each gives up after about a second";
 }
 
 TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {

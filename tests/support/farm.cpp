@@ -59,9 +59,13 @@ void Farm::start_coordinator(int port) {
   port_ = std::stoi(m[1]);
 }
 
-void Farm::restart_coordinator(int sig, double pause) {
+void Farm::stop_coordinator(int sig) {
   coordinator_->signal(sig);
   coordinator_->wait(30);
+}
+
+void Farm::restart_coordinator(int sig, double pause) {
+  stop_coordinator(sig);
   if (pause > 0) std::this_thread::sleep_for(std::chrono::duration<double>(pause));
   start_coordinator(port_);
 }

@@ -34,6 +34,8 @@ class Farm {
   // Stops the coordinator with `sig` (SIGKILL: a crash; SIGTERM: a graceful stop), waits for it
   // to exit, and starts it again on the same port and state directory after `pause` seconds.
   void restart_coordinator(int sig = SIGKILL, double pause = 0);
+  void stop_coordinator(int sig = SIGTERM);  // and waits for it to exit; start_coordinator(port())
+  int port() const { return port_; }
 
   Process& worker(const std::vector<std::string>& extra = {"--exit-when-idle"});
   // A client command against this coordinator (run from the source tree), output 2>&1.
