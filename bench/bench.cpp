@@ -4,15 +4,15 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include <atomic>
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <random>
 
-#include "engine/camera.h"
 #include "engine/buffer_file.h"
+#include "engine/camera.h"
 #include "engine/frame_accumulator.h"
 #include "engine/render.h"
 #include "engine/sampler.h"
@@ -39,8 +39,8 @@ Mesh make_sphere(Vec3 c, float r, int n_theta, int n_phi, uint32_t material) {
     for (int j = 0; j < n_phi; ++j) {
       float ph = 2 * kPi * float(j) / float(n_phi);
       float rr = r * (1.0f + 0.03f * std::sin(9 * th) * std::sin(11 * ph));
-      m.positions.push_back(c + rr * Vec3(std::sin(th) * std::cos(ph), std::cos(th),
-                                          std::sin(th) * std::sin(ph)));
+      m.positions.push_back(
+          c + rr * Vec3(std::sin(th) * std::cos(ph), std::cos(th), std::sin(th) * std::sin(ph)));
     }
   }
   for (int i = 0; i < n_theta; ++i)
@@ -188,19 +188,21 @@ void bench_splat_accumulation(bool quick) {
         for (int c = 0; c < 3; ++c) plane[3 * size_t(px) + size_t(c)] += double(v);
   }
   double list_s = seconds_since(t0);
-  std::printf("\nsplat accumulation, %llu splats into %dx%d: atomic fetch_add %.1f Msplats/s, "
-              "chunk lists merged in order %.1f Msplats/s\n",
-              (unsigned long long)splats, w, h, double(splats) / atomic_s / 1e6,
-              double(splats) / list_s / 1e6);
+  std::printf(
+      "\nsplat accumulation, %llu splats into %dx%d: atomic fetch_add %.1f Msplats/s, "
+      "chunk lists merged in order %.1f Msplats/s\n",
+      (unsigned long long)splats, w, h, double(splats) / atomic_s / 1e6,
+      double(splats) / list_s / 1e6);
 }
 
 }  // namespace
 
 void add_bench_options(CLI::App& app, BenchOptions& o) {
   app.add_option("--scene", o.scenes, "scene files to benchmark (default: scenes/cornell-box)");
-  app.add_option("--spp", o.spp, "samples per pixel per measurement");
-  app.add_option("--res", o.res, "square resolution");
-  app.add_option("--triangles", o.triangles, "triangles of the generated scene");
+  app.add_option("--spp", o.spp, "samples per pixel per measurement")->check(CLI::Range(1.0, 1e6));
+  app.add_option("--res", o.res, "square resolution")->check(CLI::Range(1.0, 16384.0));
+  app.add_option("--triangles", o.triangles, "triangles of the generated scene")
+      ->check(CLI::Range(1.0, 1e9));
   app.add_flag("!--no-generated", o.generated, "skip the generated scene");
   app.add_flag("--quick", o.quick, "a tiny run that only checks the benchmark works");
 }
@@ -228,7 +230,8 @@ void bench_merge(bool quick) {
       SampleBuffer b(th, r, false);
       for (int y = r.y0; y < r.y1(); ++y)
         for (int x = r.x0; x < r.x1(); ++x)
-          for (int s = 0; s < 4; ++s) b.add_sample(x, y, RGB(float(u(rng)), float(u(rng)), float(u(rng))));
+          for (int s = 0; s < 4; ++s)
+            b.add_sample(x, y, RGB(float(u(rng)), float(u(rng)), float(u(rng))));
       b.finish_pass();
       wire.push_back(encode_buffer(b));
     }
@@ -244,8 +247,9 @@ void bench_merge(bool quick) {
   auto t2 = std::chrono::steady_clock::now();
   double decode_s = std::chrono::duration<double>(t1 - t0).count();
   double merge_s = std::chrono::duration<double>(t2 - t1).count();
-  std::printf("\nmerge (one core): %zu task buffers of %dx%d px, %.1f MB encoded, frame %dx%d, %u passes\n",
-              wire.size(), tile, tile, bytes / 1e6, size, size, passes);
+  std::printf(
+      "\nmerge (one core): %zu task buffers of %dx%d px, %.1f MB encoded, frame %dx%d, %u passes\n",
+      wire.size(), tile, tile, bytes / 1e6, size, size, passes);
   std::printf("  decode + merge %.2f GB/s | merge alone %.2f GB/s | decode alone %.2f GB/s\n",
               bytes / (decode_s + merge_s) / 1e9, bytes / merge_s / 1e9, bytes / decode_s / 1e9);
 }
@@ -258,8 +262,9 @@ int run_bench(const BenchOptions& in) {
   if (scenes.empty()) scenes.push_back(cornell);
   std::printf("rayfarm bench: %d threads, %dx%d, %d spp, max depth from each scene\n",
               tbb::this_task_arena::max_concurrency(), o.res, o.res, o.spp);
-  std::printf("(rays/s: path counts closest-hit and shadow rays; bare Embree casts a camera ray "
-              "and one diffuse bounce per sample, closest-hit only)\n");
+  std::printf(
+      "(rays/s: path counts closest-hit and shadow rays; bare Embree casts a camera ray "
+      "and one diffuse bounce per sample, closest-hit only)\n");
   SceneOverrides ov;
   ov.width = ov.height = o.res;
   ov.spp = uint64_t(o.spp);

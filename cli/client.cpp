@@ -12,7 +12,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     c->add_option("--timeout", *timeout,
                   "give up after this many seconds (watch: this long without an answer); calls "
                   "answered UNAVAILABLE are retried until then (default 300)")
-        ->check(CLI::Range(0.001, 1e9));
+        ->check(finite_in(0.001, 1e9));
     add_credential_options(*c, shared);
   };
   struct Args {
@@ -29,10 +29,10 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
 
   // Read when the command runs, after parsing, so a bad token file is reported as such.
   auto ep = [&shared, a] {
-    return Endpoint{shared.coordinator,
-                    load_client_credentials(shared.token_file, shared.tls_ca, shared.tls_cert,
-                                            shared.tls_key),
-                    a->timeout};
+    return Endpoint{
+        shared.coordinator,
+        load_client_credentials(shared.token_file, shared.tls_ca, shared.tls_cert, shared.tls_key),
+        a->timeout};
   };
 
   auto* submit = app.add_subcommand("submit", "submit a job; prints its id");
@@ -43,10 +43,11 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   add_override_options(*submit, a->overrides);
   submit->add_option("--frames", a->submit.frames,
                      "frames, Open Job Description syntax (1-10:2,15)");
-  submit->add_option("--priority", a->submit.priority, "higher runs first");
+  submit->add_option("--priority", a->submit.priority, "higher runs first")
+      ->check(finite_in(-1e9, 1e9));
   submit->add_option("--name", a->submit.name, "job name (default: the scene's file name)");
   submit->add_option("--tile-size", a->submit.tile_size, "tile size in pixels")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(8, 4096));
   submit->add_option("--build-id", a->submit.build_id,
                      "merge results of this worker build only (default: the first result's)");
   out.push_back({submit, [a, ep] {
@@ -58,7 +59,8 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   add_addr(status, &a->timeout);
   status->add_option("job", a->job, "one job");
   status->add_flag("--json", a->json, "machine-readable");
-  status->add_option("--limit", a->page.limit, "at most this many jobs (default: all)");
+  status->add_option("--limit", a->page.limit, "at most this many jobs (default: all)")
+      ->check(finite_in(1, 1e9));
   status->add_option("--after", a->page.after, "the jobs after this one");
   out.push_back({status, [a, ep] { return cmd_status(ep(), a->job, a->json, a->page); }});
 
@@ -71,8 +73,10 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   add_addr(fetch, &a->timeout);
   fetch->add_option("job", a->job, "job id")->required();
   fetch->add_option("-o,--output", a->fetch_dir, "output directory")->required();
-  fetch->add_option("--frame", a->fetch_frame, "only this frame");
-  fetch->add_option("--exposure", a->fetch_exposure, "PNG exposure in stops");
+  fetch->add_option("--frame", a->fetch_frame, "only this frame")
+      ->check(finite_in(0, 4294967295.0));
+  fetch->add_option("--exposure", a->fetch_exposure, "PNG exposure in stops")
+      ->check(finite_in(-64, 64));
   out.push_back({fetch, [a, ep] {
                    return cmd_fetch(ep(), a->job, a->fetch_dir, a->fetch_frame, a->fetch_exposure);
                  }});

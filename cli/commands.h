@@ -37,6 +37,17 @@ struct SharedOptions {
   std::string tls_ca, tls_cert, tls_key;  // PEM files (farm/channel.h load_client_credentials)
 };
 
+// A CLI11 check: a finite number in [lo, hi]. (CLI11's Range and PositiveNumber let NaN through,
+// and an unsigned option takes "-1" as 2^64-1: every numeric flag gets one of these.)
+CLI::Validator finite_in(double lo, double hi);
+
+// The paths a command writes: each must not be an existing non-regular file (a device, a FIFO,
+// a directory), and no two may be the same file. Throws UsageError naming the flag.
+void check_outputs(const std::vector<std::pair<std::string, std::string>>& flag_and_path);
+// -o of render and merge: an .exr (its PNG preview goes beside it), or for merge also .rfb.
+void check_extension(const std::string& flag, const std::string& path,
+                     const std::vector<std::string>& allowed);
+
 // --token-file, --tls-ca, --tls-cert, --tls-key on a command that talks to a coordinator.
 void add_credential_options(CLI::App& cmd, SharedOptions& shared);
 

@@ -112,6 +112,10 @@ int cmd_render(const RenderArgs& a) {
     throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
   if (!a.partial.empty() && a.pass_range.empty())
     throw UsageError("--partial needs --pass-range FIRST-LAST");
+  if (!a.output.empty()) check_extension("-o", a.output, {".exr"});
+  check_outputs({{"-o", a.output},
+                 {"the PNG preview", a.output.empty() ? "" : png_path_for(a.output)},
+                 {"--partial", a.partial}});
 
   Scene scene = load_scene(a.scene, ov);
   LocalRenderOptions opt;
@@ -154,9 +158,23 @@ int cmd_render(const RenderArgs& a) {
 
 int cmd_merge(const std::vector<std::string>& inputs, const std::string& output, float exposure) {
   if (inputs.empty()) throw UsageError("merge: no input files");
-  SampleBuffer acc = read_buffer_file(inputs[0]);
+  check_extension("-o", output, {".exr", ".rfb"});
+  bool rfb = std::filesystem::path(output).extension() == ".rfb";
+  std::vector<std::pair<std::string, std::string>> paths = {
+      {"-o", output}, {"the PNG preview", rfb ? "" : png_path_for(output)}};
+  for (const std::string& in : inputs) paths.push_back({"input " + in, in});
+  check_outputs(paths);
+  // A buffer with non-finite sums or counts its header does not explain is refused: merged, it
+  // would make the image and its noise figure nonsense.
+  auto read_checked = [](const std::string& path) {
+    SampleBuffer b = read_buffer_file(path);
+    if (std::string why = buffer_problem(b); !why.empty())
+      throw std::runtime_error("merge: " + path + ": refused: " + why);
+    return b;
+  };
+  SampleBuffer acc = read_checked(inputs[0]);
   for (size_t i = 1; i < inputs.size(); ++i) {
-    SampleBuffer b = read_buffer_file(inputs[i]);
+    SampleBuffer b = read_checked(inputs[i]);
     try {
       merge_into(acc, b);
     } catch (const MergeError& e) {
@@ -208,15 +226,20 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   render->add_option("scene", ra->scene, "scene file (JSON)")->required();
   render->add_option("-o,--output", ra->output, "output EXR (a PNG preview is written beside it)");
   add_override_options(*render, ra->overrides);
-  render->add_option("--frame", ra->frame, "frame number (selects the seed stream)");
-  render->add_option("--threads", shared.threads, "worker threads (default: all cores)");
-  render->add_option(
-      "--time-budget", ra->time_budget,
-      "stop after this many seconds, on a completed prefix of passes (not reproducible)");
+  render->add_option("--frame", ra->frame, "frame number (selects the seed stream)")
+      ->check(finite_in(0, 4294967295.0));
+  render->add_option("--threads", shared.threads, "worker threads (default: all cores)")
+      ->check(finite_in(0, 4096));
+  render
+      ->add_option(
+          "--time-budget", ra->time_budget,
+          "stop after this many seconds, on a completed prefix of passes (not reproducible)")
+      ->check(finite_in(1e-3, 1e9));
   render->add_option("--pass-range", ra->pass_range, "render only passes FIRST-LAST (inclusive)");
   render->add_option("--partial", ra->partial, "write the sample buffer (.rfb) of the pass range");
-  render->add_option("--tile-size", ra->tile, "tile size in pixels")->check(CLI::PositiveNumber);
-  render->add_option("--exposure", ra->exposure, "PNG exposure in stops");
+  render->add_option("--tile-size", ra->tile, "tile size in pixels")->check(finite_in(1, 65536));
+  render->add_option("--exposure", ra->exposure, "PNG exposure in stops")
+      ->check(finite_in(-64, 64));
   render->add_flag("-q,--quiet", ra->quiet, "no progress output");
   out.push_back({render, [ra] { return cmd_render(*ra); }});
 
@@ -229,7 +252,7 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   auto* merge = app.add_subcommand("merge", "merge partial sample buffers (.rfb) into an image");
   merge->add_option("inputs", ma->inputs, "partial results")->required();
   merge->add_option("-o,--output", ma->output, "output .exr (plus .png) or .rfb")->required();
-  merge->add_option("--exposure", ma->exposure, "PNG exposure in stops");
+  merge->add_option("--exposure", ma->exposure, "PNG exposure in stops")->check(finite_in(-64, 64));
   out.push_back({merge, [ma] { return cmd_merge(ma->inputs, ma->output, ma->exposure); }});
 
   struct CompareArgs {
@@ -241,13 +264,15 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   compare->add_option("image", ca->image, "the image (EXR)")->required();
   compare->add_option("reference", ca->reference, "the reference (EXR, same size)")->required();
   compare->add_option("--window", ca->window, "compare only pixels X0,Y0,X1,Y1 (half-open)")
-      ->delimiter(',');
+      ->delimiter(',')
+      ->check(finite_in(0, 1e6));
   out.push_back({compare, [ca] { return cmd_compare(ca->image, ca->reference, ca->window); }});
 
   auto bo = std::make_shared<BenchOptions>();
   auto* bench = app.add_subcommand("bench", "throughput of the path tracer vs a bare Embree loop");
   add_bench_options(*bench, *bo);
-  bench->add_option("--threads", shared.threads, "worker threads (default: all cores)");
+  bench->add_option("--threads", shared.threads, "worker threads (default: all cores)")
+      ->check(finite_in(0, 4096));
   out.push_back({bench, [bo] { return run_bench(*bo); }});
 }
 

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <memory>
+#include <new>
 
 #include "cli/commands.h"
 #include "client/commands.h"
@@ -17,13 +18,27 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   rf::cli::SharedOptions shared;
   shared.coordinator = rf::default_coordinator();
-  app.add_option("--threads", shared.threads, "worker threads (default: all cores)");
+  app.add_option("--threads", shared.threads, "worker threads (default: all cores)")
+      ->check(rf::cli::finite_in(0, 4096));
   std::vector<rf::cli::Command> commands;
   rf::cli::add_local_commands(app, shared, commands);
   rf::cli::add_service_commands(app, shared, commands);
   rf::cli::add_client_commands(app, shared, commands);
 
-  CLI11_PARSE(app, argc, argv);
+  // Exit codes, the same for every command (README): 0 success, 1 failure at run time, 2 bad
+  // usage (parse errors included), 3 cancelled (watch).
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e);
+    return 2;
+  }
   std::unique_ptr<tbb::global_control> limit;
   if (shared.threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -40,6 +55,11 @@ int main(int argc, char** argv) {
   } catch (const rf::cli::UsageError& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 2;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr,
+                 "error: out of memory (an allocation failed; smaller settings or more "
+                 "memory needed)\n");
+    return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;

@@ -1,5 +1,9 @@
-// The scene overrides `render` and `submit` share.
+// The scene overrides `render` and `submit` share, and the checks every command's flags use.
+#include <sys/stat.h>
+
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 
 #include "cli/commands.h"
 
@@ -12,23 +16,78 @@ std::pair<int, int> parse_resolution(const std::string& s) {
   char x = 0, extra = 0;
   if (std::sscanf(s.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
     throw UsageError("--res: expected WIDTHxHEIGHT (e.g. 640x480), got '" + s + "'");
+  if (w < 1 || h < 1 || w > 65536 || h > 65536)
+    throw UsageError("--res: " + s + ": width and height must be in 1..65536");
   return {w, h};
 }
 
 }  // namespace
 
+CLI::Validator finite_in(double lo, double hi) {
+  char desc[96];
+  std::snprintf(desc, sizeof desc, "NUMBER in [%g, %g]", lo, hi);
+  return CLI::Validator(
+      [lo, hi](std::string& s) -> std::string {
+        char* end = nullptr;
+        double v = std::strtod(s.c_str(), &end);
+        if (s.empty() || end == s.c_str() || *end != 0) return "'" + s + "' is not a number";
+        if (!std::isfinite(v) || v < lo || v > hi) {
+          char buf[128];
+          std::snprintf(buf, sizeof buf, "%s is outside [%g, %g]", s.c_str(), lo, hi);
+          return buf;
+        }
+        return "";
+      },
+      desc);
+}
+
+void check_outputs(const std::vector<std::pair<std::string, std::string>>& outputs) {
+  namespace fs = std::filesystem;
+  std::vector<std::pair<std::string, fs::path>> seen;
+  for (const auto& [flag, path] : outputs) {
+    if (path.empty()) continue;
+    if (path.find('\0') != std::string::npos) throw UsageError(flag + ": the path holds a NUL");
+    struct stat st {};
+    if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+      throw UsageError(flag + ": " + path +
+                       " exists and is not a regular file (a device, FIFO or directory); "
+                       "refusing to replace it");
+    fs::path abs = fs::weakly_canonical(fs::absolute(path));
+    for (const auto& [other_flag, other] : seen)
+      if (abs == other)
+        throw UsageError(flag + " and " + other_flag + " name the same file " + path +
+                         "; one would overwrite the other");
+    seen.emplace_back(flag, abs);
+  }
+}
+
+void check_extension(const std::string& flag, const std::string& path,
+                     const std::vector<std::string>& allowed) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  std::string list;
+  for (const std::string& a : allowed) {
+    if (ext == a) return;
+    list += (list.empty() ? "" : " or ") + a;
+  }
+  throw UsageError(flag + ": " + path + " must end in " + list +
+                   (ext == ".png" ? " (the PNG preview is written beside the .exr)" : ""));
+}
+
 void add_override_options(CLI::App& cmd, OverrideArgs& a) {
-  cmd.add_option("--spp", a.spp, "samples per pixel (all passes)");
-  cmd.add_option("--passes", a.passes, "number of passes (spp must be a multiple)");
+  cmd.add_option("--spp", a.spp, "samples per pixel (all passes)")->check(finite_in(1, 1e12));
+  cmd.add_option("--passes", a.passes, "number of passes (spp must be a multiple)")
+      ->check(finite_in(1, 1e6));
   cmd.add_option("--integrator", a.integrator, "integrator name");
-  cmd.add_option("--seed", a.seed, "job seed");
+  cmd.add_option("--seed", a.seed, "job seed")->check(finite_in(0, 1.8e19));
   cmd.add_option("--res", a.res, "resolution WIDTHxHEIGHT");
-  cmd.add_option("--max-depth", a.max_depth, "max scattering events");
+  cmd.add_option("--max-depth", a.max_depth, "max scattering events")->check(finite_in(0, 1e6));
   cmd.add_option("--filter", a.filter, "pixel filter (box, triangle, gaussian)");
   cmd.add_option("--sampler", a.sampler, "sampler (independent, sobol)");
   cmd.add_option("--light-selection", a.light_selection,
                  "light selection for next-event estimation (auto, power, bvh)");
-  cmd.add_option("--noise-target", a.noise_target, "stop when relMSE <= this");
+  cmd.add_option("--noise-target", a.noise_target, "stop when relMSE <= this")
+      ->check(finite_in(0, 1e6));
   cmd.add_option("--aov", a.aovs,
                  "auxiliary outputs, comma-separated: albedo, normal, depth (docs/outputs.md)");
 }

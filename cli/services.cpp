@@ -17,9 +17,9 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   coord->add_option("--state-dir", co->state_dir, "durable state: database, checkpoints, blobs")
       ->required();
   coord->add_option("--lease-seconds", co->lease_seconds, "lease time of a task")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(0.1, 86400));
   coord->add_option("--window", co->window_frames, "frames open at once per job")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(1, 10000));
   coord->add_option_function<std::vector<std::string>>(
       "--limit",
       [co](const std::vector<std::string>& items) {
@@ -46,7 +46,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       ->add_option("--verify-fraction", co->verify_fraction,
                    "render this fraction of tasks on two workers and merge only bit-identical "
                    "results; a third settles a disagreement and the outvoted worker is refused")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(finite_in(0, 1));
   coord->add_option("--tls-cert", co->tls_cert, "serve TLS with this certificate chain (PEM)");
   coord->add_option("--tls-key", co->tls_key, "the key of --tls-cert (PEM)");
   coord->add_option("--tls-client-ca", co->tls_client_ca,
@@ -65,19 +65,21 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   worker->add_option("--coordinator", shared.coordinator,
                      "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
   worker->add_option("--cache-dir", wo->cache_dir, "blob cache (default ~/.cache/rayfarm)");
-  worker->add_option(
-      "--drain-seconds", wo->drain_seconds,
-      "on SIGTERM, finish the task in flight if done within this, else hand it back");
+  worker
+      ->add_option("--drain-seconds", wo->drain_seconds,
+                   "on SIGTERM, finish the task in flight if done within this, else hand it back")
+      ->check(finite_in(0, 86400));
   worker->add_flag("--exit-when-idle", wo->exit_when_idle,
                    "exit once the coordinator has no queued or leased work left");
   worker->add_option("--max-tasks", wo->max_tasks, "exit after this many tasks")
-      ->check(CLI::NonNegativeNumber);
+      ->check(finite_in(0, 2e9));
   worker
       ->add_option("--give-up-after", wo->give_up_after,
                    "exit 1 after this many seconds without an answer from the coordinator "
                    "(default: keep waiting; for batch schedulers)")
-      ->check(CLI::NonNegativeNumber);
-  worker->add_option("--threads", shared.threads, "render threads (default: all cores)");
+      ->check(finite_in(0, 1e9));
+  worker->add_option("--threads", shared.threads, "render threads (default: all cores)")
+      ->check(finite_in(0, 4096));
   add_credential_options(*worker, shared);
   out.push_back({worker,
                  [wo, &shared] {

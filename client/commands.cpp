@@ -248,9 +248,9 @@ int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
                     }),
           "submit", addr, &retry);
     std::string id;
-    grpc::Status s = upload_job(*stub, spec, fs::path(a.scene).parent_path(),
-                                {missing.sha256().begin(), missing.sha256().end()}, retry.left(),
-                                &id);
+    grpc::Status s =
+        upload_job(*stub, spec, fs::path(a.scene).parent_path(),
+                   {missing.sha256().begin(), missing.sha256().end()}, retry.left(), &id);
     if (s.ok()) {
       std::printf("%s\n", id.c_str());
       return 0;
@@ -321,8 +321,9 @@ int cmd_status(const Endpoint& ep, const std::string& job, bool json, const Stat
       req.set_after(after);
       if (page.limit) req.set_limit(uint32_t(std::min<uint64_t>(page.limit - jobs.size(), 1000)));
       pb::ListJobsResponse resp;
-      check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->ListJobs(&ctx, req, &resp); }),
-            "status", addr, &retry);
+      check(
+          retry.run(30, [&](grpc::ClientContext& ctx) { return stub->ListJobs(&ctx, req, &resp); }),
+          "status", addr, &retry);
       jobs.insert(jobs.end(), resp.jobs().begin(), resp.jobs().end());
       next = after = resp.next_after();
     } while (!after.empty() && (page.limit == 0 || jobs.size() < page.limit));

@@ -133,9 +133,10 @@ struct TaskFailureReport {
 // What one job may ask for, checked at submit: a job over a limit is refused naming it
 // (RESOURCE_EXHAUSTED for sizes, INVALID_ARGUMENT for strings). The coordinator keeps a tile
 // rectangle per tile, a record per task in flight only (scheduler.h) and, per open frame
-// (CoreOptions::window_frames of them), an accumulator of about 104 bytes per pixel (more with AOVs): the defaults bound one job to
-// 10 million tasks (a bit each while their frame is open, a row each once done) and 1.7 GB per
-// open frame. `rayfarm coordinator --limit NAME=VALUE` sets them.
+// (CoreOptions::window_frames of them), an accumulator of about 104 bytes per pixel (more with
+// AOVs): the defaults bound one job to 10 million tasks (a bit each while their frame is open, a
+// row each once done) and 1.7 GB per open frame. `rayfarm coordinator --limit NAME=VALUE` sets
+// them.
 struct JobLimits {
   uint64_t pixels_per_frame = 4096ull * 4096;
   uint64_t tiles_per_frame = 4096;
@@ -260,8 +261,8 @@ class Coordinator {
   std::shared_ptr<JobRecord> find_for(const std::string& id, const Caller& caller) const;
   // The worker's registration checked against the caller; throws if unknown or not theirs.
   void check_worker(const std::string& worker_id, const Caller& caller) const;  // under mu_
-  // The lease is known and held by worker_id (and for `task` when given): true; false when it  // under mu_
-  // is retired (ended with its task settled); throws otherwise.
+  // The lease is known and held by worker_id (and for `task` when given): true; false when it  //
+  // under mu_ is retired (ended with its task settled); throws otherwise.
   bool check_lease(const std::string& worker_id, const std::string& lease_id,
                    const TaskRef* task) const;
 

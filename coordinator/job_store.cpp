@@ -313,8 +313,7 @@ void JobStore::result_refused(const std::string& id, uint32_t frame, uint32_t pa
 }
 
 std::vector<std::string> JobStore::refused_workers(const std::string& id) const {
-  Stmt s(db_, "SELECT worker FROM task_events WHERE job_id = ? AND done = 2 ORDER BY rowid",
-         path_);
+  Stmt s(db_, "SELECT worker FROM task_events WHERE job_id = ? AND done = 2 ORDER BY rowid", path_);
   s.bind(id);
   std::vector<std::string> out;
   while (s.step()) out.push_back(s.text(0));

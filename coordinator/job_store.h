@@ -91,7 +91,7 @@ class JobStore {
   void for_each_lease(const std::string& job_id,
                       const std::function<void(const StoredLease&)>& f) const;
   std::vector<StoredLease> leases(const std::string& job_id) const;
-  void delete_leases(const std::string& job_id);  // the job ended
+  void delete_leases(const std::string& job_id);                  // the job ended
   void delete_leases(const std::string& job_id, uint32_t frame);  // the frame is done
 
   struct TaskFailure {

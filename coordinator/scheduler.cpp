@@ -69,8 +69,9 @@ bool Scheduler::excluded(const TaskRef& ref, const std::string& worker_id) const
 std::optional<uint64_t> Scheduler::first_for(const JobState& j, FrameState& f,
                                              const std::string& worker_id) {
   uint64_t limit = uint64_t(f.passes_needed) * j.tiles;
-  auto ref_of = [&](uint64_t n) { return TaskRef{j.id, f.frame, uint32_t(n / j.tiles),
-                                                 uint32_t(n % j.tiles)}; };
+  auto ref_of = [&](uint64_t n) {
+    return TaskRef{j.id, f.frame, uint32_t(n / j.tiles), uint32_t(n % j.tiles)};
+  };
   std::optional<uint64_t> best;
   for (uint64_t n : f.waiting)
     if (!excluded(ref_of(n), worker_id)) {
@@ -184,12 +185,13 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
       f.waiting.erase(best_number);
     } else {  // fresh tasks passed over (excluded for this worker) wait for the others
       for (uint64_t n = f.fresh; n < best_number; ++n)
-        if (!is_done(f, n)) f.waiting.insert(n);
-        else --f.done_ahead;
+        if (!is_done(f, n))
+          f.waiting.insert(n);
+        else
+          --f.done_ahead;
       f.fresh = best_number + 1;
     }
-    TaskRef ref{j->id, f.frame, uint32_t(best_number / j->tiles),
-                uint32_t(best_number % j->tiles)};
+    TaskRef ref{j->id, f.frame, uint32_t(best_number / j->tiles), uint32_t(best_number % j->tiles)};
     std::string id = options_.lease_prefix + std::to_string(++next_lease_);
     leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
     expiry_.insert({now + options_.lease_seconds, id});
@@ -274,8 +276,7 @@ void Scheduler::mark_passes_done(const std::string& job_id, uint32_t frame, uint
 
 bool Scheduler::settled(const TaskRef& ref) const {
   auto [j, f] = locate(ref);
-  return !f || !needed(*j, *f, ref.pass) ||
-         is_done(*f, uint64_t(ref.pass) * j->tiles + ref.tile);
+  return !f || !needed(*j, *f, ref.pass) || is_done(*f, uint64_t(ref.pass) * j->tiles + ref.tile);
 }
 
 std::optional<TaskRef> Scheduler::lease_task(const std::string& lease_id) const {

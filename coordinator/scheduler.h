@@ -161,8 +161,7 @@ class Scheduler {
   bool needed(const JobState& j, const FrameState& f, uint32_t pass) const;
   bool is_done(const FrameState& f, uint64_t number) const;
   // The frame's first task this worker may get, as its number, or none.
-  std::optional<uint64_t> first_for(const JobState& j, FrameState& f,
-                                    const std::string& worker_id);
+  std::optional<uint64_t> first_for(const JobState& j, FrameState& f, const std::string& worker_id);
   bool excluded(const TaskRef& ref, const std::string& worker_id) const;
   uint64_t queued_in(const JobState& j, const FrameState& f) const;
   JobState* job(const std::string& id);

@@ -4,6 +4,8 @@
 #include <array>
 #include <cassert>
 #include <cmath>
+#include <cstdlib>
+#include <limits>
 #include <stdexcept>
 
 #include "engine/filter.h"
@@ -202,11 +204,14 @@ bool SampleBuffer::planes_match_rect() const {
          (splat.empty() || splat.size() == frame_channels(header));
 }
 
-std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass) {
+namespace {
+
+std::string samples_problem(const SampleBuffer& b, uint64_t spp_per_pass, double max_core_seconds) {
   if (!b.planes_match_rect()) return "its planes do not match its rect";
   const double cs = b.header.core_seconds;
-  if (!std::isfinite(cs) || cs < 0 || cs > 1e7)
-    return "core_seconds " + std::to_string(cs) + " is outside 0..1e7";
+  if (!std::isfinite(cs) || cs < 0 || cs > max_core_seconds)
+    return "core_seconds " + std::to_string(cs) + " is outside 0.." +
+           std::to_string(max_core_seconds);
   const uint64_t samples = b.total_samples();
   const uint64_t frame_pixels = uint64_t(b.header.width) * uint64_t(b.header.height);
   if (samples == 0 && !b.splat.empty()) {
@@ -235,6 +240,26 @@ std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass) {
   if (!finite(b.sum_sq, true) || !finite(b.batch_sum_sq, true))
     return "a sum of squares is negative or not finite";
   return "";
+}
+
+}  // namespace
+
+std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass) {
+  return samples_problem(b, spp_per_pass, 1e7);
+}
+
+std::string buffer_problem(const SampleBuffer& b) {
+  const std::string key = "spp_per_pass=";
+  size_t at = b.header.settings.find(key);
+  if (at == std::string::npos) return "its header does not say its samples per pass";
+  uint64_t spp = std::strtoull(b.header.settings.c_str() + at + key.size(), nullptr, 10);
+  uint64_t passes = b.header.passes.count();
+  if (spp == 0 || passes == 0)
+    return "its header holds no samples (passes " + b.header.passes.to_string() + ")";
+  std::string why = samples_problem(b, spp * passes, std::numeric_limits<double>::max());
+  if (why.empty()) return "";
+  return why + " (passes " + b.header.passes.to_string() + " of " + std::to_string(spp) +
+         " samples each)";
 }
 
 bool same_samples(const SampleBuffer& a, const SampleBuffer& b) {

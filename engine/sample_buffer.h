@@ -162,6 +162,9 @@ void splat_to_film(SplatTarget& target, Vec2 raster, RGB value);
 // sum or a negative sum of squares, or diagnostics out of range. The coordinator refuses such
 // uploads before they are merged.
 std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass);
+// The same for a buffer of any number of passes (a partial result, a merged frame): the samples
+// per pass come from its header's settings, and every pixel must hold passes x that many.
+std::string buffer_problem(const SampleBuffer& b);
 
 // Whether two buffers hold the same samples, bit for bit: every plane and count, ignoring the
 // provenance that may differ between honest renders (core_seconds, isa). The determinism

@@ -1,6 +1,7 @@
 // The command line end to end: render, partial renders + merge, refusals, repeatability.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 
 #include <filesystem>
@@ -96,6 +97,65 @@ TEST(Cli, BadArgumentsAreNamed) {
   r = test::run_command(cli("render scenes/nope/missing.json -o /tmp/x.exr"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("missing.json"), std::string::npos) << r.output;
+}
+
+// Exit codes are 0, 1 (failure at run time), 2 (bad usage, parse errors included) for every
+// command; every numeric flag is range-checked (before: --spp -1 wrapped to 2^64-1 and never
+// ended, --threads -1, --time-budget -1 and --exposure nan were taken, parse errors exited
+// 104-109); -o never writes over the PNG, a device, a FIFO or an input; merge refuses a buffer
+// whose sums are not finite or whose counts its header does not explain (before: relMSE nan,
+// exit 0).
+TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
+  std::string dir = test::make_temp_dir("cli-hygiene");
+  const std::string render = "render " + kScene + " -o " + dir + "/x.exr --res 8x8 -q ";
+  for (const std::string& bad :
+       {std::string("--spp -1"), std::string("--spp 0"), std::string("--threads -1"),
+        std::string("--time-budget -1"), std::string("--exposure nan"),
+        std::string("--exposure inf"), std::string("--passes 0"), std::string("--seed -3"),
+        std::string("--noise-target nan"), std::string("--max-depth -2"),
+        std::string("--res 0x10"), std::string("--no-such-flag"), std::string("--spp")}) {
+    auto r = test::run_command(cli(render + bad));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    std::string flag = bad.substr(0, bad.find(' '));
+    EXPECT_NE(r.output.find(flag), std::string::npos) << bad << ": " << r.output;
+  }
+  for (const std::string& bad :
+       {std::string("status --timeout 0"), std::string("watch"), std::string("submit"),
+        std::string("worker --give-up-after -1"), std::string("coordinator --state-dir " + dir +
+                                                              "/s --lease-seconds nan"),
+        std::string("nonsense")}) {
+    auto r = test::run_command(cli(bad));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+  }
+  EXPECT_EQ(test::run_command(cli("render --help")).exit_code, 0);
+
+  auto png = test::run_command(cli("render " + kScene + " -o " + dir + "/out.png --res 8x8 -q"));
+  EXPECT_EQ(png.exit_code, 2) << png.output;
+  EXPECT_NE(png.output.find(".exr"), std::string::npos) << png.output;
+  ASSERT_EQ(test::run_command("mkfifo " + dir + "/fifo.exr").exit_code, 0);
+  auto fifo = test::run_command(cli("render " + kScene + " -o " + dir + "/fifo.exr --res 8x8 -q"));
+  EXPECT_EQ(fifo.exit_code, 2) << fifo.output;
+  EXPECT_NE(fifo.output.find("not a regular file"), std::string::npos) << fifo.output;
+  EXPECT_TRUE(std::filesystem::is_fifo(dir + "/fifo.exr")) << "left as it was";
+
+  // merge: a good partial, the same with a NaN sum, and one with a sample too many.
+  const std::string common = " --res 8x8 --spp 4 --passes 2 -q --pass-range 0-0 --partial ";
+  ASSERT_EQ(test::run_command(cli("render " + kScene + common + dir + "/a.rfb")).exit_code, 0);
+  SampleBuffer a = read_buffer_file(dir + "/a.rfb");
+  SampleBuffer nan = a;
+  nan.sum[4] = std::nan("");
+  write_buffer_file(dir + "/nan.rfb", nan);
+  SampleBuffer extra = a;
+  extra.count[0] += 1;
+  write_buffer_file(dir + "/extra.rfb", extra);
+  EXPECT_EQ(test::run_command(cli("merge " + dir + "/a.rfb -o " + dir + "/m.exr")).exit_code, 0);
+  for (const char* bad : {"nan", "extra"}) {
+    auto r = test::run_command(cli("merge " + dir + "/" + bad + ".rfb -o " + dir + "/m.exr"));
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find(std::string(bad) + ".rfb: refused"), std::string::npos) << r.output;
+  }
+  auto over = test::run_command(cli("merge " + dir + "/a.rfb -o " + dir + "/a.rfb"));
+  EXPECT_EQ(over.exit_code, 2) << over.output;
 }
 
 // `compare`: an image against itself has no error; against a differently seeded render of the

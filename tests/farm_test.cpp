@@ -225,9 +225,8 @@ TEST(Farm, ClientsRetryUnavailableWithinTheirTimeoutAndSubmitsAreNeverDoubled) {
   const std::string job = kCornell + " --spp 4 --passes 1 --res 16x16";
   test::CommandResult many = test::run_command(
       "cd " + test::source_dir() + " && for i in $(seq 50); do { " + test::rayfarm_binary() +
-      " submit " + job + " --coordinator " + farm.address() +
-      " > " + farm.dir() + "/submit-$i.out 2>&1; echo $? >> " + farm.dir() +
-      "/submit-codes; } & done; wait");
+      " submit " + job + " --coordinator " + farm.address() + " > " + farm.dir() +
+      "/submit-$i.out 2>&1; echo $? >> " + farm.dir() + "/submit-codes; } & done; wait");
   ASSERT_EQ(many.exit_code, 0) << many.output;
   test::CommandResult codes = test::run_command("sort " + farm.dir() + "/submit-codes | uniq -c");
   EXPECT_NE(codes.output.find("50 0"), std::string::npos) << codes.output;
@@ -243,10 +242,10 @@ TEST(Farm, ClientsRetryUnavailableWithinTheirTimeoutAndSubmitsAreNeverDoubled) {
   EXPECT_EQ(nlohmann::json::parse(listed.output, nullptr, false).size(), 50u) << listed.output;
 
   farm.stop_coordinator();
-  Process late({test::rayfarm_binary(), "submit", test::source_dir() + "/" + kCornell, "--spp",
-                "4", "--passes", "1", "--res", "16x16", "--coordinator", farm.address(),
-                "--timeout", "60"},
-               farm.dir() + "/late-submit.log");
+  Process late(
+      {test::rayfarm_binary(), "submit", test::source_dir() + "/" + kCornell, "--spp", "4",
+       "--passes", "1", "--res", "16x16", "--coordinator", farm.address(), "--timeout", "60"},
+      farm.dir() + "/late-submit.log");
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   EXPECT_TRUE(late.running()) << late.log();
   farm.start_coordinator(farm.port());

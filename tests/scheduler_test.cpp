@@ -152,8 +152,8 @@ TEST(Scheduler, RestoredDoneTasksAndFailuresAmongFreshTasks) {
   std::vector<TaskRef> got;
   while (auto l = s.lease("w", 0)) got.push_back(l->task);
   // Tile 1 of pass 0 is done, tile 2 failed on w before: w gets the rest in order.
-  std::vector<TaskRef> want = {{"j", 5, 0, 0}, {"j", 5, 0, 3}, {"j", 5, 1, 0}, {"j", 5, 1, 1},
-                               {"j", 5, 1, 3}};
+  std::vector<TaskRef> want = {
+      {"j", 5, 0, 0}, {"j", 5, 0, 3}, {"j", 5, 1, 0}, {"j", 5, 1, 1}, {"j", 5, 1, 3}};
   EXPECT_EQ(got, want);
   EXPECT_EQ(s.queued_tasks(), 1u) << "tile 2 of pass 0 waits for another worker";
   auto other = s.lease("v", 0);
@@ -202,8 +202,7 @@ TEST(SchedulerRestart, ResultOfALeaseFromBeforeARestartCountsOnce) {
   EXPECT_EQ(after.complete(old->lease_id, old->task, 1), CompleteOutcome::Accepted);
   EXPECT_EQ(after.complete(old->lease_id, old->task, 2), CompleteOutcome::Duplicate);
   EXPECT_EQ(after.complete(old->lease_id, 2), CompleteOutcome::NotFound) << "by lease id alone";
-  EXPECT_EQ(after.complete(old->lease_id, TaskRef{"gone", 0, 0, 0}, 2),
-            CompleteOutcome::NotFound);
+  EXPECT_EQ(after.complete(old->lease_id, TaskRef{"gone", 0, 0, 0}, 2), CompleteOutcome::NotFound);
 
   // The accepted task is not handed out again; the others are, under the new prefix.
   std::vector<TaskRef> leased;
@@ -235,8 +234,8 @@ TEST(SchedulerRestart, MarkDoneTasksAreNeverLeased) {
   s.add_job("j", {4}, /*tiles=*/3, /*passes=*/1, 0);
   s.mark_done({"j", 4, 0, 0});
   s.mark_done({"j", 4, 0, 2});
-  s.mark_done({"j", 4, 0, 2});    // twice: no effect
-  s.mark_done({"j", 9, 0, 0});    // unknown task: ignored
+  s.mark_done({"j", 4, 0, 2});  // twice: no effect
+  s.mark_done({"j", 9, 0, 0});  // unknown task: ignored
   auto l = s.lease("w", 0);
   ASSERT_TRUE(l);
   EXPECT_EQ(l->task, (TaskRef{"j", 4, 0, 1}));

@@ -9,8 +9,8 @@
 
 #include <chrono>
 #include <fstream>
-#include <iostream>
 #include <functional>
+#include <iostream>
 #include <map>
 #include <regex>
 #include <set>
@@ -476,8 +476,8 @@ TEST(Security, AHugeJobAdmittedByRaisedLimitsIsHeldInBoundedMemory) {
   // room for a transient second copy while the frame is planned; nothing per task.
   const long bound = 160 * 1024;
   std::ostringstream figures;
-  figures << "RSS KiB: start " << before << ", submitted " << submitted << ", 300 leases "
-          << leased << ", cancelled " << cancelled << ", restarted " << restarted;
+  figures << "RSS KiB: start " << before << ", submitted " << submitted << ", 300 leases " << leased
+          << ", cancelled " << cancelled << ", restarted " << restarted;
   std::cout << figures.str() << "\n";
   EXPECT_LT(submitted - before, bound) << figures.str();
   EXPECT_LT(leased - before, bound) << figures.str();

@@ -167,14 +167,13 @@ void Worker::connect(int keepalive_seconds) {
 
 void Worker::check_give_up(const grpc::Status& last) {
   if (o_.give_up_after <= 0) return;
-  double silent =
-      std::chrono::duration<double>(Clock::now().time_since_epoch() -
-                                    Clock::duration(last_contact_ns_.load()))
-          .count();
+  double silent = std::chrono::duration<double>(Clock::now().time_since_epoch() -
+                                                Clock::duration(last_contact_ns_.load()))
+                      .count();
   if (silent < o_.give_up_after) return;
   throw std::runtime_error("no answer from the coordinator at " + o_.coordinator + " for " +
-                           std::to_string(int(silent)) + " s (--give-up-after); last: " +
-                           last.error_message());
+                           std::to_string(int(silent)) +
+                           " s (--give-up-after); last: " + last.error_message());
 }
 
 void Worker::start_give_up_watch() {
