@@ -134,6 +134,10 @@ int cmd_render(const RenderArgs& a) {
   opt.progress = [&](const LocalProgress& p) { printer(p); };
 
   Renderer renderer(scene);
+  if (!renderer.has_lights() && scene.render.integrator.type() != "ao")
+    spdlog::warn("{}: the scene has no lights (no emitter, light or environment): the {} image "
+                 "will be black",
+                 a.scene, scene.render.integrator.type());
   LocalRenderResult res = render_local(renderer, opt);
   warn_nonfinite(res.frame);
   if (!a.partial.empty()) {

@@ -18,6 +18,8 @@ Renderer::Renderer(const Scene& scene)
                                    2 * t / float(std::min(scene.film.width, scene.film.height))});
 }
 
+bool Renderer::has_lights() const { return !lights_->empty(); }
+
 bool Renderer::splats() const { return integrator_splats(scene_.render.integrator.method); }
 
 BufferHeader Renderer::header(uint32_t frame, const PassSet& passes) const {

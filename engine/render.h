@@ -34,6 +34,8 @@ class Renderer {
 
   // True for integrators whose tasks cover the whole frame and splat (light tracing, BDPT).
   bool splats() const;
+  // Whether anything emits light (area, punctual or environment lights).
+  bool has_lights() const;
   // Header of every buffer this scene's frame produces, for the given passes.
   BufferHeader header(uint32_t frame, const PassSet& passes) const;
   // The task rects of a frame (work_units).

@@ -5,8 +5,10 @@
 #include <cstdio>
 
 #include <filesystem>
+#include <nlohmann/json.hpp>
 
 #include "engine/buffer_file.h"
+#include "engine/digest.h"
 #include "tests/support/exr.h"
 #include "tests/support/test_support.h"
 
@@ -156,6 +158,17 @@ TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
   }
   auto over = test::run_command(cli("merge " + dir + "/a.rfb -o " + dir + "/a.rfb"));
   EXPECT_EQ(over.exit_code, 2) << over.output;
+
+  // A scene without anything that emits renders (black) with a warning naming it.
+  ASSERT_EQ(test::run_command("cp -r " + test::source_dir() + "/scenes/cornell-box/meshes " + dir)
+                .exit_code,
+            0);
+  nlohmann::json scene = nlohmann::json::parse(read_file_bytes(test::source_dir() + "/" + kScene));
+  for (auto& shape : scene["shapes"]) shape.erase("emission");
+  test::write_text(dir + "/dark.json", scene.dump(2));
+  auto d = test::run_command(cli("render " + dir + "/dark.json -o " + dir + "/dark.exr --res 8x8 -q"));
+  EXPECT_EQ(d.exit_code, 0) << d.output;
+  EXPECT_NE(d.output.find("dark.json: the scene has no lights"), std::string::npos) << d.output;
 }
 
 // `compare`: an image against itself has no error; against a differently seeded render of the
