@@ -135,10 +135,22 @@ int cmd_render(const RenderArgs& a) {
 
   Renderer renderer(scene);
   if (!renderer.has_lights() && scene.render.integrator.type() != "ao")
-    spdlog::warn("{}: the scene has no lights (no emitter, light or environment): the {} image "
-                 "will be black",
-                 a.scene, scene.render.integrator.type());
-  LocalRenderResult res = render_local(renderer, opt);
+    spdlog::warn(
+        "{}: the scene has no lights (no emitter, light or environment): the {} image "
+        "will be black",
+        a.scene, scene.render.integrator.type());
+  LocalRenderResult res;
+  try {
+    res = render_local(renderer, opt);
+  } catch (const std::bad_alloc&) {
+    double gib = double(scene.film.width) * double(scene.film.height) * 104.0 / double(1 << 30);
+    char buf[160];
+    std::snprintf(buf, sizeof buf,
+                  "out of memory rendering a %dx%d film (about %.1f GiB at 104 "
+                  "bytes per pixel for the frame, more per pass in flight)",
+                  scene.film.width, scene.film.height, gib);
+    throw std::runtime_error(a.scene + ": " + buf);
+  }
   warn_nonfinite(res.frame);
   if (!a.partial.empty()) {
     write_buffer_file(a.partial, res.frame);

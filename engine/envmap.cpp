@@ -30,7 +30,20 @@ std::vector<RGB> read_rgb(const Environment& env, int& width, int& height) {
   int nc = spec.nchannels;
   if (width <= 0 || height <= 0 || nc <= 0)
     throw std::runtime_error(name + ": image has no pixels or no channels");
-  std::vector<float> buf(size_t(width) * size_t(height) * size_t(nc));
+  // A small file can declare a huge image (a decompression bomb): name it and the size asked for.
+  const uint64_t pixels = uint64_t(width) * uint64_t(height);
+  const uint64_t bytes = pixels * (uint64_t(nc) * 4 + 12 + 8);  // decoded, texels, sampling CDF
+  if (pixels > (uint64_t(1) << 28))
+    throw std::runtime_error(name + ": " + std::to_string(width) + "x" + std::to_string(height) +
+                             " is over the limit of 268435456 pixels (16384x16384)");
+  std::vector<float> buf;
+  try {
+    buf.resize(size_t(pixels) * size_t(nc));
+  } catch (const std::bad_alloc&) {
+    throw std::runtime_error(name + ": cannot allocate " + std::to_string(bytes >> 20) +
+                             " MiB for its " + std::to_string(width) + "x" +
+                             std::to_string(height) + " pixels");
+  }
   if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, buf.data()))
     throw std::runtime_error(name + ": cannot read: " + in->geterror());
   bool is_integer = !spec.format.is_floating_point();

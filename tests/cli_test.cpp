@@ -26,7 +26,8 @@ std::string cli(const std::string& args) {
 
 TEST(Cli, RenderWritesExrAndPngWithProvenance) {
   std::string dir = test::make_temp_dir("cli-render");
-  auto r = test::run_command(cli("render " + kScene + " -o " + dir + "/c.exr --res 32x32 --spp 16 --passes 4 --max-depth 8"));
+  auto r = test::run_command(cli("render " + kScene + " -o " + dir +
+                                 "/c.exr --res 32x32 --spp 16 --passes 4 --max-depth 8"));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("samples/s"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("relMSE"), std::string::npos);
@@ -42,12 +43,17 @@ TEST(Cli, RenderWritesExrAndPngWithProvenance) {
 TEST(Cli, PartialRendersMergeToTheFullRender) {
   std::string dir = test::make_temp_dir("cli-merge");
   std::string common = " --res 24x24 --spp 16 --passes 8 --max-depth 6 -q";
-  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/full.exr" + common)).exit_code, 0);
-  auto a = test::run_command(cli("render " + kScene + common + " --pass-range 0-2 --partial " + dir + "/a.rfb"));
+  ASSERT_EQ(
+      test::run_command(cli("render " + kScene + " -o " + dir + "/full.exr" + common)).exit_code,
+      0);
+  auto a = test::run_command(
+      cli("render " + kScene + common + " --pass-range 0-2 --partial " + dir + "/a.rfb"));
   ASSERT_EQ(a.exit_code, 0) << a.output;
-  auto b = test::run_command(cli("render " + kScene + common + " --pass-range 3-7 --partial " + dir + "/b.rfb"));
+  auto b = test::run_command(
+      cli("render " + kScene + common + " --pass-range 3-7 --partial " + dir + "/b.rfb"));
   ASSERT_EQ(b.exit_code, 0) << b.output;
-  auto m = test::run_command(cli("merge " + dir + "/b.rfb " + dir + "/a.rfb -o " + dir + "/merged.exr"));
+  auto m =
+      test::run_command(cli("merge " + dir + "/b.rfb " + dir + "/a.rfb -o " + dir + "/merged.exr"));
   ASSERT_EQ(m.exit_code, 0) << m.output;
   Exr full = read_exr(dir + "/full.exr"), merged = read_exr(dir + "/merged.exr");
   ASSERT_EQ(full.px.size(), merged.px.size());
@@ -55,19 +61,27 @@ TEST(Cli, PartialRendersMergeToTheFullRender) {
   for (size_t i = 0; i < full.px.size(); ++i) {
     double x = full.px[i], y = merged.px[i];
     // DESIGN.md's merge tolerance, plus float32 rounding of the EXR.
-    if (std::fabs(x - y) > 1e-6 * std::max(std::fabs(x), std::fabs(y)) + 1e-7 * std::fabs(x) + 1e-12) ++bad;
+    if (std::fabs(x - y) >
+        1e-6 * std::max(std::fabs(x), std::fabs(y)) + 1e-7 * std::fabs(x) + 1e-12)
+      ++bad;
   }
   EXPECT_EQ(bad, 0u);
 
   // Overlapping pass ranges and mismatched headers are refused with a reason.
-  auto c = test::run_command(cli("render " + kScene + common + " --pass-range 2-4 --partial " + dir + "/c.rfb"));
+  auto c = test::run_command(
+      cli("render " + kScene + common + " --pass-range 2-4 --partial " + dir + "/c.rfb"));
   ASSERT_EQ(c.exit_code, 0);
-  auto overlap = test::run_command(cli("merge " + dir + "/a.rfb " + dir + "/c.rfb -o " + dir + "/x.exr"));
+  auto overlap =
+      test::run_command(cli("merge " + dir + "/a.rfb " + dir + "/c.rfb -o " + dir + "/x.exr"));
   EXPECT_NE(overlap.exit_code, 0);
   EXPECT_NE(overlap.output.find("overlap"), std::string::npos) << overlap.output;
-  auto d = test::run_command(cli("render " + kScene + " --res 24x24 --spp 16 --passes 8 --max-depth 6 -q --seed 99 --pass-range 5-5 --partial " + dir + "/d.rfb"));
+  auto d = test::run_command(cli(
+      "render " + kScene +
+      " --res 24x24 --spp 16 --passes 8 --max-depth 6 -q --seed 99 --pass-range 5-5 --partial " +
+      dir + "/d.rfb"));
   ASSERT_EQ(d.exit_code, 0);
-  auto seed = test::run_command(cli("merge " + dir + "/a.rfb " + dir + "/d.rfb -o " + dir + "/y.exr"));
+  auto seed =
+      test::run_command(cli("merge " + dir + "/a.rfb " + dir + "/d.rfb -o " + dir + "/y.exr"));
   EXPECT_NE(seed.exit_code, 0);
   EXPECT_NE(seed.output.find("seed"), std::string::npos) << seed.output;
   EXPECT_FALSE(std::filesystem::exists(dir + "/y.exr")) << "nothing half-written on refusal";
@@ -76,13 +90,23 @@ TEST(Cli, PartialRendersMergeToTheFullRender) {
 TEST(Cli, SameSeedTwiceGivesTheSamePixels) {
   std::string dir = test::make_temp_dir("cli-repeat");
   std::string args = " --res 16x16 --spp 8 --passes 2 --max-depth 4 -q";
-  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/a.exr" + args)).exit_code, 0);
-  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/b.exr" + args + " --threads 1")).exit_code, 0);
+  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/a.exr" + args)).exit_code,
+            0);
+  ASSERT_EQ(
+      test::run_command(cli("render " + kScene + " -o " + dir + "/b.exr" + args + " --threads 1"))
+          .exit_code,
+      0);
   Exr a = read_exr(dir + "/a.exr"), b = read_exr(dir + "/b.exr");
   EXPECT_EQ(a.px, b.px) << "bit-identical pixels expected for one build on one machine";
   SampleBuffer pa, pb;
-  ASSERT_EQ(test::run_command(cli("render " + kScene + args + " --pass-range 0-1 --partial " + dir + "/a.rfb")).exit_code, 0);
-  ASSERT_EQ(test::run_command(cli("render " + kScene + args + " --pass-range 0-1 --partial " + dir + "/b.rfb --threads 1")).exit_code, 0);
+  ASSERT_EQ(test::run_command(
+                cli("render " + kScene + args + " --pass-range 0-1 --partial " + dir + "/a.rfb"))
+                .exit_code,
+            0);
+  ASSERT_EQ(test::run_command(cli("render " + kScene + args + " --pass-range 0-1 --partial " + dir +
+                                  "/b.rfb --threads 1"))
+                .exit_code,
+            0);
   pa = read_buffer_file(dir + "/a.rfb");
   pb = read_buffer_file(dir + "/b.rfb");
   EXPECT_EQ(pa.sum, pb.sum);
@@ -114,8 +138,8 @@ TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
        {std::string("--spp -1"), std::string("--spp 0"), std::string("--threads -1"),
         std::string("--time-budget -1"), std::string("--exposure nan"),
         std::string("--exposure inf"), std::string("--passes 0"), std::string("--seed -3"),
-        std::string("--noise-target nan"), std::string("--max-depth -2"),
-        std::string("--res 0x10"), std::string("--no-such-flag"), std::string("--spp")}) {
+        std::string("--noise-target nan"), std::string("--max-depth -2"), std::string("--res 0x10"),
+        std::string("--no-such-flag"), std::string("--spp")}) {
     auto r = test::run_command(cli(render + bad));
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
     std::string flag = bad.substr(0, bad.find(' '));
@@ -123,8 +147,8 @@ TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
   }
   for (const std::string& bad :
        {std::string("status --timeout 0"), std::string("watch"), std::string("submit"),
-        std::string("worker --give-up-after -1"), std::string("coordinator --state-dir " + dir +
-                                                              "/s --lease-seconds nan"),
+        std::string("worker --give-up-after -1"),
+        std::string("coordinator --state-dir " + dir + "/s --lease-seconds nan"),
         std::string("nonsense")}) {
     auto r = test::run_command(cli(bad));
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
@@ -166,7 +190,8 @@ TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
   nlohmann::json scene = nlohmann::json::parse(read_file_bytes(test::source_dir() + "/" + kScene));
   for (auto& shape : scene["shapes"]) shape.erase("emission");
   test::write_text(dir + "/dark.json", scene.dump(2));
-  auto d = test::run_command(cli("render " + dir + "/dark.json -o " + dir + "/dark.exr --res 8x8 -q"));
+  auto d =
+      test::run_command(cli("render " + dir + "/dark.json -o " + dir + "/dark.exr --res 8x8 -q"));
   EXPECT_EQ(d.exit_code, 0) << d.output;
   EXPECT_NE(d.output.find("dark.json: the scene has no lights"), std::string::npos) << d.output;
 }
@@ -176,12 +201,16 @@ TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
 TEST(Cli, CompareReportsTheErrorAndRefusesABadWindow) {
   std::string dir = test::make_temp_dir("cli-compare");
   std::string args = " --res 16x16 --spp 4 --passes 2 --max-depth 4 -q";
-  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/a.exr" + args)).exit_code, 0);
-  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/b.exr --seed 5" + args)).exit_code, 0);
+  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/a.exr" + args)).exit_code,
+            0);
+  ASSERT_EQ(test::run_command(cli("render " + kScene + " -o " + dir + "/b.exr --seed 5" + args))
+                .exit_code,
+            0);
   auto same = test::run_command(cli("compare " + dir + "/a.exr " + dir + "/a.exr"));
   ASSERT_EQ(same.exit_code, 0) << same.output;
   EXPECT_NE(same.output.find("rmse 0 relmse 0 mae 0"), std::string::npos) << same.output;
-  auto other = test::run_command(cli("compare " + dir + "/a.exr " + dir + "/b.exr --window 0,0,8,8"));
+  auto other =
+      test::run_command(cli("compare " + dir + "/a.exr " + dir + "/b.exr --window 0,0,8,8"));
   ASSERT_EQ(other.exit_code, 0) << other.output;
   double rmse = -1, rel = -1, mae = -1;
   ASSERT_EQ(std::sscanf(other.output.c_str(), "rmse %lf relmse %lf mae %lf", &rmse, &rel, &mae), 3)
@@ -189,7 +218,8 @@ TEST(Cli, CompareReportsTheErrorAndRefusesABadWindow) {
   EXPECT_GT(rmse, 0);
   EXPECT_GT(rel, 0);
   EXPECT_GT(mae, 0);
-  auto bad = test::run_command(cli("compare " + dir + "/a.exr " + dir + "/b.exr --window 0,0,17,8"));
+  auto bad =
+      test::run_command(cli("compare " + dir + "/a.exr " + dir + "/b.exr --window 0,0,17,8"));
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.output.find("window"), std::string::npos) << bad.output;
 }

@@ -827,6 +827,11 @@ const std::vector<BadScene>& bad_scenes() {
          j["render"]["integrator"] = {{"type", "direct"}, {"light_samples", 0}, {"bsdf_samples", 0}};
        }),
        "render.integrator", "light_samples and bsdf_samples cannot both be 0"},
+      // 2^28 photons asked for 16 GiB and ended in a bare bad_alloc; the cap names the field.
+      {"TooManyPhotons", edit([](json& j) {
+         j["render"]["integrator"] = {{"type", "ppm"}, {"photons", 1 << 28}};
+       }),
+       "render.integrator.photons", "16777216"},
       {"UnknownSampler", edit([](json& j) { j["render"]["sampler"] = "halton"; }),
        "render.sampler", "unknown sampler 'halton' (known: independent, sobol, sobol-sequence)"},
       {"SphereNegativeRadius", with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"),

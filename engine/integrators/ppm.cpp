@@ -107,7 +107,8 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
       if (prev_delta) {
         radiance += beta * le;
       } else {
-        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
+        float light_pdf =
+            ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
         radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
       }
     }
@@ -147,7 +148,10 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
 }  // namespace
 
 void PpmIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
-  if (const Json* v = r.find(j, "photons")) photons = int(r.integer(*v, p + ".photons", 1, 1 << 28));
+  // At most 2^24 photons per pass: each costs about 64 bytes in the photon map and its tree, so
+  // the cap bounds a pass's map to about 1 GiB (2^28 asked for 16 GiB and ended in bad_alloc).
+  if (const Json* v = r.find(j, "photons"))
+    photons = int(r.integer(*v, p + ".photons", 1, 1 << 24));
   if (const Json* v = r.find(j, "radius")) {
     radius = r.number(*v, p + ".radius");
     if (radius < 0) r.fail(p + ".radius", "must be >= 0 (0: automatic), got " + v->dump());
