@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 
 #include "coordinator/checkpoint.h"
 #include "engine/buffer_file.h"
@@ -217,6 +218,89 @@ Coordinator::Coordinator(CoreOptions o)
     if (!w.refused.empty()) outvoted_[w.id] = w.refused;
   }
   for (const StoredJob& j : store_.jobs()) restore(j);
+  recover_folders();
+}
+
+void Coordinator::write_folder_record(const StoredJob& j) const {
+  std::string dir = options_.state_dir + "/jobs/" + j.id;
+  write_file_atomic(dir + "/job.spec", j.spec);
+  nlohmann::json meta = {
+      {"id", j.id}, {"seq", j.seq}, {"tenant", j.tenant}, {"submitted_unix", j.submitted_unix}};
+  write_file_atomic(dir + "/job.json", meta.dump() + "\n");
+}
+
+void Coordinator::write_folder_state(const JobRecord& job) const {
+  nlohmann::json st = {{"state", int(job.state)}, {"error", job.error}};
+  try {
+    write_file_atomic(options_.state_dir + "/jobs/" + job.id + "/state.json", st.dump() + "\n");
+  } catch (const std::exception& e) {  // the database holds it; the folder's copy is a backup
+    spdlog::warn("job {}: {}", job.id, e.what());
+  }
+}
+
+void Coordinator::recover_folders() {
+  std::error_code ec;
+  std::vector<std::string> lost;
+  for (const auto& entry : fs::directory_iterator(options_.state_dir + "/jobs", ec)) {
+    std::string id = entry.path().filename().string();
+    unsigned long long n = 0;
+    char extra = 0;
+    if (!entry.is_directory() || std::sscanf(id.c_str(), "j%llu%c", &n, &extra) != 1) continue;
+    next_seq_ = std::max<uint64_t>(next_seq_, n + 1);  // never reuse an id
+    if (jobs_.count(id)) {
+      if (!fs::exists(entry.path() / "job.spec")) {  // a folder from before folder records
+        const JobRecord& job = *jobs_.at(id);
+        try {
+          write_folder_record({id, job.seq, encode_job_spec(job.spec), 0, "", job.submitted_unix, 0,
+                               job.tenant, ""});
+        } catch (const std::exception& e) {
+          spdlog::warn("job {}: {}", id, e.what());
+        }
+      }
+      continue;
+    }
+    if (!fs::exists(entry.path() / "job.spec") || !fs::exists(entry.path() / "job.json")) {
+      spdlog::info("removing {}: a submit that never finished", entry.path().string());
+      fs::remove_all(entry.path(), ec);
+      continue;
+    }
+    StoredJob stored;
+    try {
+      stored.id = id;
+      stored.spec = read_file_bytes((entry.path() / "job.spec").string());
+      nlohmann::json meta =
+          nlohmann::json::parse(read_file_bytes((entry.path() / "job.json").string()));
+      stored.seq = meta.at("seq").get<uint64_t>();
+      stored.tenant = meta.at("tenant").get<std::string>();
+      stored.submitted_unix = meta.at("submitted_unix").get<int64_t>();
+      stored.state = int(JobState::Queued);
+      if (fs::exists(entry.path() / "state.json")) {
+        nlohmann::json st =
+            nlohmann::json::parse(read_file_bytes((entry.path() / "state.json").string()));
+        stored.state = st.at("state").get<int>();
+        stored.error = st.at("error").get<std::string>();
+      }
+    } catch (const std::exception& e) {
+      spdlog::error(
+          "job {}: not in the job database, and its folder record is unreadable ({}); "
+          "left in {} for the operator",
+          id, e.what(), entry.path().string());
+      continue;
+    }
+    spdlog::warn(
+        "job {}: missing from the job database (lost: truncated, or its WAL removed); "
+        "recovered from its folder with the passes its checkpoints hold",
+        id);
+    store_.insert_job(stored);
+    if (stored.state != int(JobState::Queued)) store_.set_state(id, stored.state, stored.error);
+    restore(stored);
+    lost.push_back(id);
+  }
+  if (!lost.empty()) {
+    std::string ids;
+    for (const std::string& id : lost) ids += " " + id;
+    spdlog::warn("recovered {} jobs from their folders:{}", lost.size(), ids);
+  }
 }
 
 Coordinator::~Coordinator() = default;
@@ -504,9 +588,24 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
     fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
     return first;
   }
+  StoredJob record{id,
+                   seq,
+                   encode_job_spec(spec),
+                   int(JobState::Queued),
+                   "",
+                   job->submitted_unix,
+                   0,
+                   caller.tenant,
+                   ""};
+  try {
+    write_folder_record(record);  // first: a folder without it is a submit that never finished
+    store_.insert_job(record);
+  } catch (const std::exception& e) {
+    std::error_code ec;
+    fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
+    refuse(ErrorCode::Unavailable, std::string("cannot store the job: ") + e.what());
+  }
   if (!spec.request_id.empty()) requests_[{caller.tenant, spec.request_id}] = id;
-  store_.insert_job({id, seq, encode_job_spec(spec), int(JobState::Queued), "", job->submitted_unix,
-                     0, caller.tenant});
   scheduler_.add_job(id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
                      spec.priority);
   jobs_[id] = job;
@@ -584,6 +683,7 @@ void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) 
   job.error = err;
   store_.set_state(job.id, int(s), err);
   if (terminal(s)) {
+    write_folder_state(job);
     store_.delete_leases(job.id);
     scheduler_.cancel_job(job.id);  // frees its tasks and leases (a no-op once all are done)
     for (auto it = verifying_.begin(); it != verifying_.end();)

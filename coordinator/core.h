@@ -239,6 +239,13 @@ class Coordinator {
   void restore(const StoredJob& stored);
   // A stored job that cannot be restored: kept, failed with the reason, with no frames.
   void restore_failed(const StoredJob& stored, const std::string& why);
+  // Each job's folder holds its own record (job.spec, job.json, and state.json once it ended)
+  // beside its checkpoints, so a job the database lost is recovered from its folder.
+  void write_folder_record(const StoredJob& job) const;
+  void write_folder_state(const JobRecord& job) const;
+  // Jobs with a folder but no row (the database lost them): recovered; folders of submits that
+  // never finished: removed. Job ids are never reused: next_seq_ passes every folder's.
+  void recover_folders();
   void check_limits(const JobSpec& spec) const;
   bool verified(const TaskRef& task) const;
   // A verified task's result: true when it agrees with another worker's (merge it now); false

@@ -99,6 +99,36 @@ JobStore::JobStore(const std::string& path) : path_(path) {
     sqlite3_close(db_);
     throw StoreError(path + ": cannot open the job database: " + why);
   }
+  try {
+    open_schema();
+    std::string check;
+    {
+      Stmt s(db_, "PRAGMA quick_check", path_);
+      while (s.step()) check += (check.empty() ? "" : "; ") + s.text(0);
+    }
+    if (check != "ok")
+      throw StoreDamaged(path + ": the job database is damaged (SQLite quick_check: " +
+                         check.substr(0, 500) + ")" + damage_advice());
+  } catch (const StoreDamaged&) {
+    sqlite3_close(db_);
+    db_ = nullptr;
+    throw;
+  } catch (const StoreError& e) {
+    sqlite3_close(db_);
+    db_ = nullptr;
+    throw StoreDamaged(std::string(e.what()) + damage_advice());
+  }
+}
+
+std::string JobStore::damage_advice() const {
+  return ". To recover: stop, move " + path_ +
+         " and its -wal and -shm files aside (keep them for "
+         "a post-mortem), and start again: each job is recovered from its folder under jobs/ "
+         "(its spec, state and checkpoints), with its merged passes; task failure counts and "
+         "worker registrations start afresh";
+}
+
+void JobStore::open_schema() {
   sqlite3_busy_timeout(db_, 5000);
   // WAL with synchronous=FULL: a committed transaction survives a power loss.
   exec("PRAGMA journal_mode=WAL");

@@ -20,6 +20,12 @@ namespace rf {
 struct StoreError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
+// The database as a whole is damaged (not a database, fails SQLite's integrity check): the
+// coordinator exits with kStoreDamagedExit and this message, which says how to recover.
+struct StoreDamaged : StoreError {
+  using StoreError::StoreError;
+};
+constexpr int kStoreDamagedExit = 4;
 
 struct StoredJob {
   std::string id;
@@ -108,6 +114,8 @@ class JobStore {
 
  private:
   void exec(const std::string& sql);
+  void open_schema();  // WAL, tables, columns added since
+  std::string damage_advice() const;
   sqlite3* db_ = nullptr;
   std::string path_;
 };

@@ -543,7 +543,14 @@ int run_coordinator(const CoordinatorOptions& o) {
   sigaddset(&set, SIGTERM);
   sigaddset(&set, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);  // before gRPC starts its threads
-  CoordinatorServer server(o);
+  std::unique_ptr<CoordinatorServer> started;
+  try {
+    started = std::make_unique<CoordinatorServer>(o);
+  } catch (const StoreDamaged& e) {
+    spdlog::critical("{}", e.what());
+    return kStoreDamagedExit;
+  }
+  CoordinatorServer& server = *started;
   spdlog::info("coordinator listening on {} (port {}), state in {}, {}", o.listen, server.port(),
                o.state_dir,
                o.token_file.empty() ? std::string("no token file: loopback only, no authentication")

@@ -107,6 +107,7 @@ class CoreBench {
     return encode_buffer(result_buffer(a, value));
   }
   const std::string& state_dir() const { return state_; }
+  void stop() { core_.reset(); }
 
   bool complete(const TaskAssignment& a, float value, const std::string& worker = "w") {
     return core_->complete({this->worker(worker), a.lease_id, a.task, result(a, value)});
@@ -623,6 +624,70 @@ TEST(CoordinatorCore, TheJobListComesInPages) {
   EXPECT_EQ(page[0].job_id, jobs[4]);
   EXPECT_FALSE(more);
   EXPECT_EQ(refusal([&] { bench.core().list({}, 2, "j999999"); }), ErrorCode::NotFound);
+}
+
+// The job database lost (deleted, or truncated to nothing, or its WAL with the last jobs
+// removed): every job is recovered from its folder (spec, state, checkpoints) with the passes
+// it had merged, ended jobs stay ended, and new jobs never reuse an id. Before, the coordinator
+// started with 0 jobs and gave the next job the id of an old folder.
+TEST(CoordinatorCore, JobsTheDatabaseLostAreRecoveredFromTheirFolders) {
+  CoreBench bench("core-lost-db");
+  std::string done = bench.submit(2), cancelled = bench.submit(2), running = bench.submit(2);
+  for (int i = 0; i < 8; ++i) {  // all of the first job's tasks
+    TaskAssignment a = bench.lease();
+    ASSERT_EQ(a.task.job_id, done);
+    EXPECT_TRUE(bench.complete(a, 1.0f));
+  }
+  bench.core().cancel(cancelled);
+  for (int i = 0; i < 4; ++i) {  // pass 0 of the third
+    TaskAssignment a = bench.lease();
+    ASSERT_EQ(a.task.job_id, running);
+    EXPECT_TRUE(bench.complete(a, 1.0f));
+  }
+  SampleBuffer before = bench.image(done);
+  bench.stop();
+  for (const char* f : {"/jobs.sqlite", "/jobs.sqlite-wal", "/jobs.sqlite-shm"})
+    std::filesystem::remove(bench.state_dir() + f);
+  bench.start("B");
+  EXPECT_EQ(bench.core().status(done).state, JobState::Completed);
+  EXPECT_EQ(bench.core().status(cancelled).state, JobState::Cancelled);
+  JobStatus r = bench.core().status(running);
+  EXPECT_EQ(r.frames[0].progress.passes_merged, 1u) << "pass 0 came back from its checkpoint";
+  SampleBuffer after = bench.image(done);
+  EXPECT_EQ(after.sum, before.sum);
+  std::string next = bench.submit(2);
+  EXPECT_EQ(next, "j000004") << "after the highest folder";
+  // Worker registrations were in the database: workers register again (NOT_FOUND tells them).
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease("w2"), 1.0f, "w2"));
+  EXPECT_EQ(bench.core().status(running).state, JobState::Completed);
+}
+
+// A damaged database (not a database, or failing SQLite's check) stops the coordinator with
+// StoreDamaged, exit status 4 from the process, and a message that says how to recover; doing
+// what it says brings every job back.
+TEST(CoordinatorCore, ADamagedJobDatabaseStopsTheCoordinatorSayingHowToRecover) {
+  CoreBench bench("core-damaged-db");
+  std::string job = bench.submit(2);
+  bench.stop();
+  std::string db = bench.state_dir() + "/jobs.sqlite";
+  auto size = std::filesystem::file_size(db);
+  std::filesystem::resize_file(db, size / 2);
+  std::string message;
+  try {
+    bench.start("B");
+  } catch (const StoreDamaged& e) {
+    message = e.what();
+  }
+  EXPECT_NE(message.find("To recover"), std::string::npos) << message;
+  test::write_text(db, std::string(8192, 'x'));
+  test::CommandResult r = test::run_command(test::rayfarm_binary() + " coordinator --state-dir " +
+                                            bench.state_dir() + " --listen 127.0.0.1:0");
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("jobs.sqlite"), std::string::npos) << r.output;
+  for (const char* f : {"/jobs.sqlite", "/jobs.sqlite-wal", "/jobs.sqlite-shm"})
+    std::filesystem::remove(bench.state_dir() + f);
+  bench.start("C");
+  EXPECT_EQ(bench.core().status(job).state, JobState::Queued);
 }
 
 // A submit retried with its request id (the client makes one per command) gets the job the
