@@ -655,6 +655,8 @@ JobStatus Coordinator::status_of(const JobRecord& job) const {
   s.build_id = job.build_id;
   s.state = job.state;
   s.error = job.error;
+  if (!terminal(job.state) && !storage_problem_.empty())
+    s.error = "waiting for the coordinator's storage: " + storage_problem_;
   s.core_seconds = job.core_seconds;
   s.submitted_unix = job.submitted_unix;
   for (const auto& f : job.frames) s.frames.push_back(frame_status(job, *f));
@@ -846,8 +848,15 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
     out.no_more_work = !scheduler_.work_left_for(worker_id, may);
     return out;
   }
-  store_.insert_lease(
-      {l->lease_id, l->task.job_id, l->task.frame, l->task.pass, l->task.tile, worker_id});
+  try {
+    store_.insert_lease(
+        {l->lease_id, l->task.job_id, l->task.frame, l->task.pass, l->task.tile, worker_id});
+  } catch (const std::exception& e) {  // the coordinator's storage, not the worker's doing
+    scheduler_.fail(l->lease_id, "", /*handed_back=*/true, now());
+    storage_failed(e.what());
+    refuse(ErrorCode::Unavailable,
+           std::string("the coordinator cannot store leases now (") + e.what() + "); retry later");
+  }
   std::shared_ptr<JobRecord> job = find(l->task.job_id);
   FrameRecord* f = job->by_number.at(l->task.frame);
   if (f->first_lease_at < 0) f->first_lease_at = now();
@@ -915,19 +924,58 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
 }
 
 // The scheduler's verdict on a durable result and, when it is the first, the database row.
+// The row goes first: if the database cannot take it, the scheduler has not counted the task
+// done, and the worker's retry finds it still open.
 bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds,
                                 const std::string& build_id) {
   if (!build_ok(job, build_id)) return false;  // another build's result was merged meanwhile
-  if (scheduler_.complete(r.lease_id, r.task, now()) != CompleteOutcome::Accepted)
+  if (scheduler_.settled(r.task)) {
+    scheduler_.complete(r.lease_id, r.task, now());  // ends the lease
     return false;  // another result came first, or the job was cancelled or failed meanwhile
-  if (job.build_id.empty()) {  // the first merged result pins the job to its build
-    job.build_id = build_id;
-    store_.set_build(job.id, build_id);
   }
-  store_.task_done(job.id, r.task.frame, r.task.pass, r.task.tile, r.worker_id);
+  try {
+    if (job.build_id.empty()) store_.set_build(job.id, build_id);
+    store_.task_done(job.id, r.task.frame, r.task.pass, r.task.tile, r.worker_id);
+    store_.add_core_seconds(job.id, core_seconds);
+  } catch (const std::exception& e) {
+    storage_failed(e.what());
+    refuse(ErrorCode::Unavailable,
+           std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
+  }
+  if (job.build_id.empty()) job.build_id = build_id;  // the first merged result pins the job
   job.core_seconds += core_seconds;
-  store_.add_core_seconds(job.id, core_seconds);
+  scheduler_.complete(r.lease_id, r.task, now());
+  storage_ok();
   return true;
+}
+
+std::string Coordinator::storage_problem() const {
+  std::lock_guard lock(mu_);
+  return storage_problem_;
+}
+
+void Coordinator::set_storage_listener(std::function<void(const std::string&)> listener) {
+  std::lock_guard lock(mu_);
+  storage_listener_ = std::move(listener);
+}
+
+void Coordinator::storage_failed(const std::string& why) {
+  if (storage_problem_.empty())
+    spdlog::error("cannot store results: {}; refusing them UNAVAILABLE until it can", why);
+  bool changed = storage_problem_ != why;
+  storage_problem_ = why;
+  if (changed && storage_listener_) storage_listener_(why);
+  ++version_;
+  changed_.notify_all();
+}
+
+void Coordinator::storage_ok() {
+  if (storage_problem_.empty()) return;
+  spdlog::info("results are stored again (was: {})", storage_problem_);
+  storage_problem_.clear();
+  if (storage_listener_) storage_listener_("");
+  ++version_;
+  changed_.notify_all();
 }
 
 bool Coordinator::check_upload(const std::string& worker_id, const std::string& lease_id,
@@ -990,7 +1038,11 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   try {
     f->checkpoint->save_task(r.task.pass, r.task.tile, buffer);
   } catch (const std::exception& e) {
-    refuse(ErrorCode::Internal, std::string("cannot store the result: ") + e.what());
+    // The coordinator's fault (disk full, unwritable state): never the worker's. It retries.
+    std::lock_guard lock(mu_);
+    storage_failed(e.what());
+    refuse(ErrorCode::Unavailable,
+           std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
   }
   {
     std::lock_guard lock(mu_);
@@ -999,7 +1051,14 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
   // frames' merges go on meanwhile.
   bool merged = f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
-  if (merged) f->checkpoint->save_prefix(f->acc->frame());
+  if (merged) {
+    try {  // the task files stay until a prefix holding them is durable
+      f->checkpoint->save_prefix(f->acc->frame());
+    } catch (const std::exception& e) {
+      std::lock_guard lock(mu_);
+      storage_failed(e.what());
+    }
+  }
   std::lock_guard lock(mu_);
   publish_frame(*job, *f);
   if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now

@@ -230,6 +230,13 @@ class Coordinator {
   // Refuses leases and ends watches from now on.
   void shut_down();
 
+  // The coordinator's own storage (disk full, unwritable state directory): why it cannot store
+  // results now, or "" when it can. A result it cannot store is refused UNAVAILABLE (the worker
+  // retries; nothing counts against it), running jobs show the problem, and `listener` hears
+  // each change (the server turns it into the health status of "rayfarm.storage").
+  std::string storage_problem() const;
+  void set_storage_listener(std::function<void(const std::string& problem)> listener);
+
  private:
   double now() const { return options_.clock(); }
   std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec,
@@ -296,6 +303,10 @@ class Coordinator {
   // worker, until two agree; and the workers outvoted, with why.
   std::map<TaskRef, std::vector<std::pair<std::string, SampleBuffer>>> verifying_;
   std::map<std::string, std::string> outvoted_;
+  std::string storage_problem_;  // under mu_
+  std::function<void(const std::string&)> storage_listener_;
+  void storage_failed(const std::string& why);  // under mu_
+  void storage_ok();                            // under mu_
   uint64_t next_seq_ = 1, next_worker_ = 1;
 };
 

@@ -517,6 +517,16 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
     if (!impl_->health_server || impl_->health_port == 0)
       throw std::runtime_error("coordinator: cannot listen on --health-listen " + o.health_listen);
   }
+  // "rayfarm.storage": SERVING while results can be stored, NOT_SERVING while they cannot
+  // (disk full, unwritable state). The overall status ("") stays SERVING: the coordinator still
+  // leases, answers and holds results back until it can store them; restarting it would not help.
+  auto set_storage = [impl = impl_.get()](const std::string& problem) {
+    for (grpc::Server* s : {impl->server.get(), impl->health_server.get()})
+      if (s && s->GetHealthCheckService())
+        s->GetHealthCheckService()->SetServingStatus("rayfarm.storage", problem.empty());
+  };
+  set_storage("");
+  impl_->core->set_storage_listener(set_storage);
 }
 
 CoordinatorServer::~CoordinatorServer() { shutdown(); }
@@ -543,6 +553,8 @@ int run_coordinator(const CoordinatorOptions& o) {
   sigaddset(&set, SIGTERM);
   sigaddset(&set, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &set, nullptr);  // before gRPC starts its threads
+  // A file size limit (ulimit -f) reached is a write error (EFBIG) to report, not a reason to die.
+  ::signal(SIGXFSZ, SIG_IGN);
   std::unique_ptr<CoordinatorServer> started;
   try {
     started = std::make_unique<CoordinatorServer>(o);

@@ -265,6 +265,54 @@ TEST(Farm, ClientsRetryUnavailableWithinTheirTimeoutAndSubmitsAreNeverDoubled) {
   EXPECT_LT(took, 10) << "each gives up after about a second";
 }
 
+// The coordinator's disk refuses writes mid-job (a file size limit set on the running process
+// with prlimit: writes past it fail with EFBIG, as a full disk fails them with ENOSPC). Results
+// and leases are refused UNAVAILABLE, the problem shows in the job's status and in the health
+// of "rayfarm.storage", nothing counts against the worker, and once the limit is lifted the job
+// completes with the local image. Before, each refused write counted as a failure of the
+// worker, which was barred from the job after three.
+TEST(Farm, ACoordinatorThatCannotWriteHoldsResultsBackAndBlamesNoWorker) {
+  if (test::run_command("prlimit --version").exit_code != 0)
+    GTEST_SKIP() << "prlimit (util-linux) is not installed";
+  Farm farm("farm-disk", /*lease_seconds=*/3);
+  // Tasks of a second or more, so the worker is rendering when the limit lands: its upload
+  // meets the refusal (and so does its next lease).
+  const std::string job_args = kCornell + " --spp 2048 --passes 4 --res 64x64";
+  std::string job = farm.submit(job_args + " --tile-size 64");
+  Process& worker = farm.worker();
+  ASSERT_TRUE(worker.wait_for_log("merged", 60)) << worker.log();
+  std::string pid = std::to_string(farm.coordinator().pid());
+  ASSERT_EQ(test::run_command("prlimit --pid " + pid + " --fsize=1024:unlimited").exit_code, 0);
+  ASSERT_TRUE(farm.coordinator().wait_for_log("cannot store", 60)) << farm.coordinator().log();
+  EXPECT_EQ(check_health(farm.address(), "rayfarm.storage"), "NOT_SERVING");
+  EXPECT_EQ(check_health(farm.address()), "SERVING");
+  nlohmann::json s = farm.status(job);
+  EXPECT_NE(s["error"].get<std::string>().find("waiting for the coordinator's storage"),
+            std::string::npos)
+      << s.dump();
+  std::this_thread::sleep_for(std::chrono::seconds(4));  // longer than a lease
+  ASSERT_EQ(test::run_command("prlimit --pid " + pid + " --fsize=unlimited:unlimited").exit_code,
+            0);
+  nlohmann::json done;
+  for (int i = 0; i < 600; ++i) {  // a job that stalls (its worker barred) fails, not hangs
+    done = farm.status(job);
+    if (done["state"] != "running" && done["state"] != "queued") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  ASSERT_EQ(done["state"], "completed") << done.dump() << worker.log();
+  EXPECT_EQ(check_health(farm.address(), "rayfarm.storage"), "SERVING");
+  EXPECT_EQ(done["error"], "");
+  EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 2048.0);
+  EXPECT_EQ(farm.coordinator().log().find("failed on"), std::string::npos)
+      << farm.coordinator().log();
+  EXPECT_EQ(worker.wait(60), 0) << worker.log();
+  EXPECT_EQ(worker.log().find("] error:"), std::string::npos) << worker.log();
+  EXPECT_NE(worker.log().find("upload failed"), std::string::npos)
+      << "the upload met the refusal and was retried: " << worker.log();
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
+}
+
 TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
   Farm farm("farm-noise");
   // At 64x64 and 4 spp per pass the Cornell box reaches relMSE 0.01 after roughly 10 passes.
