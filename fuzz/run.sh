@@ -8,15 +8,17 @@
 #   fuzz/run.sh [SCALE]    SCALE times each target's default number of inputs (default 1)
 #
 # Budget on the 2-core CI machine: about 3 minutes to build from scratch, under 2 minutes to run
-# the 7 targets (each default is about 15 s of inputs there).
+# the 8 targets (each default is about 15 s of inputs there).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${RAYFARM_FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
 SCALE="${1:-1}"
 # Inputs per target at SCALE 1: about 15 s each on the CI machine (the scene targets write a file
-# and run a whole importer per input, the others parse from memory).
+# and run a whole importer per input, the others parse from memory; a frame range the fuzzer
+# grows to a million frames costs milliseconds under the sanitizers, hence its smaller count).
 declare -A RUNS=([fuzz_scene_json]=9000 [fuzz_scene_pbrt]=12000 [fuzz_scene_xml]=24000
-                 [fuzz_scene_gltf]=12000 [fuzz_scene_glb]=30000 [fuzz_mesh]=60000 [fuzz_rfb]=60000)
+                 [fuzz_scene_gltf]=12000 [fuzz_scene_glb]=30000 [fuzz_mesh]=60000 [fuzz_rfb]=60000
+                 [fuzz_frame_range]=5000)
 log() { printf 'fuzz: %s\n' "$*" >&2; }
 
 PACKAGES=(clang libfuzzer-14-dev)
@@ -38,7 +40,8 @@ if [ ! -f "$BUILD/build.ninja" ]; then
   CC=clang CXX=clang++ cmake -S "$ROOT" -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1" -DRAYFARM_FUZZ=ON >/dev/null
 fi
-targets=(fuzz_scene_json fuzz_scene_pbrt fuzz_scene_xml fuzz_scene_gltf fuzz_scene_glb fuzz_mesh fuzz_rfb)
+targets=(fuzz_scene_json fuzz_scene_pbrt fuzz_scene_xml fuzz_scene_gltf fuzz_scene_glb fuzz_mesh fuzz_rfb
+         fuzz_frame_range)
 cmake --build "$BUILD" --target "${targets[@]}" -- -j"$(nproc)" >"$BUILD/build.log" 2>&1 ||
   { tail -40 "$BUILD/build.log" >&2; log "build failed"; exit 1; }
 log "built in $(( $(date +%s) - start )) s"
@@ -70,6 +73,7 @@ seed_dir fuzz_scene_glb "" -name '*.glb'
 seed_dir fuzz_mesh '\\x00' -name '*.obj'
 seed_dir fuzz_mesh '\\x01' -name '*.ply'
 seed_dir fuzz_rfb "" -name '*.rfb'
+seed_dir fuzz_frame_range "" -name '*.frames'
 
 status=0
 for t in "${targets[@]}"; do
