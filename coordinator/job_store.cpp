@@ -213,25 +213,29 @@ void JobStore::add_core_seconds(const std::string& id, double seconds) {
 
 void JobStore::task_done(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
                          const std::string& worker) {
-  Stmt s(db_,
-         "INSERT INTO task_events (job_id, frame, pass, tile, worker, done) VALUES (?,?,?,?,?,1)",
-         path_);
-  s.bind(id).bind(int64_t(frame)).bind(int64_t(pass)).bind(int64_t(tile)).bind(worker).step();
+  insert_event(id, frame, pass, tile, worker, 1, "");
 }
 
-void JobStore::task_failed(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
-                           const std::string& worker, const std::string& message) {
+// task_events.done: 1 done, 0 failed, 2 result refused.
+void JobStore::insert_event(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
+                            const std::string& worker, int kind, const std::string& message) {
   Stmt s(db_,
          "INSERT INTO task_events (job_id, frame, pass, tile, worker, done, message) VALUES "
-         "(?,?,?,?,?,0,?)",
+         "(?,?,?,?,?,?,?)",
          path_);
   s.bind(id)
       .bind(int64_t(frame))
       .bind(int64_t(pass))
       .bind(int64_t(tile))
       .bind(worker)
+      .bind(int64_t(kind))
       .bind(message)
       .step();
+}
+
+void JobStore::task_failed(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
+                           const std::string& worker, const std::string& message) {
+  insert_event(id, frame, pass, tile, worker, 0, message);
 }
 
 std::vector<StoredJob> JobStore::jobs() const {
@@ -326,20 +330,9 @@ void JobStore::delete_leases(const std::string& job_id, uint32_t frame) {
   s.bind(job_id).bind(int64_t(frame)).step();
 }
 
-// task_events.done: 1 done, 0 failed, 2 result refused.
 void JobStore::result_refused(const std::string& id, uint32_t frame, uint32_t pass, uint32_t tile,
                               const std::string& worker, const std::string& why) {
-  Stmt s(db_,
-         "INSERT INTO task_events (job_id, frame, pass, tile, worker, done, message) VALUES "
-         "(?,?,?,?,?,2,?)",
-         path_);
-  s.bind(id)
-      .bind(int64_t(frame))
-      .bind(int64_t(pass))
-      .bind(int64_t(tile))
-      .bind(worker)
-      .bind(why)
-      .step();
+  insert_event(id, frame, pass, tile, worker, 2, why);
 }
 
 std::vector<std::string> JobStore::refused_workers(const std::string& id) const {

@@ -115,6 +115,8 @@ class JobStore {
  private:
   void exec(const std::string& sql);
   void open_schema();  // WAL, tables, columns added since
+  void insert_event(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
+                    const std::string& worker_id, int kind, const std::string& message);
   std::string damage_advice() const;
   sqlite3* db_ = nullptr;
   std::string path_;
