@@ -257,6 +257,8 @@ void Coordinator::recover_folders() {
           spdlog::warn("job {}: {}", id, e.what());
         }
       }
+      const JobRecord& job = *jobs_.at(id);
+      if (terminal(job.state) && !fs::exists(entry.path() / "state.json")) write_folder_state(job);
       continue;
     }
     if (!fs::exists(entry.path() / "job.spec") || !fs::exists(entry.path() / "job.json")) {
