@@ -106,6 +106,11 @@ class Worker {
   bool stopping() const { return stop_.load(); }
   // The coordinator answered: the --give-up-after clock starts again.
   void heard_from_coordinator() { last_contact_ns_ = Clock::now().time_since_epoch().count(); }
+  double seconds_without_coordinator() const {
+    return std::chrono::duration<double>(Clock::now().time_since_epoch() -
+                                         Clock::duration(last_contact_ns_.load()))
+        .count();
+  }
   // Throws once give_up_after seconds have passed without an answer from the coordinator.
   void check_give_up(const grpc::Status& last);
   // With --give-up-after: a thread that counts the time the channel is not connected (calls
@@ -167,9 +172,7 @@ void Worker::connect(int keepalive_seconds) {
 
 void Worker::check_give_up(const grpc::Status& last) {
   if (o_.give_up_after <= 0) return;
-  double silent = std::chrono::duration<double>(Clock::now().time_since_epoch() -
-                                                Clock::duration(last_contact_ns_.load()))
-                      .count();
+  double silent = seconds_without_coordinator();
   if (silent < o_.give_up_after) return;
   throw std::runtime_error("no answer from the coordinator at " + o_.coordinator + " for " +
                            std::to_string(int(silent)) +
@@ -185,9 +188,7 @@ void Worker::start_give_up_watch() {
         heard_from_coordinator();
         continue;
       }
-      double silent = std::chrono::duration<double>(Clock::now().time_since_epoch() -
-                                                    Clock::duration(last_contact_ns_.load()))
-                          .count();
+      double silent = seconds_without_coordinator();
       if (silent < o_.give_up_after) continue;
       spdlog::error("no coordinator at {} for {:.0f} s (--give-up-after); exiting", o_.coordinator,
                     silent);
