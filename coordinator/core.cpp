@@ -210,8 +210,14 @@ Coordinator::Coordinator(CoreOptions o)
       lock_(options_.state_dir),
       blobs_(options_.state_dir + "/blobs"),  // creates the state directory too
       store_(options_.state_dir + "/jobs.sqlite"),
-      scheduler_(SchedulerOptions{options_.lease_seconds, options_.max_failures,
-                                  options_.window_frames, options_.instance + "-L"}) {
+      scheduler_(SchedulerOptions{
+          options_.lease_seconds, options_.max_failures, options_.window_frames,
+          options_.instance + "-L",
+          [lease_seconds = options_.lease_seconds](const std::string& lease,
+                                                   const std::string& worker, const TaskRef& task) {
+            spdlog::warn("lease {} of worker {} on task {} expired: not renewed for {:g} s", lease,
+                         worker, task_id_text(task), lease_seconds);
+          }}) {
   next_seq_ = store_.next_seq();
   for (const JobStore::StoredWorker& w : store_.workers()) {
     workers_[w.id] = {w.principal, w.build_id};

@@ -56,7 +56,7 @@ void Scheduler::add_job(const std::string& job_id, const std::vector<uint32_t>& 
   j.frames.reserve(frames.size());
   for (uint32_t f : frames) {
     j.frame_index[f] = j.frames.size();
-    j.frames.push_back({f, passes, uint64_t(tiles) * passes});
+    j.frames.push_back({f, passes, uint64_t(tiles) * passes, 0, 0, {}, {}});
   }
 }
 
@@ -147,6 +147,7 @@ void Scheduler::expire(double now) {
     LeaseState& l = leases_.at(id);
     end_lease(id, l);
     requeue_if_needed(l.task);
+    if (options_.on_expired) options_.on_expired(id, l.worker_id, l.task);
   }
 }
 

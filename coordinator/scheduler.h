@@ -36,6 +36,11 @@ struct SchedulerOptions {
   int max_failures = 3;
   uint32_t window_frames = 4;
   std::string lease_prefix = "L";  // lease ids are prefix + a counter: unique per coordinator run
+  // Called when a lease ends for want of renewal (how a crashed, stalled or cut-off worker is
+  // noticed), with the lease, its worker and its task.
+  std::function<void(const std::string& lease_id, const std::string& worker_id,
+                     const TaskRef& task)>
+      on_expired;
 };
 
 struct Lease {

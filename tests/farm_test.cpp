@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <signal.h>
+#include <unistd.h>
 #include "farm/chunking.h"
 #include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
@@ -315,6 +316,133 @@ TEST(Farm, ACoordinatorThatCannotWriteHoldsResultsBackAndBlamesNoWorker) {
   EXPECT_EQ(worker.log().find("] error:"), std::string::npos) << worker.log();
   EXPECT_NE(worker.log().find("upload failed"), std::string::npos)
       << "the upload met the refusal and was retried: " << worker.log();
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
+}
+
+// Network namespaces for a partition: a coordinator namespace linked to each worker namespace by
+// its own veth pair (subnet 10.231.N.0/24, the coordinator .1, the worker .2). Removed, with
+// their links, when this goes out of scope.
+class Partitionable {
+ public:
+  explicit Partitionable(int workers) : id_(std::to_string(getpid())), workers_(workers) {}
+  ~Partitionable() {
+    for (const std::string& ns : made_) test::run_command("ip netns del " + ns);
+  }
+  // Makes the namespaces and links; the reason when the machine forbids it, else "".
+  std::string make() {
+    test::CommandResult r = add(coordinator_ns());
+    if (r.exit_code != 0) return r.output;
+    sh("ip -n " + coordinator_ns() + " link set lo up");
+    for (int n = 1; n <= workers_; ++n) {
+      if ((r = add(worker_ns(n))).exit_code != 0) return r.output;
+      std::string c = "rfc" + std::to_string(n) + "-" + id_,
+                  w = "rfw" + std::to_string(n) + "-" + id_;
+      sh("ip -n " + worker_ns(n) + " link set lo up");
+      sh("ip link add " + c + " netns " + coordinator_ns() + " type veth peer name " + w +
+         " netns " + worker_ns(n));
+      sh("ip -n " + coordinator_ns() + " addr add 10.231." + std::to_string(n) + ".1/24 dev " + c);
+      sh("ip -n " + worker_ns(n) + " addr add 10.231." + std::to_string(n) + ".2/24 dev " + w);
+      set_link(n, "up");
+    }
+    return "";
+  }
+  std::string coordinator_ns() const { return "rfc-" + id_; }
+  std::string worker_ns(int n) const { return "rfw" + std::to_string(n) + "-" + id_; }
+  // The coordinator's address as worker n reaches it.
+  static std::string coordinator_host(int n) { return "10.231." + std::to_string(n) + ".1"; }
+  // Cuts (down) or restores (up) worker n's link at both ends: packets in flight are lost and
+  // neither side is told, as when a switch port or a cable fails.
+  void set_link(int n, const std::string& state) {
+    sh("ip -n " + coordinator_ns() + " link set rfc" + std::to_string(n) + "-" + id_ + " " + state);
+    sh("ip -n " + worker_ns(n) + " link set rfw" + std::to_string(n) + "-" + id_ + " " + state);
+  }
+
+ private:
+  test::CommandResult add(const std::string& ns) {
+    test::CommandResult r = test::run_command("ip netns add " + ns);
+    if (r.exit_code == 0) made_.push_back(ns);
+    return r;
+  }
+  static void sh(const std::string& command) {
+    test::CommandResult r = test::run_command(command);
+    ASSERT_EQ(r.exit_code, 0) << command << ": " << r.output;
+  }
+  std::string id_;
+  int workers_;
+  std::vector<std::string> made_;
+};
+
+// A partition: the coordinator and two workers in three network namespaces (so the coordinator
+// listens on a non-loopback address, with tokens). One worker's link is cut while it renders a
+// task: the coordinator notices within one lease time (the lease expires and its task goes to
+// the other worker); when the link is back the cut-off worker carries on without a restart,
+// and the image equals the local render, with the exact spp.
+TEST(Farm, ACutLinkIsNoticedWithinALeaseAndTheJobCompletesAsTheLocalRender) {
+  Partitionable net(2);
+  if (std::string why = net.make(); !why.empty())
+    GTEST_SKIP() << "this machine forbids network namespaces (ip netns add: " << why
+                 << "); the partition test needs root or CAP_SYS_ADMIN";
+  std::string dir = test::make_temp_dir("farm-partition-tokens");
+  test::Token client = test::make_token(dir, "client", "--role client --tenant shot");
+  test::Token worker = test::make_token(dir, "worker", "--role worker --tenant farm");
+  test::write_token_file(dir + "/tokens", {&client, &worker});
+  const double lease = 3;
+  Farm farm("farm-partition", lease, dir + "/tokens", {},
+            {net.coordinator_ns(), "0.0.0.0", Partitionable::coordinator_host(1)});
+  farm.client_token_file = client.file;
+  farm.worker_token_file = worker.file;
+  // Tasks of about a second each with two workers on two cores.
+  const std::string job_args = kCornell + " --spp 4096 --passes 16 --res 64x64";
+  std::string job = farm.submit(job_args + " --tile-size 64");
+  auto coordinator_at = [&](int n) {
+    return Partitionable::coordinator_host(n) + ":" + std::to_string(farm.port());
+  };
+  Process& cut = farm.worker_in(net.worker_ns(1), coordinator_at(1), {});
+  Process& other = farm.worker_in(net.worker_ns(2), coordinator_at(2), {});
+  ASSERT_TRUE(cut.wait_for_log("merged", 120)) << cut.log();
+  // Cut it right after it leases a task whose result is not merged yet.
+  std::regex leased("task (\\S+): leased \\((\\S+)\\)");
+  std::string task, lease_id;
+  for (int i = 0; i < 2000 && task.empty(); ++i) {
+    std::string log = cut.log();
+    std::smatch m;
+    for (auto it = std::sregex_iterator(log.begin(), log.end(), leased);
+         it != std::sregex_iterator(); ++it)
+      m = *it;
+    if (!m.empty() && log.find("task " + m[1].str() + ": merged") == std::string::npos &&
+        log.find("task " + m[1].str() + ": rendered") == std::string::npos) {
+      task = m[1];
+      lease_id = m[2];
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  }
+  ASSERT_NE(task, "") << cut.log();
+  net.set_link(1, "down");
+  auto t0 = std::chrono::steady_clock::now();
+  ASSERT_TRUE(farm.coordinator().wait_for_log("lease " + lease_id + " of worker", 30))
+      << farm.coordinator().log();
+  double noticed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  // The lease was last renewed at most a third of a lease before the cut; the expiry is seen at
+  // the next scheduler call, which the other worker makes at least every third of a lease.
+  EXPECT_LE(noticed, lease + 1.5) << farm.coordinator().log();
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  size_t seen = cut.log().size();
+  net.set_link(1, "up");
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0) << farm.coordinator().log();
+  nlohmann::json s = farm.status(job);
+  EXPECT_EQ(s["frames"][0]["passes_merged"], 16);
+  EXPECT_DOUBLE_EQ(s["frames"][0]["spp"].get<double>(), 4096.0);  // the spp asked, no more
+  // The cut-off worker is still there and spoke with the coordinator again after the link came
+  // back (its held result answered, or a new lease).
+  EXPECT_TRUE(cut.running()) << cut.log();
+  std::string after = cut.log().substr(seen);
+  EXPECT_TRUE(
+      after.find("merged") != std::string::npos || after.find("not needed") != std::string::npos ||
+      after.find("leased") != std::string::npos || after.find("is back") != std::string::npos)
+      << cut.log();
+  EXPECT_TRUE(other.running()) << other.log();
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
 }

@@ -29,34 +29,11 @@ namespace {
 
 namespace pb = rayfarm::v1;
 using test::Farm;
+using test::make_token;
+using test::Token;
+using test::write_token_file;
 
 const std::string kJob = "scenes/cornell-box/scene.json --spp 8 --passes 4 --res 32x32";
-
-// A token made by `rayfarm token new`: the token (line 1) and its token-file line (line 2).
-struct Token {
-  std::string token, line, file;
-};
-
-Token make_token(const std::string& dir, const std::string& name, const std::string& args) {
-  test::CommandResult r =
-      test::run_command("{ " + test::rayfarm_binary() + " token new " + args + " 2>/dev/null; }");
-  EXPECT_EQ(r.exit_code, 0) << r.output;
-  Token t;
-  std::istringstream in(r.output);
-  std::getline(in, t.token);
-  std::getline(in, t.line);
-  EXPECT_EQ(t.token.rfind("rft_", 0), 0u) << r.output;
-  EXPECT_EQ(t.line.substr(0, 64), sha256_hex(t.token)) << "line 2 holds the digest";
-  t.file = dir + "/" + name + ".token";
-  test::write_text(t.file, t.token + "\n");
-  return t;
-}
-
-void write_token_file(const std::string& path, const std::vector<const Token*>& tokens) {
-  std::string text = "# accepted tokens\n";
-  for (const Token* t : tokens) text += t->line + "\n";
-  test::write_text(path, text);
-}
 
 // Calls every method of both services once on `channel`, with requests that are harmless when
 // admitted, and returns each one's status code.
@@ -158,14 +135,6 @@ std::map<std::string, grpc::StatusCode> call_every_method(std::shared_ptr<grpc::
 
 const std::set<std::string> kWorkerMethods = {"Register",  "LeaseTask",    "RenewLease",
                                               "FetchBlob", "CompleteTask", "FailTask"};
-
-bool wait_for(const std::function<bool()>& f, double seconds) {
-  for (int i = 0; i < int(seconds * 50); ++i) {
-    if (f()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return f();
-}
 
 // Every method of both services asks for a token of the right role: none, an unknown one and an
 // expired one are UNAUTHENTICATED; a client token on a worker method and a worker token on a job

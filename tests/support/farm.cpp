@@ -6,8 +6,10 @@
 #include <chrono>
 #include <cmath>
 #include <regex>
+#include <sstream>
 #include <thread>
 
+#include "engine/digest.h"
 #include "farm/channel.h"
 #include "farm/chunking.h"
 #include "tests/support/exr.h"
@@ -30,23 +32,36 @@ void expect_same_image(const std::string& farm, const std::string& local) {
                      << " values";
 }
 
+namespace {
+
+// argv run in network namespace `netns` (empty: as it is).
+std::vector<std::string> in_netns(const std::string& netns, std::vector<std::string> argv) {
+  if (!netns.empty()) argv.insert(argv.begin(), {"/usr/sbin/ip", "netns", "exec", netns});
+  return argv;
+}
+
+}  // namespace
+
 Farm::Farm(const std::string& tag, double lease_seconds, const std::string& token_file,
-           const std::vector<std::string>& coordinator_args)
+           const std::vector<std::string>& coordinator_args, FarmNetwork network)
     : dir_(make_temp_dir(tag)),
       lease_seconds_(lease_seconds),
       token_file_(token_file),
-      coordinator_args_(coordinator_args) {
+      coordinator_args_(coordinator_args),
+      network_(std::move(network)) {
   start_coordinator(0);
 }
 
 void Farm::start_coordinator(int port) {
   std::vector<std::string> argv{
-      rayfarm_binary(), "coordinator",   "--listen",        "127.0.0.1:" + std::to_string(port),
-      "--state-dir",    dir_ + "/state", "--lease-seconds", std::to_string(lease_seconds_)};
+      rayfarm_binary(),  "coordinator",
+      "--listen",        network_.listen_host + ":" + std::to_string(port),
+      "--state-dir",     dir_ + "/state",
+      "--lease-seconds", std::to_string(lease_seconds_)};
   if (!token_file_.empty()) argv.insert(argv.end(), {"--token-file", token_file_});
   argv.insert(argv.end(), coordinator_args_.begin(), coordinator_args_.end());
-  coordinator_ =
-      std::make_unique<Process>(argv, dir_ + "/coordinator" + std::to_string(starts_++) + ".log");
+  coordinator_ = std::make_unique<Process>(
+      in_netns(network_.netns, argv), dir_ + "/coordinator" + std::to_string(starts_++) + ".log");
   std::smatch m;
   std::regex re("\\(port ([0-9]+)\\)");
   std::string log;
@@ -71,21 +86,26 @@ void Farm::restart_coordinator(int sig, double pause) {
 }
 
 Process& Farm::worker(const std::vector<std::string>& extra) {
-  std::vector<std::string> argv{rayfarm_binary(), "worker",      "--coordinator",
-                                address(),        "--cache-dir", dir_ + "/cache"};
+  return worker_in("", address(), extra);
+}
+
+Process& Farm::worker_in(const std::string& netns, const std::string& coordinator_address,
+                         const std::vector<std::string>& extra) {
+  std::vector<std::string> argv{rayfarm_binary(),    "worker",      "--coordinator",
+                                coordinator_address, "--cache-dir", dir_ + "/cache"};
   if (!worker_token_file.empty()) argv.insert(argv.end(), {"--token-file", worker_token_file});
   argv.insert(argv.end(), worker_args.begin(), worker_args.end());
   argv.insert(argv.end(), extra.begin(), extra.end());
-  workers_.push_back(
-      std::make_unique<Process>(argv, dir_ + "/worker" + std::to_string(workers_.size()) + ".log"));
+  workers_.push_back(std::make_unique<Process>(
+      in_netns(netns, argv), dir_ + "/worker" + std::to_string(workers_.size()) + ".log"));
   return *workers_.back();
 }
 
 CommandResult Farm::client(const std::string& args) const {
   std::string token =
       (client_token_file.empty() ? "" : " --token-file " + client_token_file) + client_args;
-  return run_command("cd " + source_dir() + " && " + rayfarm_binary() + " " + args +
-                     " --coordinator " + address() + token);
+  return run_command("cd " + source_dir() + " && " + netns_prefix() + rayfarm_binary() + " " +
+                     args + " --coordinator " + address() + token);
 }
 
 std::string Farm::submit(const std::string& args) const {
@@ -93,8 +113,9 @@ std::string Farm::submit(const std::string& args) const {
   // warnings go to stderr).
   std::string token =
       (client_token_file.empty() ? "" : " --token-file " + client_token_file) + client_args;
-  CommandResult r = run_command("cd " + source_dir() + " && { " + rayfarm_binary() + " submit " +
-                                args + " --coordinator " + address() + token + " 2>/dev/null; }");
+  CommandResult r =
+      run_command("cd " + source_dir() + " && { " + netns_prefix() + rayfarm_binary() + " submit " +
+                  args + " --coordinator " + address() + token + " 2>/dev/null; }");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   std::string id = r.output;
   while (!id.empty() && (id.back() == '\n' || id.back() == ' ')) id.pop_back();
@@ -122,8 +143,32 @@ std::string Farm::fetched(const std::string& job, uint32_t frame) const {
   return dir_ + "/out-" + job + "/" + name;
 }
 
+std::string Farm::netns_prefix() const {
+  return network_.netns.empty() ? "" : "/usr/sbin/ip netns exec " + network_.netns + " ";
+}
+
 std::shared_ptr<grpc::Channel> Farm::channel(const std::string& token) const {
   return coordinator_channel(address(), ClientCredentials{token, "", "", ""});
+}
+
+Token make_token(const std::string& dir, const std::string& name, const std::string& args) {
+  CommandResult r = run_command("{ " + rayfarm_binary() + " token new " + args + " 2>/dev/null; }");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  Token t;
+  std::istringstream in(r.output);
+  std::getline(in, t.token);
+  std::getline(in, t.line);
+  EXPECT_EQ(t.token.rfind("rft_", 0), 0u) << r.output;
+  EXPECT_EQ(t.line.substr(0, 64), sha256_hex(t.token)) << "line 2 holds the digest";
+  t.file = dir + "/" + name + ".token";
+  write_text(t.file, t.token + "\n");
+  return t;
+}
+
+void write_token_file(const std::string& path, const std::vector<const Token*>& tokens) {
+  std::string text = "# accepted tokens\n";
+  for (const Token* t : tokens) text += t->line + "\n";
+  write_text(path, text);
 }
 
 std::string register_worker(pb::WorkerService::Stub& stub, const std::string& hostname) {

@@ -22,13 +22,22 @@ namespace rf::test {
 // |a-b| <= 1e-6 * max(|a|,|b|) + 1e-12 (in practice the farm's images are bit-identical).
 void expect_same_image(const std::string& farm, const std::string& local);
 
+// Where a farm's coordinator runs: by default on loopback in the test's own network namespace.
+// With `netns`, the coordinator and the client commands run in that namespace (ip netns exec),
+// the coordinator listens on listen_host and the clients call it at host.
+struct FarmNetwork {
+  std::string netns;
+  std::string listen_host = "127.0.0.1";
+  std::string host = "127.0.0.1";
+};
+
 class Farm {
  public:
   // A coordinator with this lease time; with a token file, it authenticates every call, and
   // client() and worker() show the tokens in client_token_file / worker_token_file.
   explicit Farm(const std::string& tag, double lease_seconds = 30,
                 const std::string& coordinator_token_file = "",
-                const std::vector<std::string>& coordinator_args = {});
+                const std::vector<std::string>& coordinator_args = {}, FarmNetwork network = {});
 
   void start_coordinator(int port);  // and waits until it logs its port
   // Stops the coordinator with `sig` (SIGKILL: a crash; SIGTERM: a graceful stop), waits for it
@@ -38,6 +47,10 @@ class Farm {
   int port() const { return port_; }
 
   Process& worker(const std::vector<std::string>& extra = {"--exit-when-idle"});
+  // A worker in network namespace `netns` (empty: the test's own) calling the coordinator at
+  // `coordinator_address`.
+  Process& worker_in(const std::string& netns, const std::string& coordinator_address,
+                     const std::vector<std::string>& extra);
   // A client command against this coordinator (run from the source tree), output 2>&1.
   CommandResult client(const std::string& args) const;
   std::string submit(const std::string& args) const;  // the job id; expects success
@@ -48,7 +61,7 @@ class Farm {
   std::string fetched(const std::string& job, uint32_t frame) const;
 
   std::string worker_log(size_t i) const { return workers_.at(i)->log(); }
-  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  std::string address() const { return network_.host + ":" + std::to_string(port_); }
   const std::string& dir() const { return dir_; }
   Process& coordinator() { return *coordinator_; }
   // A plain channel; with a token, it sends "authorization: Bearer TOKEN" on every call.
@@ -63,11 +76,24 @@ class Farm {
   double lease_seconds_;
   std::string token_file_;
   std::vector<std::string> coordinator_args_;
+  FarmNetwork network_;
   int port_ = 0, starts_ = 0;
   mutable int local_count_ = 0;
   std::unique_ptr<Process> coordinator_;
   std::vector<std::unique_ptr<Process>> workers_;
+
+  // "ip netns exec NS " when the coordinator has a namespace, for client command lines.
+  std::string netns_prefix() const;
 };
+
+// A token made by `rayfarm token new` (written to DIR/NAME.token): the token and its token-file
+// line.
+struct Token {
+  std::string token, line, file;
+};
+Token make_token(const std::string& dir, const std::string& name, const std::string& args);
+// A coordinator's token file accepting these tokens.
+void write_token_file(const std::string& path, const std::vector<const Token*>& tokens);
 
 // Registers a worker under `hostname` through a raw stub; the id the coordinator issued.
 std::string register_worker(rayfarm::v1::WorkerService::Stub& stub, const std::string& hostname);
