@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -52,6 +53,7 @@ class Retry {
   explicit Retry(const Endpoint& ep)
       : end_(Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                 std::chrono::duration<double>(ep.timeout))),
+        address_(ep.address),
         rng_(std::random_device{}()) {}
 
   double left() const { return std::chrono::duration<double>(end_ - Clock::now()).count(); }
@@ -73,6 +75,11 @@ class Retry {
     if (s.error_code() != grpc::StatusCode::UNAVAILABLE) return false;
     double wait = backoff_seconds(attempt, 0.1, 5, rng_);
     if (left() <= wait) return false;
+    // Said once, with gRPC's reason: a coordinator that is down and one this client cannot
+    // speak to (TLS on one side only, a wrong CA) both answer UNAVAILABLE.
+    if (retries_ == 0)
+      std::cerr << "rayfarm: coordinator " << address_ << " unavailable (" << s.error_message()
+                << "); retrying for up to " << std::lround(left()) << " s (--timeout)\n";
     ++retries_;
     std::this_thread::sleep_for(std::chrono::duration<double>(wait));
     return true;
@@ -81,6 +88,7 @@ class Retry {
 
  private:
   Clock::time_point end_;
+  std::string address_;
   std::mt19937 rng_;
   int retries_ = 0;
 };

@@ -526,8 +526,10 @@ TEST(Security, TlsWithClientCertificatesForWorkersAndAPlaintextHealthPort) {
             {"--tls-cert", pki.server_cert, "--tls-key", pki.server_key, "--tls-client-ca", pki.ca,
              "--health-listen", "127.0.0.1:0"});
   farm.client_token_file = client.file;
-  test::CommandResult plain = farm.client("status");
+  // Without TLS, the client cannot speak to it: UNAVAILABLE, retried within --timeout, saying why.
+  test::CommandResult plain = farm.client("status --timeout 2");
   EXPECT_NE(plain.exit_code, 0) << plain.output;
+  EXPECT_NE(plain.output.find("unavailable"), std::string::npos) << plain.output;
   farm.client_args = " --tls-ca " + pki.ca;
   EXPECT_EQ(farm.client("status").exit_code, 0);
   std::string job = farm.submit(kJob + " --frames 1");

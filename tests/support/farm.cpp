@@ -101,21 +101,21 @@ Process& Farm::worker_in(const std::string& netns, const std::string& coordinato
   return *workers_.back();
 }
 
-CommandResult Farm::client(const std::string& args) const {
+std::string Farm::client_command(const std::string& args) const {
   std::string token =
       (client_token_file.empty() ? "" : " --token-file " + client_token_file) + client_args;
-  return run_command("cd " + source_dir() + " && " + netns_prefix() + rayfarm_binary() + " " +
-                     args + " --coordinator " + address() + token);
+  return "cd " + source_dir() + " && " + netns_prefix() + rayfarm_binary() + " " + args +
+         " --coordinator " + address() + token;
+}
+
+CommandResult Farm::client(const std::string& args) const {
+  return run_command(client_command(args));
 }
 
 std::string Farm::submit(const std::string& args) const {
   // The job id is stdout alone (run_command adds 2>&1 outside the braces; the importers'
   // warnings go to stderr).
-  std::string token =
-      (client_token_file.empty() ? "" : " --token-file " + client_token_file) + client_args;
-  CommandResult r =
-      run_command("cd " + source_dir() + " && { " + netns_prefix() + rayfarm_binary() + " submit " +
-                  args + " --coordinator " + address() + token + " 2>/dev/null; }");
+  CommandResult r = run_command("{ " + client_command("submit " + args) + " 2>/dev/null; }");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   std::string id = r.output;
   while (!id.empty() && (id.back() == '\n' || id.back() == ' ')) id.pop_back();
@@ -124,7 +124,9 @@ std::string Farm::submit(const std::string& args) const {
 }
 
 nlohmann::json Farm::status(const std::string& job) const {
-  CommandResult r = client("status " + job + " --json");
+  // stdout alone: a retry's note goes to stderr.
+  CommandResult r =
+      run_command("{ " + client_command("status " + job + " --json") + " 2>/dev/null; }");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   return nlohmann::json::parse(r.output, nullptr, false);
 }

@@ -84,6 +84,7 @@ class Farm {
 
   // "ip netns exec NS " when the coordinator has a namespace, for client command lines.
   std::string netns_prefix() const;
+  std::string client_command(const std::string& args) const;  // a shell command line
 };
 
 // A token made by `rayfarm token new` (written to DIR/NAME.token): the token and its token-file
