@@ -1,24 +1,24 @@
 #!/usr/bin/env bash
 # The fuzzing stage (fuzz/README.md): builds the libFuzzer targets with clang, AddressSanitizer
-# and UBSan in build-fuzz/, then runs each for a fixed number of inputs from a fixed seed (so a
+# and UBSan in build-san/ (the sanitizer build, tests/sanitize.sh), then runs each for a fixed number of inputs from a fixed seed (so a
 # run is repeatable), its corpus seeded from the repository's test files and scenes. Exit status
-# 1 and the crashing input in build-fuzz/findings/ when a target crashes, leaks, hangs or runs
+# 1 and the crashing input in build-san/findings/ when a target crashes, leaks, hangs or runs
 # out of memory.
 #
 #   fuzz/run.sh [SCALE]    SCALE times each target's default number of inputs (default 1)
 #
 # Budget on the 2-core CI machine: about 3 minutes to build from scratch, under 2 minutes to run
-# the 8 targets (each default is about 15 s of inputs there).
+# the 9 targets (each default is about 15 s of inputs there).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-BUILD="${RAYFARM_FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
+BUILD="${RAYFARM_FUZZ_BUILD_DIR:-$ROOT/build-san}"
 SCALE="${1:-1}"
 # Inputs per target at SCALE 1: about 15 s each on the CI machine (the scene targets write a file
 # and run a whole importer per input, the others parse from memory; a frame range the fuzzer
 # grows to a million frames costs milliseconds under the sanitizers, hence its smaller count).
 declare -A RUNS=([fuzz_scene_json]=9000 [fuzz_scene_pbrt]=12000 [fuzz_scene_xml]=24000
                  [fuzz_scene_gltf]=12000 [fuzz_scene_glb]=30000 [fuzz_mesh]=60000 [fuzz_rfb]=60000
-                 [fuzz_frame_range]=5000)
+                 [fuzz_frame_range]=5000 [fuzz_coordinator]=400)
 log() { printf 'fuzz: %s\n' "$*" >&2; }
 
 PACKAGES=(clang libfuzzer-14-dev)
@@ -36,12 +36,9 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 start=$(date +%s)
-if [ ! -f "$BUILD/build.ninja" ]; then
-  CC=clang CXX=clang++ cmake -S "$ROOT" -B "$BUILD" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-    -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1" -DRAYFARM_FUZZ=ON >/dev/null
-fi
+"$ROOT/tests/sanitize_configure.sh" "$BUILD"
 targets=(fuzz_scene_json fuzz_scene_pbrt fuzz_scene_xml fuzz_scene_gltf fuzz_scene_glb fuzz_mesh fuzz_rfb
-         fuzz_frame_range)
+         fuzz_frame_range fuzz_coordinator)
 cmake --build "$BUILD" --target "${targets[@]}" -- -j"$(nproc)" >"$BUILD/build.log" 2>&1 ||
   { tail -40 "$BUILD/build.log" >&2; log "build failed"; exit 1; }
 log "built in $(( $(date +%s) - start )) s"
@@ -74,6 +71,7 @@ seed_dir fuzz_mesh '\\x00' -name '*.obj'
 seed_dir fuzz_mesh '\\x01' -name '*.ply'
 seed_dir fuzz_rfb "" -name '*.rfb'
 seed_dir fuzz_frame_range "" -name '*.frames'
+seed_dir fuzz_coordinator "" -name '*.ops'
 
 status=0
 for t in "${targets[@]}"; do

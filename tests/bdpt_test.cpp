@@ -9,9 +9,9 @@
 #include <cstdio>
 #include <cstring>
 
-#include "tests/support/bdpt_strategies.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/bdpt_strategies.h"
 #include "tests/support/fixtures.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"
@@ -248,9 +248,7 @@ TEST(Bdpt, UnweightedStrategiesOfOneDepthAgree) {
 
 // The determinism contract: a pass is the same threaded or not, and twice.
 TEST(Bdpt, PassesAreBitIdentical) {
-  auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
-    return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(double)) == 0;
-  };
+  const auto same = &test::bits_equal;
   for (const char* which : {"cornell", "cornell sobol", "glass room"}) {
     SCOPED_TRACE(which);
     Scene s = std::string(which) == "glass room" ? glass_room("bdpt", 24, 4, 4, 3)

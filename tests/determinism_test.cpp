@@ -7,8 +7,8 @@
 #include <cstring>
 #include <random>
 
-#include "engine/local_render.h"
 #include "engine/frame_accumulator.h"
+#include "engine/local_render.h"
 #include "engine/render.h"
 #include "engine/scene.h"
 #include "tests/support/fixtures.h"
@@ -17,9 +17,7 @@
 namespace rf {
 namespace {
 
-bool bits_equal(const std::vector<double>& a, const std::vector<double>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(double)) == 0;
-}
+using test::bits_equal;
 
 void expect_close(const std::vector<double>& a, const std::vector<double>& b, const char* what) {
   ASSERT_EQ(a.size(), b.size()) << what;
@@ -38,7 +36,8 @@ TEST(Determinism, WholeFrameEqualsTilesBitForBit) {
     SampleBuffer serial = r.render(TaskKey{0, full, pass}, /*parallel=*/false);
     EXPECT_TRUE(bits_equal(whole.sum, serial.sum)) << "threads changed pixels";
     SampleBuffer assembled(r.header(0, PassSet::range(pass, pass + 1)), full, false);
-    for (const Rect& t : r.tiles(20)) assemble_tile(assembled, r.render(TaskKey{0, t, pass}, false));
+    for (const Rect& t : r.tiles(20))
+      assemble_tile(assembled, r.render(TaskKey{0, t, pass}, false));
     EXPECT_TRUE(bits_equal(whole.sum, assembled.sum));
     EXPECT_TRUE(bits_equal(whole.sum_sq, assembled.sum_sq));
     EXPECT_TRUE(bits_equal(whole.batch_sum, assembled.batch_sum));
@@ -107,7 +106,8 @@ TEST(Determinism, LocalRenderEqualsTaskMerge) {
   opt.tile_size = 16;
   LocalRenderResult res = render_local(r, opt);
   SampleBuffer manual(r.header(0, PassSet{}), Rect{0, 0, 32, 32}, false);
-  for (uint32_t p = 0; p < 4; ++p) merge_into(manual, r.render(TaskKey{0, {0, 0, 32, 32}, p}, true));
+  for (uint32_t p = 0; p < 4; ++p)
+    merge_into(manual, r.render(TaskKey{0, {0, 0, 32, 32}, p}, true));
   EXPECT_TRUE(bits_equal(res.frame.sum, manual.sum));
   EXPECT_EQ(res.passes_merged, 4u);
 }

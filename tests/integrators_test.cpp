@@ -6,11 +6,11 @@
 #include <cstdio>
 #include <cstring>
 
+#include "engine/buffer_merge.h"
 #include "engine/camera.h"
 #include "engine/filter.h"
 #include "engine/integrators/common.h"
 #include "engine/local_render.h"
-#include "engine/buffer_merge.h"
 #include "engine/render.h"
 #include "engine/scene.h"
 #include "tests/support/fixtures.h"
@@ -35,7 +35,8 @@ void expect_agree(const test::ImageStats& a, const test::ImageStats& b, const ch
 TEST(DirectIntegrator, EqualsPathWithMaxDepthOne) {
   // 256 spp per pass: pixels on the light's edge (radiance 17 or 0) dominate the image mean's
   // noise; this many samples bring its standard error under the harness's 0.3% warning level.
-  test::ImageStats direct = test::render_stats(test::cornell_box({"direct", 32, 256, 32, 1}), 32, 1);
+  test::ImageStats direct =
+      test::render_stats(test::cornell_box({"direct", 32, 256, 32, 1}), 32, 1);
   test::ImageStats path = test::render_stats(test::cornell_box({"path", 32, 256, 32, 2, 1}), 32, 1);
   expect_agree(direct, path, "direct vs path (max depth 1)");
 }
@@ -52,24 +53,30 @@ std::string plates_scene(const std::string& strategy, int bsdf_samples, int spp)
   const char* names[4] = {"p0", "p1", "p2", "p3"};
   std::string materials = R"("black": {"type": "diffuse", "reflectance": 0})";
   for (int i = 0; i < 4; ++i) {
-    materials += std::string(R"(, ")") + names[i] + R"(": {"type": "rough_conductor", "tint": 0.8, "roughness": )" +
+    materials += std::string(R"(, ")") + names[i] +
+                 R"(": {"type": "rough_conductor", "tint": 0.8, "roughness": )" +
                  std::to_string(alphas[i]) + "}";
-    plates += std::string(R"({"type": "rectangle", "material": ")") + names[i] +
-              R"(", "transform": [{"scale": [2.0, 0.3, 1]}, {"rotate": {"axis": [1, 0, 0], "angle_deg": )" +
-              std::to_string(-60 + 8 * i) + R"(}}, {"translate": [0, )" + std::to_string(0.2 + 0.7 * i) +
-              R"(, )" + std::to_string(-0.6 * i) + R"(]}]},)";
-    lights += std::string(R"({"type": "sphere", "material": "black", "radius": )") + std::to_string(radii[i]) +
-              R"(, "center": [)" + std::to_string(-1.5 + i) + R"(, 3.5, -3], "tessellation": [16, 32],
-               "emission": {"radiance": )" + std::to_string(1.5 / (radii[i] * radii[i])) + "}},";
+    plates +=
+        std::string(R"({"type": "rectangle", "material": ")") + names[i] +
+        R"(", "transform": [{"scale": [2.0, 0.3, 1]}, {"rotate": {"axis": [1, 0, 0], "angle_deg": )" +
+        std::to_string(-60 + 8 * i) + R"(}}, {"translate": [0, )" + std::to_string(0.2 + 0.7 * i) +
+        R"(, )" + std::to_string(-0.6 * i) + R"(]}]},)";
+    lights += std::string(R"({"type": "sphere", "material": "black", "radius": )") +
+              std::to_string(radii[i]) + R"(, "center": [)" + std::to_string(-1.5 + i) +
+              R"(, 3.5, -3], "tessellation": [16, 32],
+               "emission": {"radiance": )" +
+              std::to_string(1.5 / (radii[i] * radii[i])) + "}},";
   }
   return std::string(R"({"version": 1,
     "camera": {"fov_deg": 50, "look_at": {"eye": [0, 2.5, 6], "target": [0, 1.2, -1], "up": [0, 1, 0]}},
     "film": {"resolution": [40, 30]},
-    "render": {"integrator": {"type": "direct", "strategy": ")") + strategy +
-         R"(", "bsdf_samples": )" + std::to_string(bsdf_samples) + R"(}, "spp": )" +
+    "render": {"integrator": {"type": "direct", "strategy": ")") +
+         strategy + R"(", "bsdf_samples": )" + std::to_string(bsdf_samples) + R"(}, "spp": )" +
          std::to_string(spp) + R"(, "passes": 32, "seed": 9, "sampler": "independent"},
-    "materials": {)" + materials + R"(},
-    "shapes": [)" + plates + lights.substr(0, lights.size() - 1) + R"(],
+    "materials": {)" +
+         materials + R"(},
+    "shapes": [)" +
+         plates + lights.substr(0, lights.size() - 1) + R"(],
     "lights": [{"type": "point", "position": [2, 4, 2], "intensity": 3}]})";
 }
 
@@ -132,7 +139,8 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
     }
     LightSample ls;
     float ul = sampler.get_1d();
-    if (ctx.lights.sample(hit.p, Vec3(0.0f), ul, sampler.get_2d(), ls) && light_visible(ctx, hit, ls)) {
+    if (ctx.lights.sample(hit.p, Vec3(0.0f), ul, sampler.get_2d(), ls) &&
+        light_visible(ctx, hit, ls)) {
       float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
       radiance += beta * bsdf.eval(wo, ls.wi) * ls.radiance *
                   (std::fabs(dot(ls.wi, ns)) * w / ls.pdf_solid_angle);
@@ -144,8 +152,9 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
       if (ctx.accel.intersect(ctx.accel.spawn(hit, bs.wi), lh)) {
         RGB le = LightSet::emitted(ctx.accel.mesh(lh.mesh), lh.ng, -bs.wi);
         float w = bs.is_delta ? 1.0f
-                              : power_heuristic(bs.pdf_solid_angle,
-                                                ctx.lights.pdf_solid_angle(hit.p, Vec3(0.0f), lh.mesh, lh.prim, lh.p, lh.ng));
+                              : power_heuristic(bs.pdf_solid_angle, ctx.lights.pdf_solid_angle(
+                                                                        hit.p, Vec3(0.0f), lh.mesh,
+                                                                        lh.prim, lh.p, lh.ng));
         radiance += beta * bs.f * le * (std::fabs(dot(bs.wi, ns)) * w / bs.pdf_solid_angle);
       }
     }
@@ -185,7 +194,8 @@ TEST(WhittedIntegrator, EqualsRestrictedPathTracer) {
         for (uint64_t k = 0; k < spp; ++k) {
           sampler.start_camera_sample(1234, 0, pass, x, y, k);  // a seed of its own
           FilterSample fs = sample_filter(s.film.filter, sampler.get_2d());
-          Ray ray = camera.generate_ray(x + 0.5f + fs.offset.x, y + 0.5f + fs.offset.y, sampler.get_2d());
+          Ray ray =
+              camera.generate_ray(x + 0.5f + fs.offset.x, y + 0.5f + fs.offset.y, sampler.get_2d());
           RGB l = restricted_path(ctx, ray, sampler);
           for (int c = 0; c < 3; ++c) img[3 * (y * 32 + x) + c] += l[c] / double(spp);
         }
@@ -204,7 +214,9 @@ double ao_at(const Scene& s, Vec3 floor_point, int n, double* variance) {
   double sum = 0, sum_sq = 0;
   for (int k = 0; k < n; ++k) {
     sampler.start_camera_sample(3, 0, 0, 0, 0, uint64_t(k));
-    double v = ao.radiance(ctx, Ray{floor_point + Vec3(0, 1, 0) * 0.5f, {0, -1, 0}, kInf}, sampler, counters).y;
+    double v = ao.radiance(ctx, Ray{floor_point + Vec3(0, 1, 0) * 0.5f, {0, -1, 0}, kInf}, sampler,
+                           counters)
+                   .y;
     sum += v, sum_sq += v * v;
   }
   double mean = sum / n;
@@ -213,11 +225,16 @@ double ao_at(const Scene& s, Vec3 floor_point, int n, double* variance) {
 }
 
 std::string ao_scene(bool wall, bool cosine, float max_distance) {
-  std::string wall_shape = wall ? R"(, {"type": "rectangle", "material": "m", "transform": [{"scale": 200}, {"rotate": {"axis": [0, 1, 0], "angle_deg": 90}}, {"translate": [0.5, 0, 0]}]})" : "";
-  return std::string(R"({"version": 1, "camera": {"fov_deg": 30, "look_at": {"eye": [0, 1, 0], "target": [0, 0, 0], "up": [0, 0, -1]}},
+  std::string wall_shape =
+      wall
+          ? R"(, {"type": "rectangle", "material": "m", "transform": [{"scale": 200}, {"rotate": {"axis": [0, 1, 0], "angle_deg": 90}}, {"translate": [0.5, 0, 0]}]})"
+          : "";
+  return std::string(
+             R"({"version": 1, "camera": {"fov_deg": 30, "look_at": {"eye": [0, 1, 0], "target": [0, 0, 0], "up": [0, 0, -1]}},
     "film": {"resolution": [4, 4]},
-    "render": {"integrator": {"type": "ao", "sampling": ")") + (cosine ? "cosine" : "uniform") +
-         R"(", "max_distance": )" + std::to_string(max_distance) + R"(}, "spp": 1, "passes": 1},
+    "render": {"integrator": {"type": "ao", "sampling": ")") +
+         (cosine ? "cosine" : "uniform") + R"(", "max_distance": )" + std::to_string(max_distance) +
+         R"(}, "spp": 1, "passes": 1},
     "materials": {"m": {"type": "diffuse"}},
     "shapes": [{"type": "rectangle", "material": "m", "transform": [{"scale": 200}, {"rotate": {"axis": [1, 0, 0], "angle_deg": -90}}]})" +
          wall_shape + "]}";
@@ -227,14 +244,17 @@ TEST(AmbientOcclusion, MatchesClosedForms) {
   const int n = 200000;
   double var_cos, var_uni;
   // An open plane: nothing occludes, AO = 1 exactly (cosine sampling: every ray contributes 1).
-  EXPECT_EQ(ao_at(scene_from_json(ao_scene(false, true, 1), "ao-open"), {0, 0, 0}, 1000, &var_cos), 1.0);
+  EXPECT_EQ(ao_at(scene_from_json(ao_scene(false, true, 1), "ao-open"), {0, 0, 0}, 1000, &var_cos),
+            1.0);
   // A tall wall (the plane x = 0.5, 400 units across: infinite within the max distance r = 1) at
   // distance d = 0.5: the occluded directions are those with w.x >= c = d / r, whose projected
   // (cosine-weighted) measure is the disk segment (acos c - c sqrt(1 - c^2)) / pi.
   double c = 0.5;
   double expected = 1 - (std::acos(c) - c * std::sqrt(1 - c * c)) / kPi;
-  double ao_cos = ao_at(scene_from_json(ao_scene(true, true, 1), "ao-wall-cos"), {0, 0, 0}, n, &var_cos);
-  double ao_uni = ao_at(scene_from_json(ao_scene(true, false, 1), "ao-wall-uni"), {0, 0, 0}, n, &var_uni);
+  double ao_cos =
+      ao_at(scene_from_json(ao_scene(true, true, 1), "ao-wall-cos"), {0, 0, 0}, n, &var_cos);
+  double ao_uni =
+      ao_at(scene_from_json(ao_scene(true, false, 1), "ao-wall-uni"), {0, 0, 0}, n, &var_uni);
   std::printf("AO at d/r = 0.5: expected %.5f, cosine %.5f (var %.4f), uniform %.5f (var %.4f)\n",
               expected, ao_cos, var_cos, ao_uni, var_uni);
   // 4 standard errors (fixed seed).
@@ -259,9 +279,7 @@ TEST(IntegratorDeterminism, PassesAreReproducibleAndTileIndependent) {
     Rect full{0, 0, 24, 24};
     SampleBuffer a = r.render(TaskKey{0, full, 2}, true);
     SampleBuffer b = r.render(TaskKey{0, full, 2}, false);
-    auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
-      return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(double)) == 0;
-    };
+    const auto same = &test::bits_equal;
     EXPECT_TRUE(same(a.sum, b.sum));
     EXPECT_TRUE(same(a.splat, b.splat));
     if (!r.splats()) {

@@ -314,9 +314,7 @@ TEST(ProgressivePhotonMapping, ConvergesToPathOnCornellBox) {
   EXPECT_LT(e256, e64);
 }
 
-bool same_bits(const std::vector<double>& x, const std::vector<double>& y) {
-  return x.size() == y.size() && std::memcmp(x.data(), y.data(), x.size() * sizeof(double)) == 0;
-}
+const auto same_bits = &test::bits_equal;
 
 // The determinism contract: a pass is the same whole or in tiles, threaded or serial, from a
 // fresh renderer (the per-pass state rebuilt) under one thread or all, and twice.
@@ -338,7 +336,9 @@ TEST(IrPpmDeterminism, PassesAreReproducibleAndTileIndependent) {
     // A fresh renderer rebuilds the pass's VPLs / photons, here on one thread.
     Renderer r2(s);
     tbb::task_arena one(1);
-    SampleBuffer c = one.execute([&] { return r2.render(TaskKey{0, Rect{10, 0, 10, 24}, 2}, false); });
+    SampleBuffer c = one.execute([&] {
+      return r2.render(TaskKey{0, Rect{10, 0, 10, 24}, 2}, false);
+    });
     SampleBuffer d = r.render(TaskKey{0, Rect{10, 0, 10, 24}, 2}, true);
     EXPECT_TRUE(same_bits(c.sum, d.sum));
     // And another pass differs (its own light paths and, for ppm, its own radius).
@@ -356,7 +356,8 @@ TEST(IrPpmDeterminism, PassStateIsBuiltOncePerPass) {
     SCOPED_TRACE(name);
     Scene s = cornell(name, 24, 1, 4, 3);
     if (s.render.integrator.type() == "ir") s.render.integrator.as<IrIntegrator>().vpl_paths = 2048;
-    if (s.render.integrator.type() == "ppm") s.render.integrator.as<PpmIntegrator>().photons = 20000;
+    if (s.render.integrator.type() == "ppm")
+      s.render.integrator.as<PpmIntegrator>().photons = 20000;
     auto pass_rays = [&](bool parallel_tiles) {
       Renderer r(s);
       std::vector<Rect> tiles = r.tiles(4);
@@ -454,7 +455,8 @@ TEST(IrPpmSettings, RefuseDirectionalLights) {
       ADD_FAILURE() << name << " accepted a directional light";
     } catch (const SceneError& e) {
       EXPECT_NE(std::string(e.what()).find("cannot start light paths on a directional light"),
-                std::string::npos) << e.what();
+                std::string::npos)
+          << e.what();
     }
   }
 }

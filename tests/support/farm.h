@@ -53,8 +53,8 @@ class Farm {
                      const std::vector<std::string>& extra);
   // A client command against this coordinator (run from the source tree), output 2>&1.
   CommandResult client(const std::string& args) const;
-  std::string submit(const std::string& args) const;  // the job id; expects success
-  nlohmann::json status(const std::string& job) const;
+  std::string submit(const std::string& args) const;    // the job id; expects success
+  nlohmann::json status(const std::string& job) const;  // "": every job (status --json)
   // A local render of the same job and frame, for comparison; returns the EXR's path.
   std::string local(const std::string& args, uint32_t frame) const;
   // Where `fetch JOB -o DIR/out-JOB` puts a frame.

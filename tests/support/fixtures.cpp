@@ -61,11 +61,14 @@ bool within_merge_tolerance(double a, double b) {
   return std::fabs(a - b) <= 1e-6 * std::max(std::fabs(a), std::fabs(b)) + 1e-12;
 }
 
+bool bits_equal(const std::vector<double>& x, const std::vector<double>& y) {
+  // memcmp must not see the null data() of an empty vector (UBSan reports it).
+  return x.size() == y.size() &&
+         (x.empty() || std::memcmp(x.data(), y.data(), sizeof(double) * x.size()) == 0);
+}
+
 void expect_bit_identical(const SampleBuffer& a, const SampleBuffer& b) {
-  auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
-    return x.size() == y.size() &&
-           (x.empty() || std::memcmp(x.data(), y.data(), sizeof(double) * x.size()) == 0);
-  };
+  const auto same = &bits_equal;
   EXPECT_EQ(a.header, b.header);
   EXPECT_EQ(a.rect, b.rect);
   EXPECT_EQ(a.count, b.count);

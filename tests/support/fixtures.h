@@ -38,6 +38,9 @@ SampleBuffer random_pass(uint32_t pass, Rect rect, bool splats, uint64_t seed, i
 // DESIGN.md's merge tolerance, summation order only: |a-b| <= 1e-6 max(|a|,|b|) + 1e-12.
 bool within_merge_tolerance(double a, double b);
 
+// Same length and the same bit patterns (so -0 != +0, and a NaN equals itself).
+bool bits_equal(const std::vector<double>& a, const std::vector<double>& b);
+
 // Every header field, plane and counter equal, planes bit for bit.
 void expect_bit_identical(const SampleBuffer& a, const SampleBuffer& b);
 

@@ -1,0 +1,354 @@
+// soak_load: many simulated workers in one process, each speaking the real worker protocol
+// (Register, LeaseTask, RenewLease, FetchBlob, CompleteTask) over its own connection to a
+// coordinator, for the soak benchmark (bench/soak.sh, docs/reliability.md). Each renders its
+// tasks with the engine, as `rayfarm worker` does, and misbehaves on a fraction of them:
+//
+//   --kill P     drops the task and its connection without a word, then registers again as a new
+//                worker a second later (a worker process killed and restarted);
+//   --stall P    holds the task past its lease without renewing, then uploads the late result;
+//   --corrupt P  uploads a damaged result (a flipped byte in the buffer, or a NaN sample), which
+//                the coordinator must refuse.
+//
+// Runs until --seconds pass or SIGTERM/SIGINT, then prints one JSON line of counters. A corrupt
+// result the coordinator accepted is counted in corrupt_accepted (should stay 0).
+//
+//   soak_load --coordinator HOST:PORT [--workers 200] [--seconds 600] [--kill 0.02]
+//             [--stall 0.01] [--corrupt 0.01] [--cache DIR] [--seed 1]
+#include <grpcpp/grpcpp.h>
+#include <signal.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <future>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "engine/buffer_file.h"
+#include "engine/build_info.h"
+#include "engine/digest.h"
+#include "engine/render.h"
+#include "engine/scene.h"
+#include "farm/blob_store.h"
+#include "farm/chunking.h"
+#include "farm/convert.h"
+#include "proto/rayfarm.grpc.pb.h"
+
+namespace {
+
+namespace pb = rayfarm::v1;
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+std::atomic<bool> g_stop{false};
+
+struct Counters {
+  std::atomic<uint64_t> registrations{0}, leased{0}, merged{0}, not_needed{0}, refused{0},
+      late_refused{0}, upload_errors{0}, lease_errors{0}, kills{0}, stalls{0}, corrupt{0},
+      corrupt_accepted{0}, renewals{0}, renew_failures{0};
+};
+Counters g_count;
+
+struct Options {
+  std::string coordinator;
+  int workers = 200;
+  double seconds = 600, kill = 0.02, stall = 0.01, corrupt = 0.01;
+  std::string cache = "soak-cache";
+  uint32_t seed = 1;
+};
+
+void set_deadline(grpc::ClientContext& ctx, double seconds) {
+  ctx.set_deadline(std::chrono::system_clock::now() +
+                   std::chrono::milliseconds(int64_t(seconds * 1000)));
+  ctx.set_wait_for_ready(true);
+}
+
+// Scenes shared by all simulated workers: fetched, laid out and parsed once per bundle and
+// settings, as one worker process would for its own tasks.
+class Scenes {
+ public:
+  explicit Scenes(const std::string& dir) : dir_(dir), blobs_(dir + "/blobs") {}
+
+  std::shared_ptr<const rf::Renderer> get(const pb::Task& task, pb::WorkerService::Stub& stub) {
+    std::string key = task.scene_digest() + task.overrides().SerializeAsString();
+    std::lock_guard lock(mu_);
+    auto it = cache_.find(key);
+    if (it != cache_.end()) return it->second.renderer;
+    std::vector<rf::BundleEntry> bundle = rf::from_wire(task.files());
+    for (const rf::BundleEntry& e : bundle)
+      if (!blobs_.has(e.sha256)) fetch(stub, e.sha256);
+    std::string dir = dir_ + "/bundles/" + std::to_string(cache_.size());
+    blobs_.materialize(bundle, dir);
+    Entry& e = cache_[key];
+    e.scene = std::make_unique<rf::Scene>(
+        rf::load_scene(dir + "/" + task.scene_path(), rf::to_scene_overrides(task.overrides())));
+    e.renderer = std::make_shared<rf::Renderer>(*e.scene);
+    return e.renderer;
+  }
+
+ private:
+  void fetch(pb::WorkerService::Stub& stub, const std::string& sha256) {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 60);
+    pb::BlobRequest req;
+    req.set_sha256(sha256);
+    auto reader = stub.FetchBlob(&ctx, req);
+    rf::ChunkAssembler assembler(uint64_t(1) << 32);
+    pb::Chunk c;
+    while (reader->Read(&c)) assembler.add(c);
+    grpc::Status s = reader->Finish();
+    if (!s.ok() || assembler.finish() != rf::ChunkAssembler::Status::Ok)
+      throw std::runtime_error("blob " + sha256 + ": " + s.error_message() + assembler.error());
+    blobs_.put(assembler.take(), sha256);
+  }
+
+  struct Entry {
+    std::unique_ptr<rf::Scene> scene;
+    std::shared_ptr<rf::Renderer> renderer;
+  };
+  std::string dir_;
+  rf::BlobStore blobs_;
+  std::mutex mu_;
+  std::map<std::string, Entry> cache_;
+};
+
+class SimulatedWorker {
+ public:
+  SimulatedWorker(const Options& o, Scenes& scenes, int index)
+      : o_(o), scenes_(scenes), index_(index), rng_(o.seed * 7919u + index) {}
+
+  void run() {
+    while (!g_stop) {
+      connect();
+      if (!register_self()) {
+        pause(1);
+        continue;
+      }
+      serve();  // returns when "killed" (or stopping)
+      pause(1);
+    }
+  }
+
+ private:
+  void connect() {
+    grpc::ChannelArguments args;
+    args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // a connection of its own
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
+    channel_ = grpc::CreateCustomChannel(o_.coordinator, grpc::InsecureChannelCredentials(), args);
+    stub_ = pb::WorkerService::NewStub(channel_);
+  }
+
+  bool register_self() {
+    grpc::ClientContext ctx;
+    set_deadline(ctx, 30);
+    pb::RegisterRequest req;
+    req.set_hostname("sim-" + std::to_string(index_));
+    req.set_cores(1);
+    req.set_build_id(rf::build_id());
+    req.set_isa(rf::cpu_isa());
+    pb::RegisterResponse resp;
+    if (!stub_->Register(&ctx, req, &resp).ok()) return false;
+    ++g_count.registrations;
+    worker_id_ = resp.worker_id();
+    lease_seconds_ = resp.lease_seconds();
+    keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
+    return true;
+  }
+
+  void serve() {
+    std::uniform_real_distribution<double> u(0, 1);
+    while (!g_stop) {
+      grpc::ClientContext ctx;
+      set_deadline(ctx, 5);
+      pb::LeaseRequest req;
+      req.set_worker_id(worker_id_);
+      pb::LeaseResponse resp;
+      grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
+      if (s.error_code() == grpc::StatusCode::NOT_FOUND) return;
+      if (!s.ok()) {
+        ++g_count.lease_errors;
+        pause(0.5);
+        continue;
+      }
+      if (!resp.has_task()) {
+        pause(0.5 + u(rng_));
+        continue;
+      }
+      ++g_count.leased;
+      const pb::Task& task = resp.task();
+      double r = u(rng_);
+      if (r < o_.kill) {
+        ++g_count.kills;
+        channel_.reset();  // the connection closes; the lease is left to expire
+        stub_.reset();
+        return;
+      }
+      bool stall = r < o_.kill + o_.stall;
+      bool corrupt = !stall && r < o_.kill + o_.stall + o_.corrupt;
+      if (stall) {
+        ++g_count.stalls;
+        pause(lease_seconds_ + 1);
+      }
+      std::string bytes;
+      try {
+        bytes = render(task, !stall);
+      } catch (const std::exception& e) {
+        spdlog::error("sim-{}: task {}: {}", index_, task.task_id(), e.what());
+        continue;
+      }
+      if (corrupt) {
+        ++g_count.corrupt;
+        damage(bytes);
+      }
+      upload(task, bytes, corrupt, stall);
+    }
+  }
+
+  // Renders the task (renewing its lease meanwhile unless told not to); the encoded buffer.
+  std::string render(const pb::Task& task, bool renew) {
+    std::shared_ptr<const rf::Renderer> renderer = scenes_.get(task, *stub_);
+    rf::Rect rect = rf::from_wire(task.rect());
+    auto done = std::async(std::launch::async, [&] {
+      return renderer->render(rf::TaskKey{task.frame(), rect, task.pass()}, true);
+    });
+    while (done.wait_for(std::chrono::duration<double>(keepalive_seconds_)) !=
+           std::future_status::ready) {
+      if (!renew) continue;
+      grpc::ClientContext ctx;
+      set_deadline(ctx, 10);
+      pb::RenewRequest req;
+      req.set_worker_id(worker_id_);
+      req.set_lease_id(task.lease_id());
+      pb::RenewResponse resp;
+      (stub_->RenewLease(&ctx, req, &resp).ok() ? g_count.renewals : g_count.renew_failures)++;
+    }
+    return rf::encode_buffer(done.get());
+  }
+
+  // A flipped byte past the header, or (every other time) a NaN sample sum.
+  void damage(std::string& bytes) {
+    if (rng_() % 2 == 0) {
+      size_t at = bytes.size() / 2 + rng_() % (bytes.size() / 2);
+      bytes[at] = char(bytes[at] ^ (1 << (rng_() % 8)));
+    } else {
+      rf::SampleBuffer b = rf::decode_buffer(bytes, "result");
+      b.sum[rng_() % b.sum.size()] = std::nan("");
+      bytes = rf::encode_buffer(b);
+    }
+  }
+
+  void upload(const pb::Task& task, const std::string& bytes, bool corrupt, bool late) {
+    for (int attempt = 0; attempt < 5 && !g_stop; ++attempt) {
+      grpc::ClientContext ctx;
+      set_deadline(ctx, 60);
+      pb::CompleteResponse resp;
+      auto w = stub_->CompleteTask(&ctx, &resp);
+      pb::CompleteRequest head;
+      head.mutable_header()->set_worker_id(worker_id_);
+      head.mutable_header()->set_lease_id(task.lease_id());
+      head.mutable_header()->set_task_id(task.task_id());
+      head.mutable_header()->set_core_seconds(0.01);
+      bool ok = w->Write(head);
+      rf::for_each_chunk(bytes, [&](pb::Chunk&& c) {
+        if (!ok) return;
+        pb::CompleteRequest m;
+        *m.mutable_chunk() = std::move(c);
+        ok = w->Write(m);
+      });
+      if (ok) w->WritesDone();
+      grpc::Status s = w->Finish();
+      if (s.ok()) {
+        if (corrupt && resp.accepted()) ++g_count.corrupt_accepted;
+        (resp.accepted() ? g_count.merged : g_count.not_needed)++;
+        return;
+      }
+      switch (s.error_code()) {
+        case grpc::StatusCode::INVALID_ARGUMENT:
+        case grpc::StatusCode::DATA_LOSS:
+          ++g_count.refused;
+          if (!corrupt)
+            spdlog::error("sim-{}: task {}: a sound result refused: {}", index_, task.task_id(),
+                          s.error_message());
+          return;
+        case grpc::StatusCode::FAILED_PRECONDITION:
+        case grpc::StatusCode::NOT_FOUND:
+        case grpc::StatusCode::PERMISSION_DENIED:  // barred from the job after its refusals
+          (late ? g_count.late_refused : g_count.refused)++;
+          return;
+        default:
+          ++g_count.upload_errors;
+          pause(0.5);
+      }
+    }
+  }
+
+  void pause(double seconds) {
+    auto end = Clock::now() + std::chrono::duration<double>(seconds);
+    while (!g_stop && Clock::now() < end)
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+
+  const Options& o_;
+  Scenes& scenes_;
+  int index_;
+  std::mt19937 rng_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<pb::WorkerService::Stub> stub_;
+  std::string worker_id_;
+  uint32_t lease_seconds_ = 30;
+  double keepalive_seconds_ = 10;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  CLI::App app{"Simulated workers for the soak benchmark (bench/soak.sh)"};
+  app.add_option("--coordinator", o.coordinator, "HOST:PORT")->required();
+  app.add_option("--workers", o.workers)->check(CLI::Range(1, 100000));
+  app.add_option("--seconds", o.seconds)->check(CLI::Range(1.0, 1e6));
+  app.add_option("--kill", o.kill)->check(CLI::Range(0.0, 1.0));
+  app.add_option("--stall", o.stall)->check(CLI::Range(0.0, 1.0));
+  app.add_option("--corrupt", o.corrupt)->check(CLI::Range(0.0, 1.0));
+  app.add_option("--cache", o.cache, "directory for fetched bundles");
+  app.add_option("--seed", o.seed);
+  CLI11_PARSE(app, argc, argv);
+
+  signal(SIGTERM, [](int) { g_stop = true; });
+  signal(SIGINT, [](int) { g_stop = true; });
+  fs::remove_all(o.cache);
+  fs::create_directories(o.cache);
+  Scenes scenes(o.cache);
+  std::vector<std::thread> threads;
+  auto t0 = Clock::now();
+  for (int i = 0; i < o.workers; ++i)
+    threads.emplace_back([&, i] { SimulatedWorker(o, scenes, i).run(); });
+  while (!g_stop && std::chrono::duration<double>(Clock::now() - t0).count() < o.seconds)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  g_stop = true;
+  for (std::thread& t : threads) t.join();
+  const Counters& c = g_count;
+  std::printf(
+      "{\"seconds\": %.1f, \"workers\": %d, \"registrations\": %llu, \"leased\": %llu, "
+      "\"merged\": %llu, \"not_needed\": %llu, \"refused\": %llu, \"late_refused\": %llu, "
+      "\"upload_errors\": %llu, \"lease_errors\": %llu, \"kills\": %llu, \"stalls\": %llu, "
+      "\"corrupt\": %llu, \"corrupt_accepted\": %llu, \"renewals\": %llu, "
+      "\"renew_failures\": %llu}\n",
+      std::chrono::duration<double>(Clock::now() - t0).count(), o.workers,
+      (unsigned long long)c.registrations, (unsigned long long)c.leased,
+      (unsigned long long)c.merged, (unsigned long long)c.not_needed, (unsigned long long)c.refused,
+      (unsigned long long)c.late_refused, (unsigned long long)c.upload_errors,
+      (unsigned long long)c.lease_errors, (unsigned long long)c.kills, (unsigned long long)c.stalls,
+      (unsigned long long)c.corrupt, (unsigned long long)c.corrupt_accepted,
+      (unsigned long long)c.renewals, (unsigned long long)c.renew_failures);
+  return c.corrupt_accepted == 0 ? 0 : 1;
+}
