@@ -10,14 +10,14 @@
 #   - no corrupt result accepted.
 # Prints a summary table; exit 1 if a check fails.
 #
-#   bench/soak.sh [--workers 200] [--jobs 20] [--passes 96] [--minutes 10]
+#   bench/soak.sh [--workers 200] [--jobs 20] [--passes 180] [--minutes 10]
 #
-# --passes sizes the jobs (each job: 2 frames of 64x64 in 16x16 tiles, 4 spp per pass): 96 passes
+# --passes sizes the jobs (each job: 2 frames of 64x64 in 16x16 tiles, 4 spp per pass): 180 passes
 # make the default run last about ten minutes on a 2-core machine. The run stops after --minutes
 # plus five whether or not the jobs finished (a stall is a failure, not a hang).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-WORKERS=200 JOBS=20 PASSES=96 MINUTES=10
+WORKERS=200 JOBS=20 PASSES=180 MINUTES=10
 while [ $# -gt 0 ]; do
   case "$1" in
     --workers) WORKERS=$2; shift 2 ;;

@@ -22,11 +22,6 @@
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"
 
-#if defined(__SANITIZE_ADDRESS__)
-// OpenImageIO 2.4's TextureSystem::destroy deletes through a mismatched type (tests/texture_test).
-extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
-#endif
-
 namespace rf {
 namespace {
 

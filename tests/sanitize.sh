@@ -26,9 +26,6 @@ SLOW='^(Bdpt|HarnessCornell|HarnessCornellDepth|LightBvh|DirectIntegrator|Progre
 SLOW+='FilterTest|BsdfEnergy|BsdfSampling|RoughConductor|RelMse|CornellBox|InstantRadiosity|'
 SLOW+='Furnace|WhiteFurnace|SamplerTest|LightSampling|Integrators|PathTracer)\.|'
 SLOW+='Agree|Converge|MatchesTheReference|ImageMeansMatch'
-# And the one test that bounds a process's resident memory, which ASan's shadow memory and
-# quarantine inflate (its unsanitized run is in ./rayfarm test).
-SLOW+='|Security.AHugeJobAdmittedByRaisedLimitsIsHeldInBoundedMemory'
 
 # clang and libFuzzer from Debian (the bootstrap of ./rayfarm installed everything else).
 PACKAGES=(clang libfuzzer-14-dev)

@@ -400,6 +400,7 @@ TEST(Security, AHugeJobIsRefusedNamingItsLimitAndStatusPages) {
 // Merging results of such a frame would still need its accumulator, 104 bytes a pixel per
 // pass in flight: pixels_per_frame is the limit that bounds that, and is not raised lightly.
 TEST(Security, AHugeJobAdmittedByRaisedLimitsIsHeldInBoundedMemory) {
+  if (test::kAddressSanitizer) GTEST_SKIP() << "RSS is meaningless under AddressSanitizer";
   Farm farm("security-huge", 30, "",
             {"--limit", "pixels_per_frame=268435456", "--limit", "tiles_per_frame=4194304",
              "--limit", "tasks_per_job=20000000"});

@@ -24,14 +24,7 @@
 #include "engine/sampler.h"
 #include "tests/support/test_support.h"
 
-#if defined(__SANITIZE_ADDRESS__)
-// OpenImageIO 2.4's TextureSystem::destroy deletes its object through a mismatched type, which
-// AddressSanitizer reports in the library; the rest stays checked.
-extern "C" const char* __asan_default_options() { return "new_delete_type_mismatch=0"; }
-constexpr bool kAddressSanitizer = true;
-#else
-constexpr bool kAddressSanitizer = false;
-#endif
+using rf::test::kAddressSanitizer;
 
 namespace rf {
 namespace {

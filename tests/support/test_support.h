@@ -4,7 +4,24 @@
 
 #include <string>
 
+// Built with AddressSanitizer (gcc defines __SANITIZE_ADDRESS__, clang has the feature): tests
+// that bound a process's resident memory skip, since ASan's shadow memory and quarantine inflate
+// it. test_support.cpp then also sets ASan's defaults for every test binary.
+#if defined(__SANITIZE_ADDRESS__)
+#define RAYFARM_TEST_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define RAYFARM_TEST_ASAN 1
+#endif
+#endif
+
 namespace rf::test {
+
+#ifdef RAYFARM_TEST_ASAN
+inline constexpr bool kAddressSanitizer = true;
+#else
+inline constexpr bool kAddressSanitizer = false;
+#endif
 
 std::string source_dir();                  // the repository root
 std::string rayfarm_binary();              // the built CLI
