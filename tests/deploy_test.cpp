@@ -1,0 +1,84 @@
+// The deployment recipes in deploy/ run for real where they can without a cluster: the Slurm
+// coordinator-less mode, with plain processes standing in for the array tasks (Slurm sets
+// SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT; here the test does), then the afterok merge.
+// The merged frame must equal one local render of all the passes (DESIGN.md's determinism
+// contract). (deploy/check.sh checks the manifests and scripts statically.)
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "engine/buffer_file.h"
+#include "engine/digest.h"
+#include "tests/support/farm.h"
+#include "tests/support/test_support.h"
+
+namespace rf {
+namespace {
+
+const std::string kScene = "scenes/cornell-box/scene.json";
+const std::string kFlags = " --res 32x32 --spp 40 --passes 10 --max-depth 6";
+
+// One script of deploy/slurm run as Slurm would run it, with these environment assignments.
+test::CommandResult sbatch_script(const std::string& env, const std::string& script,
+                                  const std::string& args) {
+  return test::run_command("cd " + test::source_dir() +
+                           " && env RAYFARM=" + test::rayfarm_binary() + " " + env +
+                           " bash deploy/slurm/" + script + " " + args);
+}
+
+// 12 array tasks for 10 passes (two tasks get none), then the merge: the frame equals the local
+// render, and its buffer holds every pass once. A leftover part of another render in the parts
+// directory makes the merge fail, naming it, instead of blending it in.
+TEST(DeploySlurm, CoordinatorLessArrayTasksMergeToOneLocalRender) {
+  std::string dir = test::make_temp_dir("deploy-slurm");
+  const int tasks = 12;
+  for (int t = 0; t < tasks; ++t) {
+    test::CommandResult r = sbatch_script(
+        "SLURM_ARRAY_TASK_ID=" + std::to_string(t) +
+            " SLURM_ARRAY_TASK_COUNT=" + std::to_string(tasks) + " SLURM_CPUS_PER_TASK=1",
+        "render-array.sbatch", kScene + " " + dir + "/out" + kFlags);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  size_t parts = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir + "/out/parts")) {
+    EXPECT_EQ(e.path().extension(), ".rfb") << e.path();
+    ++parts;
+  }
+  EXPECT_EQ(parts, 10u) << "one part per task with passes";
+  test::CommandResult m = sbatch_script("", "merge.sbatch", dir + "/out " + dir + "/out/frame.exr");
+  ASSERT_EQ(m.exit_code, 0) << m.output;
+  test::CommandResult local =
+      test::run_command("cd " + test::source_dir() + " && " + test::rayfarm_binary() + " render " +
+                        kScene + kFlags + " -q -o " + dir + "/local.exr");
+  ASSERT_EQ(local.exit_code, 0) << local.output;
+  test::expect_same_image(dir + "/out/frame.exr", dir + "/local.exr");
+  SampleBuffer merged = decode_buffer(read_file_bytes(dir + "/out/frame.rfb"), "frame.rfb");
+  EXPECT_EQ(merged.header.passes.count(), 10u);
+  for (uint64_t c : merged.count) ASSERT_EQ(c, 40u) << "every pixel has every pass's samples once";
+
+  // The script sets the pass range and the output itself, and needs the passes to split.
+  test::CommandResult own =
+      sbatch_script("SLURM_ARRAY_TASK_ID=0 SLURM_ARRAY_TASK_COUNT=2", "render-array.sbatch",
+                    kScene + " " + dir + "/x" + kFlags + " --pass-range 0-1");
+  EXPECT_EQ(own.exit_code, 2) << own.output;
+  test::CommandResult no_passes =
+      sbatch_script("SLURM_ARRAY_TASK_ID=0 SLURM_ARRAY_TASK_COUNT=2", "render-array.sbatch",
+                    kScene + " " + dir + "/x --res 32x32 --spp 40");
+  EXPECT_EQ(no_passes.exit_code, 2) << no_passes.output;
+  EXPECT_NE(no_passes.output.find("--passes"), std::string::npos) << no_passes.output;
+
+  // A part of another render (another seed) left in the directory: refused, not merged.
+  test::CommandResult stray =
+      sbatch_script("SLURM_ARRAY_TASK_ID=0 SLURM_ARRAY_TASK_COUNT=1", "render-array.sbatch",
+                    kScene + " " + dir + "/stray" + kFlags + " --seed 99");
+  ASSERT_EQ(stray.exit_code, 0) << stray.output;
+  std::filesystem::copy_file(dir + "/stray/parts/0.rfb", dir + "/out/parts/old.rfb");
+  test::CommandResult bad =
+      sbatch_script("", "merge.sbatch", dir + "/out " + dir + "/out/frame2.exr");
+  EXPECT_NE(bad.exit_code, 0) << bad.output;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out/frame2.exr"));
+}
+
+}  // namespace
+}  // namespace rf
