@@ -7,22 +7,10 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 log() { printf 'deploy-check: %s\n' "$*" >&2; }
 
-PACKAGES=(shellcheck)
-missing=()
-for p in "${PACKAGES[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  log "installing Debian packages: ${missing[*]}"
-  sudo=()
-  [ "$(id -u)" -ne 0 ] && sudo=(sudo)
-  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq >&2
-  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-    "${missing[@]}" >&2
-fi
+"$ROOT/tools/install-debian-packages.sh" shellcheck
 
 status=0
-for f in "$ROOT"/deploy/slurm/*.sbatch "$ROOT"/deploy/check.sh; do
+for f in "$ROOT"/deploy/slurm/*.sbatch "$ROOT"/deploy/check.sh "$ROOT"/tools/*.sh; do
   bash -n "$f" || { log "$f does not parse"; status=1; }
   shellcheck "$f" || { log "$f: shellcheck findings above"; status=1; }
 done

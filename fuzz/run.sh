@@ -22,19 +22,7 @@ declare -A RUNS=([fuzz_scene_json]=9000 [fuzz_scene_pbrt]=12000 [fuzz_scene_xml]
                  [fuzz_frame_range]=5000 [fuzz_coordinator]=400)
 log() { printf 'fuzz: %s\n' "$*" >&2; }
 
-PACKAGES=(clang libfuzzer-14-dev)
-missing=()
-for p in "${PACKAGES[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  log "installing Debian packages: ${missing[*]}"
-  sudo=()
-  [ "$(id -u)" -ne 0 ] && sudo=(sudo)
-  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq >&2
-  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-    "${missing[@]}" >&2
-fi
+"$ROOT/tools/install-debian-packages.sh" clang libfuzzer-14-dev
 
 start=$(date +%s)
 "$ROOT/tests/sanitize_configure.sh" "$BUILD"
