@@ -252,19 +252,12 @@ class SimulatedWorker {
       set_deadline(ctx, 60);
       pb::CompleteResponse resp;
       auto w = stub_->CompleteTask(&ctx, &resp);
-      pb::CompleteRequest head;
-      head.mutable_header()->set_worker_id(worker_id_);
-      head.mutable_header()->set_lease_id(task.lease_id());
-      head.mutable_header()->set_task_id(task.task_id());
-      head.mutable_header()->set_core_seconds(0.01);
-      bool ok = w->Write(head);
-      rf::for_each_chunk(bytes, [&](pb::Chunk&& c) {
-        if (!ok) return;
-        pb::CompleteRequest m;
-        *m.mutable_chunk() = std::move(c);
-        ok = w->Write(m);
-      });
-      if (ok) w->WritesDone();
+      pb::CompleteHeader h;
+      h.set_worker_id(worker_id_);
+      h.set_lease_id(task.lease_id());
+      h.set_task_id(task.task_id());
+      h.set_core_seconds(0.01);
+      rf::write_result(*w, h, bytes);
       grpc::Status s = w->Finish();
       if (s.ok()) {
         if (corrupt && resp.accepted()) ++g_count.corrupt_accepted;

@@ -1,5 +1,7 @@
 #include "farm/chunking.h"
 
+#include <grpcpp/support/sync_stream.h>
+
 #include "engine/digest.h"
 
 namespace rf {
@@ -54,6 +56,21 @@ ChunkAssembler::Status ChunkAssembler::finish() {
                                              " of " + std::to_string(total_) + " bytes");
   if (sha256_hex(data_) != sha256_) return fail(Status::DataLoss, "checksum mismatch");
   return Status::Ok;
+}
+
+bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& stream,
+                  const rayfarm::v1::CompleteHeader& header, std::string_view payload) {
+  rayfarm::v1::CompleteRequest head;
+  *head.mutable_header() = header;
+  bool ok = stream.Write(head);
+  for_each_chunk(payload, [&](rayfarm::v1::Chunk&& c) {
+    if (!ok) return;
+    rayfarm::v1::CompleteRequest m;
+    *m.mutable_chunk() = std::move(c);
+    ok = stream.Write(m);
+  });
+  if (ok) ok = stream.WritesDone();
+  return ok;
 }
 
 }  // namespace rf

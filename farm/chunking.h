@@ -10,6 +10,11 @@
 
 #include "proto/rayfarm.pb.h"
 
+namespace grpc {
+template <class W>
+class ClientWriterInterface;
+}
+
 namespace rf {
 
 inline constexpr size_t kChunkBytes = 1 << 20;
@@ -17,6 +22,11 @@ inline constexpr size_t kChunkBytes = 1 << 20;
 // Calls emit for each chunk of payload, in order (at least one chunk, even when empty).
 void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::v1::Chunk&&)>& emit,
                     size_t chunk_bytes = kChunkBytes);
+
+// A CompleteTask upload's messages: the header, then `payload` in chunks, then WritesDone. False
+// when a write failed (the stream is broken; Finish() says why).
+bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& stream,
+                  const rayfarm::v1::CompleteHeader& header, std::string_view payload);
 
 // Reassembles chunks. Each problem maps to the gRPC status the receiver answers with.
 class ChunkAssembler {

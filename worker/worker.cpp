@@ -341,20 +341,12 @@ void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double cor
     set_deadline(ctx, 600, kWaitForReady);
     pb::CompleteResponse resp;
     auto w = stub_->CompleteTask(&ctx, &resp);
-    pb::CompleteRequest head;
-    pb::CompleteHeader* h = head.mutable_header();
-    h->set_worker_id(worker_id_);
-    h->set_lease_id(task.lease_id());
-    h->set_task_id(task.task_id());
-    h->set_core_seconds(core_seconds);
-    bool ok = w->Write(head);
-    for_each_chunk(bytes, [&](pb::Chunk&& c) {
-      if (!ok) return;
-      pb::CompleteRequest m;
-      *m.mutable_chunk() = std::move(c);
-      ok = w->Write(m);
-    });
-    if (ok) w->WritesDone();
+    pb::CompleteHeader h;
+    h.set_worker_id(worker_id_);
+    h.set_lease_id(task.lease_id());
+    h.set_task_id(task.task_id());
+    h.set_core_seconds(core_seconds);
+    write_result(*w, h, bytes);
     grpc::Status s = w->Finish();
     if (s.ok()) {
       heard_from_coordinator();
