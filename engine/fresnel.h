@@ -10,7 +10,6 @@
 #pragma once
 
 #include <cmath>
-#include <complex>
 
 #include "engine/math.h"
 
@@ -32,19 +31,29 @@ inline float fresnel_dielectric(float cos_theta_i, float eta) {
 }
 
 // Conductor Fresnel reflectance for the complex IOR eta + i k (light arrives from the
-// dielectric outside; cos_theta_i is clamped to [0, 1]). |a/b|^2 is computed as |a|^2 / |b|^2,
-// so no complex division is needed.
+// dielectric outside; cos_theta_i is clamped to [0, 1]), in real arithmetic: with
+// n^2 - sin^2(theta_i) = (a + i b)^2, s = a^2 + b^2 = |eta^2 - k^2 - sin^2 + 2 i eta k| and
+// a^2 = (s + t0) / 2 (Born and Wolf, "Principles of Optics", 14.2), the two reflectances are
+//   R_perp = (s + cos^2 - 2 a cos) / (s + cos^2 + 2 a cos),
+//   R_parl = R_perp (cos^2 s + sin^4 - 2 a cos sin^2) / (cos^2 s + sin^4 + 2 a cos sin^2).
+// It equals |r|^2 of the complex Fresnel equations (tests/bsdf_test.cpp checks it against them
+// in double precision) without complex square roots and divisions.
 inline float fresnel_complex(float cos_theta_i, float eta, float k) {
-  using C = std::complex<float>;
-  cos_theta_i = std::clamp(cos_theta_i, 0.0f, 1.0f);
-  C n(eta, k);
-  C n2 = n * n;
-  float sin2_i = 1 - cos_theta_i * cos_theta_i;
-  C sin2_t = sin2_i * std::conj(n2) / std::norm(n2);  // sin^2(theta_t) = sin^2(theta_i) / n^2
-  C cos_t = std::sqrt(C(1.0f) - sin2_t);
-  float parl = std::norm(n * cos_theta_i - cos_t) / std::norm(n * cos_theta_i + cos_t);
-  float perp = std::norm(C(cos_theta_i) - n * cos_t) / std::norm(C(cos_theta_i) + n * cos_t);
-  return 0.5f * (parl + perp);
+  float c = std::clamp(cos_theta_i, 0.0f, 1.0f);
+  float c2 = c * c, sin2 = 1 - c2;
+  float eta2 = eta * eta, k2 = k * k;
+  float t0 = eta2 - k2 - sin2;
+  float s = std::sqrt(t0 * t0 + 4 * eta2 * k2);
+  // a^2 = (s + t0) / 2 cancels when t0 < 0 (k > eta, as for silver); (s + t0)(s - t0) = 4 eta^2
+  // k^2 gives the same value without the cancellation.
+  float a2 = t0 >= 0 ? 0.5f * (s + t0) : (s - t0 > 0 ? 2 * eta2 * k2 / (s - t0) : 0.0f);
+  float two_a_c = 2 * std::sqrt(a2) * c;
+  float t1 = s + c2;
+  if (!(t1 + two_a_c > 0)) return 1.0f;  // grazing light on a vacuum-like interface
+  float r_perp = (t1 - two_a_c) / (t1 + two_a_c);
+  float t3 = c2 * s + sin2 * sin2, t4 = two_a_c * sin2;
+  float r_parl = t3 + t4 > 0 ? r_perp * (t3 - t4) / (t3 + t4) : r_perp;
+  return 0.5f * (r_parl + r_perp);
 }
 
 inline RGB fresnel_complex(float cos_theta_i, RGB eta, RGB k) {

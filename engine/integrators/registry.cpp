@@ -107,7 +107,8 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // BASE bump that changes images, so that a buffer of an older build never merges with a newer one
 // (a farm mid-upgrade, a partial .rfb kept from last week). 2: exact spheres, cone-sampled sphere
 // lights, two-step light selection (issue 12). 3: the light BVH; "auto" uses it with many lights.
-constexpr int kEstimatorVersion = 3;
+// 4: the conductor Fresnel term in real arithmetic (the same function, rounded differently).
+constexpr int kEstimatorVersion = 4;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
