@@ -147,8 +147,9 @@ void LightSet::build_bvh(const std::string& mode) {
       } else {  // spot: normals within the full-strength cone, light up to the cone's edge
         b.w = q.direction;
         b.cos_theta_o = q.cos_falloff_start;
-        b.cos_theta_e = std::cos(std::max(0.0f, std::acos(std::clamp(q.cos_falloff_end, -1.0f, 1.0f)) -
-                                                    std::acos(std::clamp(q.cos_falloff_start, -1.0f, 1.0f))));
+        b.cos_theta_e =
+            std::cos(std::max(0.0f, std::acos(std::clamp(q.cos_falloff_end, -1.0f, 1.0f)) -
+                                        std::acos(std::clamp(q.cos_falloff_start, -1.0f, 1.0f))));
       }
     } else {
       continue;  // the environment
@@ -398,7 +399,8 @@ Vec3 sample_uniform_cone(Vec2 u, float cos_max) {
 }
 }  // namespace
 
-bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es) const {
+bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es,
+                               bool infinite_lights) const {
   size_t i = select(u_select, u_pos.x);
   if (i == kNoLight) return false;
   es = EmissionSample{};
@@ -436,7 +438,14 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
     es.prim = tri.prim;
   } else if (i < tris_.size() + punctual_.size()) {
     const Punctual& l = punctual_[i - tris_.size()];
-    if (l.type == LightType::Directional) return false;
+    if (l.type == LightType::Directional) {
+      if (!infinite_lights) return false;
+      // The irradiance E crosses the disk: flux E pi R^2, a delta in direction.
+      start_on_disk(l.direction, u_pos, pmf, es);
+      es.pdf_dir = 1.0f;
+      es.beta = l.intensity / es.pdf_pos;
+      return !is_black(es.beta) && is_finite(es.beta);
+    }
     es.p = l.position;
     es.n = l.direction;
     float pdf_dir;
@@ -444,20 +453,39 @@ bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionS
       es.dir = sample_uniform_sphere(u_dir);
       pdf_dir = 1.0f / (4 * kPi);
     } else {
-      es.dir = Frame::from_normal(l.direction)
-                   .to_world(sample_uniform_cone(u_dir, l.cos_falloff_end));
+      es.dir =
+          Frame::from_normal(l.direction).to_world(sample_uniform_cone(u_dir, l.cos_falloff_end));
       pdf_dir = 1.0f / (2 * kPi * (1.0f - l.cos_falloff_end));
     }
-    float falloff = l.type == LightType::Spot
-                        ? smooth_step(dot(l.direction, es.dir), l.cos_falloff_end, l.cos_falloff_start)
-                        : 1.0f;
+    float falloff = l.type == LightType::Spot ? smooth_step(dot(l.direction, es.dir),
+                                                            l.cos_falloff_end, l.cos_falloff_start)
+                                              : 1.0f;
     es.pdf_pos = pmf;  // a probability mass: the point is fixed
     es.pdf_dir = pdf_dir;
     es.beta = l.intensity * (falloff / (pmf * pdf_dir));
   } else {
-    return false;  // the environment: no finite emission position
+    if (!infinite_lights) return false;
+    Vec3 wi;  // towards the environment; the light travels along -wi
+    RGB le;
+    float pdf_dir;
+    if (!env_->sample(u_dir, wi, le, pdf_dir) || !(pdf_dir > 0)) return false;
+    start_on_disk(-wi, u_pos, pmf, es);
+    es.pdf_dir = pdf_dir;
+    es.radiance = le;
+    es.beta = le / (es.pdf_pos * pdf_dir);  // the disk faces the beam: cos = 1
   }
   return !is_black(es.beta) && is_finite(es.beta);
+}
+
+void LightSet::start_on_disk(Vec3 dir, Vec2 u, float pmf, EmissionSample& es) const {
+  Vec2 d = sample_concentric_disk(u);
+  Frame f = Frame::from_normal(dir);
+  es.p = center_ + radius_ * (f.to_world({d.x, d.y, 0.0f}) - dir);
+  es.p_error = Vec3(0.0f);
+  es.n = dir;
+  es.dir = dir;
+  es.pdf_pos = pmf / (kPi * radius_ * radius_);
+  es.is_infinite = true;
 }
 
 uint32_t LightSet::area_light_index(uint32_t mesh, uint32_t prim) const {

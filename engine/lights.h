@@ -69,15 +69,16 @@ enum class LightKind : uint8_t { Area, Point, Spot, Directional, Environment };
 
 // A light path's first vertex (light tracing): a point on a light and a direction leaving it.
 struct EmissionSample {
-  Vec3 p, p_error, n;     // point, its error bound, unit normal (area lights; the axis otherwise)
-  Vec3 dir;               // unit direction the light travels
-  RGB beta;               // Le cos / (pdf_select pdf_pos pdf_dir): the path's initial throughput
-  RGB radiance;           // Le(p, dir) for area lights (the vertex's own emission towards dir)
-  float pdf_pos = 0;      // area density of p, including the selection probability
-  float pdf_dir = 0;      // solid-angle density of dir leaving p
-  bool is_area = false;   // p lies on a surface (can be seen by the camera)
+  Vec3 p, p_error, n;    // point, its error bound, unit normal (area lights; the axis otherwise)
+  Vec3 dir;              // unit direction the light travels
+  RGB beta;              // Le cos / (pdf_select pdf_pos pdf_dir): the path's initial throughput
+  RGB radiance;          // Le(p, dir) for area lights (the vertex's own emission towards dir)
+  float pdf_pos = 0;     // area density of p, including the selection probability
+  float pdf_dir = 0;     // solid-angle density of dir leaving p
+  bool is_area = false;  // p lies on a surface (can be seen by the camera)
+  bool is_infinite = false;  // directional, environment: p is on a disk outside the scene
   uint32_t mesh = 0, prim = 0;
-  uint32_t light = 0;     // which light (the numbering above)
+  uint32_t light = 0;  // which light (the numbering above)
 };
 
 class LightSet {
@@ -112,10 +113,17 @@ class LightSet {
   size_t delta_light_count() const { return punctual_.size(); }
   // Samples the start of a light path: a light by power, a point on it, a direction (area:
   // cosine-weighted about the emitting side, both sides for two-sided; point: uniform sphere;
-  // spot: uniform in its cone). Directional and environment lights have no finite emission
-  // position and are not sampled (light tracing refuses such scenes). False when the picked light
-  // cannot emit.
-  bool sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es) const;
+  // spot: uniform in its cone). False when the picked light cannot emit.
+  // Directional and environment lights have no emission position of their own. With
+  // `infinite_lights` they start as pbrt-v4 starts them: a direction (the light's; the
+  // environment's by its importance map, pdf_dir its solid-angle density), and a point uniform
+  // on the disk of the scene's bounding radius R perpendicular to it, R outside the bounding
+  // sphere on the light's side (pdf_pos 1 / (pi R^2) times the selection probability): every
+  // ray of that parallel beam that can reach the scene starts on the disk, so the beam carries
+  // the light's whole flux into it. Without it (BDPT, whose MIS weights give such lights only
+  // the camera-side strategies) a pick of one is false.
+  bool sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es,
+                       bool infinite_lights = false) const;
   // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from (p, n), as
   // sample() would, including selection; 0 when that triangle is not a light.
   float pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Vec3 on_light,
@@ -128,7 +136,8 @@ class LightSet {
   // n for area lights) leaving in unit direction dir (BDPT's MIS weights): pdf_pos the area
   // density of the point including selection (point and spot lights: the selection
   // probability), pdf_dir the solid-angle density of dir (0 outside a spot's cone or behind a
-  // one-sided emitter). Both 0 for directional and environment lights, which never start paths.
+  // one-sided emitter). Both 0 for directional and environment lights, on which BDPT (the only
+  // caller) never starts paths.
   void pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos, float& pdf_dir) const;
   // Probability of selecting each light by power (sums to 1 over size() lights): sample_by_power,
   // sample_emission, and sample() without the BVH.
@@ -177,6 +186,9 @@ class LightSet {
   };
   bool sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const;
   bool sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const;
+  // A light path of an infinite light travelling along unit `dir`: its start on the disk
+  // (sample_emission), with pdf_pos including the selection probability pmf.
+  void start_on_disk(Vec3 dir, Vec2 u, float pmf, EmissionSample& es) const;
 
   const Scene& scene_;
   Vec3 center_{0.0f};

@@ -441,25 +441,5 @@ TEST(IrPpmSettings, BuffersOfTheEstimatorBeforeIssue12AreRefused) {
   EXPECT_EQ(merge_incompatibility(now, r.header(0, PassSet::range(1, 2))), "");
 }
 
-// Environment and directional lights cannot start light paths: refused with a SceneError that
-// names the scene, not rendered with their indirect light silently missing. The Renderer
-// refuses it when it is built, before any task runs (a farm refuses such a job at submit).
-TEST(IrPpmSettings, RefuseDirectionalLights) {
-  for (const char* name : {"ir", "ppm"}) {
-    Scene s = cornell(name, 8, 1, 1, 1);
-    Light sun;
-    sun.type = LightType::Directional;
-    s.lights.push_back(sun);
-    try {
-      Renderer r(s);
-      ADD_FAILURE() << name << " accepted a directional light";
-    } catch (const SceneError& e) {
-      EXPECT_NE(std::string(e.what()).find("cannot start light paths on a directional light"),
-                std::string::npos)
-          << e.what();
-    }
-  }
-}
-
 }  // namespace
 }  // namespace rf

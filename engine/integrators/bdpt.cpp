@@ -274,7 +274,8 @@ struct Tracer {
       float u_select = sampler.get_1d();
       Vec2 u_point = sampler.get_2d();
       LightSample ls;
-      if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_select, u_point, ls)) return RGB(0.0f);
+      if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_select, u_point, ls))
+        return RGB(0.0f);
       sampled.kind = VertexKind::Light;
       sampled.light = ls.light;
       sampled.infinite = ls.is_infinite;
@@ -338,7 +339,7 @@ RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, Spla
   // Light subpath: a point on a light, then up to max_depth surface vertices.
   size_t n_light = 0;
   EmissionSample es;
-  if (sample_light_path_start(ctx, sampler, es)) {
+  if (sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/false)) {
     Vertex& y0 = light[0];
     y0 = Vertex{};
     y0.kind = VertexKind::Light;

@@ -21,8 +21,9 @@
 // at a time. Delta BSDF vertices (mirror, glass, a smooth plastic coat's sampled lobe) have pdfs
 // 0: strategies that would connect at them are skipped in the sum and never evaluated. Delta
 // lights (point, spot, directional) cannot be hit: s = 0 does not exist for them.
-// Lights at infinity (environment, directional) cannot start light subpaths here
-// (LightSet::sample_emission refuses them), so their paths have only the s = 0 (environment
+// Lights at infinity (environment, directional) start no light subpaths here (light, ir and ppm
+// start theirs on a disk outside the scene; BDPT asks sample_emission without, so a pick of one
+// gives an empty light subpath), so their paths have only the s = 0 (environment
 // only) and s = 1 strategies; the MIS sums treat s >= 2 as impossible for such paths, so the
 // weights of the strategies that exist still sum to 1 (for the environment this is exactly the
 // path tracer's light/BSDF MIS).

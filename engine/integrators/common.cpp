@@ -30,6 +30,14 @@ Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width) 
   return Bsdf::make(material_params_at(ctx, hit, cone_width), hit.ns, hit.ng);
 }
 
+void add_escaped(const RenderContext& ctx, Vec3 dir, bool prev_delta, float prev_bsdf_pdf, RGB beta,
+                 RGB& radiance) {
+  if (!ctx.lights.has_environment()) return;
+  RGB le = ctx.lights.environment_radiance(dir);
+  float w = prev_delta ? 1.0f : power_heuristic(prev_bsdf_pdf, ctx.lights.pdf_environment(dir));
+  radiance += beta * le * w;
+}
+
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
   if (ls.is_infinite) {
     Ray r = ctx.accel.spawn(hit, ls.wi);
@@ -50,15 +58,4 @@ RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf
   float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
   return f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
 }
-
-void require_finite_emitters(const Scene& scene, const char* integrator) {
-  bool directional = false;
-  for (const Light& l : scene.lights) directional |= l.type == LightType::Directional;
-  if (scene.environment || directional)
-    throw SceneError(scene.path + ": integrator '" + integrator +
-                     "' cannot start light paths on " +
-                     std::string(scene.environment ? "an environment" : "a directional light") +
-                     " (no finite emission position); use path or bdpt for this scene");
-}
-
 }  // namespace rf

@@ -90,8 +90,11 @@ inline Vec3 receiver_normal(const Bsdf& bsdf, Vec3 wo) {
 // against BSDF sampling (1 for delta lights); f * Le * |cos| * w / pdf, or 0 when occluded.
 RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
                      float u_light, Vec2 u_point, TraceCounters& counters);
-// Light tracing, instant radiosity and photon mapping start every path on a light with a finite
-// position: throws SceneError for a scene with an environment or a directional light.
-void require_finite_emitters(const Scene& scene, const char* integrator);
+// A camera path with throughput beta left the scene in direction dir: adds the environment's
+// radiance to `radiance`, weighted by the power heuristic against light sampling when the last
+// scattering was not a delta one (prev_bsdf_pdf: that BSDF sample's solid-angle density).
+// Nothing without an environment.
+void add_escaped(const RenderContext& ctx, Vec3 dir, bool prev_delta, float prev_bsdf_pdf, RGB beta,
+                 RGB& radiance);
 
 }  // namespace rf

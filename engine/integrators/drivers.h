@@ -117,6 +117,38 @@ inline void light_path_aovs(const RenderContext& ctx, const TaskKey& task, bool 
     rows(buf.rect.y0, buf.rect.y1());
 }
 
+// What light paths cannot reach, as camera samples: the environment seen directly (a light path
+// never hits the camera's lens). spp-per-pass camera samples per pixel, started like camera
+// samples: the environment's radiance when the camera ray leaves the scene, 0 when it hits a
+// surface. The buffer's estimate is then their mean plus the splats per light path.
+inline void environment_camera_samples(const RenderContext& ctx, const TaskKey& task, bool parallel,
+                                       SampleBuffer& buf, Tally& tally) {
+  const uint64_t spp = ctx.scene.render.spp_per_pass();
+  const Sampler::Kind kind = kind_from_name(ctx.scene.render.sampler);
+  auto rows = [&](int y_begin, int y_end) {
+    double t0 = thread_cpu_seconds();
+    TraceCounters counters;
+    uint64_t nonfinite = 0;
+    Sampler sampler(kind, spp);
+    for (int y = y_begin; y < y_end; ++y)
+      for (int x = buf.rect.x0; x < buf.rect.x1(); ++x)
+        for (uint64_t s = 0; s < spp; ++s) {
+          float filter_weight;
+          Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
+          ++counters.rays;
+          RGB le = ctx.accel.cast(ray.o, ray.d) == kInf ? ctx.lights.environment_radiance(ray.d)
+                                                        : RGB(0.0f);
+          buf.add_sample(x, y, le * filter_weight, nonfinite);
+        }
+    tally.add(counters, t0, nonfinite);
+  };
+  if (parallel)
+    tbb::parallel_for(tbb::blocked_range<int>(buf.rect.y0, buf.rect.y1(), 1),
+                      [&](const auto& r) { rows(r.begin(), r.end()); });
+  else
+    rows(buf.rect.y0, buf.rect.y1());
+}
+
 }  // namespace driver_detail
 
 // One pass of camera paths over task.rect: spp_per_pass samples per pixel, each
@@ -204,7 +236,8 @@ SampleBuffer render_camera_paths_with_pass_state(const RenderContext& ctx, const
 // One pass of light paths over the whole frame: `paths` paths, path i traced by
 // trace(sampler, splats, counters) with the sampler started for (seed, frame, pass, i) (light
 // paths always use the independent sampler, sampler.h), in fixed chunks of paths whose splats are
-// added in chunk order.
+// added in chunk order. A scene with an environment also gets camera samples of the environment
+// seen directly (driver_detail::environment_camera_samples).
 template <class Trace>
 SampleBuffer render_light_paths(const RenderContext& ctx, const TaskKey& task, bool parallel,
                                 uint64_t paths, Trace&& trace) {
@@ -229,6 +262,8 @@ SampleBuffer render_light_paths(const RenderContext& ctx, const TaskKey& task, b
       },
       [&](const std::vector<Splat>& out) { buf.add_splats(out); });
   buf.light_paths = paths;
+  if (ctx.lights.has_environment())
+    driver_detail::environment_camera_samples(ctx, task, parallel, buf, tally);
   if (ctx.scene.render.aovs.any()) driver_detail::light_path_aovs(ctx, task, parallel, buf, tally);
   tally.finish(buf);
   return buf;

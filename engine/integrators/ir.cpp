@@ -123,7 +123,7 @@ std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderCont
   const int max_vpl_depth = ctx.scene.render.integrator.max_depth - 1;
   auto trace_one = [&](Sampler& sampler, std::vector<Vpl>& out, TraceCounters& c) {
     EmissionSample es;
-    if (!sample_light_path_start(ctx, sampler, es)) return;
+    if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
     VplDeposit deposit{ctx, out, inv_paths};
     trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
                                              max_vpl_depth, deposit, c);
@@ -263,7 +263,12 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
-    if (!ctx.accel.intersect(ray, hit)) break;  // no environment: refused by check()
+    if (!ctx.accel.intersect(ray, hit)) {
+      // The environment, as emission found by the previous vertex's BSDF sample (its direct
+      // light, MIS-weighted; the VPLs stand only for light that scattered on a surface).
+      add_escaped(ctx, ray.d, prev_delta, prev_bsdf_pdf, beta, radiance);
+      break;
+    }
     const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
@@ -273,7 +278,8 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
       if (prev_delta) {
         radiance += beta * le;
       } else {
-        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
+        float light_pdf =
+            ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
         radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
       }
     }
@@ -352,7 +358,6 @@ std::string IrIntegrator::settings_text() const {
 }
 
 void IrIntegrator::check(const Scene& scene) const {
-  require_finite_emitters(scene, kName);
   if (vpl_samples < 0 || vpl_samples > kMaxVplSamples || vpl_candidates < 1 ||
       vpl_candidates > kMaxVplCandidates)
     throw SceneError(scene.path + ": render.integrator: ir's vpl_samples must be in [0, " +

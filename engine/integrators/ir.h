@@ -47,8 +47,10 @@
 // pixel noise): error bars need batch means over passes, not per-pixel variances summed; the
 // target ignores visibility and BSDF lobes (glossy VPLs and receivers are picked as if diffuse)
 // and max_depth (a VPL too deep for the path is picked and adds 0); glossy receivers are poorly
-// served by VPLs and rely on the compensation path; environment and directional lights cannot
-// start light paths and such scenes are refused.
+// served by VPLs and rely on the compensation path.
+// Environment and directional lights start their VPL paths on a disk outside the scene facing the
+// light (LightSet::sample_emission, as pbrt-v4); their direct light is next-event estimation's, and
+// a camera path that leaves the scene takes the environment's radiance (MIS-weighted).
 #pragma once
 
 #include <string>

@@ -44,14 +44,13 @@ struct CameraConnector {
     SurfaceHit at;
     at.p = es.p, at.p_error = es.p_error, at.ng = es.n, at.ns = es.n;
     if (ctx.accel.visible(at, c.p_lens, Vec3(0.0f), c.wi))
-      splat_to_film(target, c.raster,
-                    le * (std::fabs(dot(es.n, c.wi)) * c.importance / (es.pdf_pos * c.pdf_solid_angle)));
+      splat_to_film(
+          target, c.raster,
+          le * (std::fabs(dot(es.n, c.wi)) * c.importance / (es.pdf_pos * c.pdf_solid_angle)));
   }
 };
 
 }  // namespace
-
-void LightIntegrator::check(const Scene& scene) const { require_finite_emitters(scene, kName); }
 
 // One pass is spp_per_pass light paths per pixel of the frame, so a pass costs about what a
 // camera-path pass costs; light path i of pass p is keyed by (seed, frame, p, i).
@@ -63,7 +62,7 @@ SampleBuffer LightIntegrator::render(const RenderContext& ctx, const TaskKey& ta
   return render_light_paths(
       ctx, task, parallel, paths, [&](Sampler& sampler, SplatTarget& target, TraceCounters& c) {
         EmissionSample es;
-        if (!sample_light_path_start(ctx, sampler, es)) return;
+        if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
         CameraConnector connector{ctx, sampler, target, c};
         connector.emitter(es);
         trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,

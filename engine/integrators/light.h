@@ -13,9 +13,13 @@
 // to max_depth scattering events), rr_min_depth (roulette on throughput relative to its start).
 // Strengths: caustics seen on diffuse surfaces (light -> specular -> diffuse -> camera), which the
 // path tracer finds only by chance.
+// Environment and directional lights start their paths on a disk outside the scene, facing the
+// light (LightSet::sample_emission, as pbrt-v4). The environment seen directly cannot be reached
+// by a light path (it never hits the lens): each pixel gets spp-per-pass camera samples for it
+// (the environment's radiance where the camera ray leaves the scene, drivers.h).
 // Cannot do: anything seen through a specular surface (a connection through a delta BSDF is
-// impossible), the environment and directional lights (no finite emission position: such
-// scenes are refused), and it is noisy wherever the camera sees little of what lights reach.
+// impossible; the environment seen in a mirror included), and it is noisy wherever the camera
+// sees little of what lights reach.
 #pragma once
 
 #include <string>
@@ -28,8 +32,6 @@ struct LightIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "light";
   static constexpr bool kSplats = true;
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
-
-  void check(const Scene& scene) const;
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const LightIntegrator&) const = default;

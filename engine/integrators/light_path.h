@@ -87,12 +87,14 @@ void trace_subpath(const RenderContext& ctx, Sampler& sampler, Ray ray, RGB beta
 }
 
 // The emission that starts a light path: a light chosen by power, a point on it and a direction
-// (three numbers from the sampler). False when no light can emit.
-inline bool sample_light_path_start(const RenderContext& ctx, Sampler& sampler,
-                                    EmissionSample& es) {
+// (three numbers from the sampler). False when no light can emit. With `infinite_lights`,
+// directional and environment lights start paths from a disk outside the scene
+// (LightSet::sample_emission); without (BDPT), a pick of one is false.
+inline bool sample_light_path_start(const RenderContext& ctx, Sampler& sampler, EmissionSample& es,
+                                    bool infinite_lights) {
   float u_select = sampler.get_1d();
   Vec2 u_pos = sampler.get_2d(), u_dir = sampler.get_2d();
-  return ctx.lights.sample_emission(u_select, u_pos, u_dir, es);
+  return ctx.lights.sample_emission(u_select, u_pos, u_dir, es, infinite_lights);
 }
 
 // The first ray of a light path leaving its emission point.

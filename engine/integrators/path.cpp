@@ -14,16 +14,12 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
   float prev_bsdf_pdf = 0;
   bool prev_delta = true;  // the camera ray counts as "specular": emission is taken unweighted
   Vec3 prev_p = ray.o, prev_n(0.0f);  // the last vertex and its receiver normal (light selection)
-  float cone_width = 0;  // ray-cone width at the current hit, for texture filtering
+  float cone_width = 0;               // ray-cone width at the current hit, for texture filtering
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
     if (!ctx.accel.intersect(ray, hit)) {
-      if (ctx.lights.has_environment()) {
-        RGB le = ctx.lights.environment_radiance(ray.d);
-        float w = prev_delta ? 1.0f : power_heuristic(prev_bsdf_pdf, ctx.lights.pdf_environment(ray.d));
-        radiance += beta * le * w;
-      }
+      add_escaped(ctx, ray.d, prev_delta, prev_bsdf_pdf, beta, radiance);
       break;
     }
     const Mesh& mesh = ctx.accel.mesh(hit.mesh);
@@ -35,7 +31,8 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
       if (prev_delta) {
         radiance += beta * le;
       } else {
-        float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
+        float light_pdf =
+            ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
         radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
       }
     }

@@ -55,7 +55,7 @@ std::shared_ptr<const PhotonMap> build_photon_map(const PpmIntegrator& s, const 
   const int max_depth = ctx.scene.render.integrator.max_depth;
   auto trace_one = [&](Sampler& sampler, std::vector<Photon>& out, TraceCounters& c) {
     EmissionSample es;
-    if (!sample_light_path_start(ctx, sampler, es)) return;
+    if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
     PhotonDeposit deposit{out, inv_paths};
     trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
                                              max_depth, deposit, c);
@@ -97,7 +97,10 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
-    if (!ctx.accel.intersect(ray, hit)) break;  // no environment: refused by build_photon_map
+    if (!ctx.accel.intersect(ray, hit)) {
+      add_escaped(ctx, ray.d, prev_delta, prev_bsdf_pdf, beta, radiance);
+      break;
+    }
     const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
@@ -167,8 +170,6 @@ std::string PpmIntegrator::settings_text() const {
   std::snprintf(buf, sizeof buf, ";ppm=%d:%.9g:%.9g", photons, double(radius), double(alpha));
   return buf;
 }
-
-void PpmIntegrator::check(const Scene& scene) const { require_finite_emitters(scene, kName); }
 
 SampleBuffer PpmIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                    bool parallel) const {

@@ -30,8 +30,10 @@
 // Strengths: caustics (light -> specular -> diffuse -> camera) and caustics seen through
 // specular surfaces (specular -> diffuse -> specular), which neither path nor light tracing
 // nor BDPT samples well.
-// Limits: biased for any finite pass count; memory per pass grows with M; environment and
-// directional lights cannot emit photons and such scenes are refused; glossy receivers blur.
+// Environment and directional lights emit photons from a disk outside the scene facing the light
+// (LightSet::sample_emission); a camera path that leaves the scene takes the environment's
+// radiance (MIS-weighted after a non-delta scattering, as path.cpp).
+// Limits: biased for any finite pass count; memory per pass grows with M; glossy receivers blur.
 #pragma once
 
 #include <string>
@@ -43,15 +45,15 @@ namespace rf {
 struct PpmIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "ppm";
   static constexpr bool kSplats = false;
-  static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth", "photons", "radius", "alpha"};
+  static constexpr const char* kKeys[] = {"type",    "max_depth", "rr_min_depth",
+                                          "photons", "radius",    "alpha"};
 
-  int photons = 100000;        // photon paths traced per pass
-  float radius = 0;            // r_1, the first pass's radius; 0: 0.02 x scene_radius()
-  float alpha = 2.0f / 3.0f;   // Knaus-Zwicker alpha in (0, 1)
+  int photons = 100000;       // photon paths traced per pass
+  float radius = 0;           // r_1, the first pass's radius; 0: 0.02 x scene_radius()
+  float alpha = 2.0f / 3.0f;  // Knaus-Zwicker alpha in (0, 1)
 
   void parse(const JsonReader& r, const Json& j, const std::string& path);
   std::string settings_text() const;
-  void check(const Scene& scene) const;
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const PpmIntegrator&) const = default;
