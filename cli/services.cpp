@@ -55,6 +55,9 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   coord->add_option("--health-listen", co->health_listen,
                     "also serve the health service alone, in plaintext, here (HOST:PORT; for "
                     "probes that cannot speak TLS)");
+  coord->add_option("--metrics-listen", co->metrics_listen,
+                    "serve Prometheus metrics over HTTP at /metrics here (IP:PORT, e.g. "
+                    "0.0.0.0:9464; docs/deploy.md)");
   coord->add_option("--token-file", co->token_file,
                     "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
                     "on SIGHUP (without it: loopback only, no authentication)");
@@ -78,6 +81,11 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                    "exit 1 after this many seconds without an answer from the coordinator "
                    "(default: keep waiting; for batch schedulers)")
       ->check(finite_in(0, 1e9));
+  worker
+      ->add_option("--heartbeat-file", wo->heartbeat_file,
+                   "rewrite this file at least every max(15 s, lease/3) while the worker runs, "
+                   "for container health checks (default: $RAYFARM_HEARTBEAT_FILE; docs/deploy.md)")
+      ->envname("RAYFARM_HEARTBEAT_FILE");
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)")
       ->check(finite_in(0, 4096));
   add_credential_options(*worker, shared);

@@ -213,11 +213,12 @@ Coordinator::Coordinator(CoreOptions o)
       scheduler_(SchedulerOptions{
           options_.lease_seconds, options_.max_failures, options_.window_frames,
           options_.instance + "-L",
-          [lease_seconds = options_.lease_seconds](const std::string& lease,
-                                                   const std::string& worker, const TaskRef& task) {
+          [this](const std::string& lease, const std::string& worker, const TaskRef& task) {
+            ++counters_.leases_expired;  // the scheduler is driven under mu_
             spdlog::warn("lease {} of worker {} on task {} expired: not renewed for {:g} s", lease,
-                         worker, task_id_text(task), lease_seconds);
+                         worker, task_id_text(task), options_.lease_seconds);
           }}) {
+  counters_.lease_buckets.assign(std::size(CoordinatorMetrics::kLeaseBuckets), 0);
   next_seq_ = store_.next_seq();
   for (const JobStore::StoredWorker& w : store_.workers()) {
     workers_[w.id] = {w.principal, w.build_id};
@@ -800,6 +801,7 @@ Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& cal
   r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
   store_.insert_worker({r.worker_id, caller.principal, w.build_id.substr(0, 256)});
   workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256)};
+  last_seen_[r.worker_id] = now();
   spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
                w.cores, clip(w.build_id), clip(w.isa));
   return r;
@@ -818,6 +820,7 @@ void Coordinator::check_worker(const std::string& worker_id, const Caller& calle
     refuse(ErrorCode::PermissionDenied,
            "worker " + worker_id + " was registered with another token");
   }
+  last_seen_[worker_id] = now();
 }
 
 bool Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
@@ -841,7 +844,25 @@ bool Coordinator::check_lease(const std::string& worker_id, const std::string& l
 }
 
 LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& caller) {
+  // The call's time in the core, lock wait included, recorded on every way out.
+  struct Timed {
+    CoordinatorMetrics::Counters& c;
+    std::chrono::steady_clock::time_point t0;
+    ~Timed() {
+      double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      ++c.lease_calls;
+      c.lease_seconds += s;
+      const auto& bounds = CoordinatorMetrics::kLeaseBuckets;
+      for (size_t i = 0; i < std::size(bounds); ++i)
+        if (s <= bounds[i]) {
+          ++c.lease_buckets[i];
+          break;
+        }
+    }
+  };
+  const auto t0 = std::chrono::steady_clock::now();
   std::lock_guard lock(mu_);
+  Timed timed{counters_, t0};  // destroyed before the lock is released
   check_worker(worker_id, caller);
   if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
   LeaseResult out;
@@ -865,6 +886,7 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
     refuse(ErrorCode::Unavailable,
            std::string("the coordinator cannot store leases now (") + e.what() + "); retry later");
   }
+  ++counters_.tasks_leased;
   std::shared_ptr<JobRecord> job = find(l->task.job_id);
   FrameRecord* f = job->by_number.at(l->task.frame);
   if (f->first_lease_at < 0) f->first_lease_at = now();
@@ -1018,6 +1040,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(r.task),
                  r.worker_id, e.what());
     std::lock_guard lock(mu_);
+    ++counters_.results_refused;
     scheduler_.refuse_result(r.lease_id, now());  // counted against the worker, not the job
     store_.result_refused(r.task.job_id, r.task.frame, r.task.pass, r.task.tile, r.worker_id,
                           e.what());
@@ -1055,6 +1078,10 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   {
     std::lock_guard lock(mu_);
     if (!record_result(*job, r, buffer.header.core_seconds, buffer.header.build_id)) return false;
+    ++counters_.tasks_completed;
+    counters_.samples_merged += buffer.total_samples();
+    counters_.bytes_merged += r.buffer.size();
+    counters_.core_seconds += buffer.header.core_seconds;
   }
   // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
   // frames' merges go on meanwhile.
@@ -1128,6 +1155,7 @@ void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
     case LeaseOutcome::Ok:
       break;
   }
+  ++(report.handed_back ? counters_.tasks_handed_back : counters_.tasks_failed);
   if (task && !report.handed_back) {
     // Recorded under the id the scheduler counted it under (the lease's worker).
     store_.task_failed(task->job_id, task->frame, task->pass, task->tile, report.worker_id,
@@ -1139,6 +1167,35 @@ void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
     if (job && !terminal(job->state))
       set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
   }
+}
+
+CoordinatorMetrics Coordinator::metrics() const {
+  std::lock_guard lock(mu_);
+  CoordinatorMetrics m;
+  m.counters = counters_;
+  m.storage_ok = storage_problem_.empty();
+  for (const auto& [id, w] : workers_) m.workers_registered += !outvoted_.count(id);
+  for (const auto& [id, seen] : last_seen_)
+    m.workers_connected += now() - seen <= options_.lease_seconds && !outvoted_.count(id);
+  std::map<std::string, Scheduler::JobLoad> load = scheduler_.load_by_job();
+  for (const auto& [id, job] : jobs_) {
+    ++m.jobs_by_state[size_t(job->state)];
+    if (terminal(job->state)) continue;
+    CoordinatorMetrics::Job j;
+    j.job_id = id;
+    j.state = job->state;
+    if (auto it = load.find(id); it != load.end()) {
+      j.tasks_queued = it->second.queued;
+      j.tasks_leased = it->second.leased;
+    }
+    m.tasks_queued += j.tasks_queued;
+    m.tasks_leased += j.tasks_leased;
+    for (const auto& f : job->frames)
+      if (!f->progress.done && f->progress.passes_merged > 0)
+        j.frames.push_back(frame_status(*job, *f));
+    m.jobs.push_back(std::move(j));
+  }
+  return m;
 }
 
 void Coordinator::shut_down() {

@@ -151,6 +151,44 @@ struct JobLimits {
   static std::vector<std::string> names();
 };
 
+// What the coordinator shows an operator (coordinator/metrics.h serves it to Prometheus, taken
+// afresh at each scrape): counters since this process started, and figures of now. Per-job
+// figures are for jobs still queued or running, so a job's series end with it; they are keyed by
+// the coordinator's own job ids, never by a client's strings.
+struct CoordinatorMetrics {
+  struct Counters {
+    uint64_t tasks_leased = 0;
+    uint64_t tasks_completed = 0;         // results merged
+    uint64_t tasks_failed = 0;            // failures workers reported
+    uint64_t tasks_handed_back = 0;       // returned unfinished by a worker shutting down
+    uint64_t leases_expired = 0;          // not renewed in time (a crashed or cut-off worker)
+    uint64_t results_refused = 0;         // results that failed the checks (counted on the worker)
+    uint64_t samples_merged = 0;          // camera samples in those results
+    uint64_t bytes_merged = 0;            // their encoded sample buffers
+    double core_seconds = 0;              // the CPU time the workers spent on them
+    uint64_t lease_calls = 0;             // lease() calls answered, with or without a task
+    double lease_seconds = 0;             // their time in the core: lock wait, scheduling, the row
+    std::vector<uint64_t> lease_buckets;  // per bound of kLeaseBuckets (not cumulative)
+  };
+  static constexpr double kLeaseBuckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
+                                             0.05,   0.1,   0.25,   0.5,   1,    2.5};
+  struct Job {
+    std::string job_id;
+    JobState state = JobState::Queued;
+    uint64_t tasks_queued = 0;        // waiting for a worker, in every frame (not only the window)
+    uint64_t tasks_leased = 0;        // leased now
+    std::vector<FrameStatus> frames;  // frames with a merged pass and not done
+  };
+  Counters counters;
+  uint64_t tasks_queued = 0;  // over all jobs
+  uint64_t tasks_leased = 0;
+  size_t workers_registered = 0;
+  size_t workers_connected = 0;  // heard from within one lease time
+  size_t jobs_by_state[6] = {};  // indexed by JobState
+  std::vector<Job> jobs;         // queued and running
+  bool storage_ok = true;
+};
+
 struct CoreOptions {
   std::string state_dir;
   double lease_seconds = 30;
@@ -237,6 +275,8 @@ class Coordinator {
   std::string storage_problem() const;
   void set_storage_listener(std::function<void(const std::string& problem)> listener);
 
+  CoordinatorMetrics metrics() const;
+
  private:
   double now() const { return options_.clock(); }
   std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec,
@@ -308,6 +348,8 @@ class Coordinator {
   void storage_failed(const std::string& why);  // under mu_
   void storage_ok();                            // under mu_
   uint64_t next_seq_ = 1, next_worker_ = 1;
+  CoordinatorMetrics::Counters counters_;            // under mu_
+  mutable std::map<std::string, double> last_seen_;  // worker id -> now() of its last call
 };
 
 }  // namespace rf

@@ -423,4 +423,17 @@ size_t Scheduler::queued_tasks() const {
   return size_t(n);
 }
 
+std::map<std::string, Scheduler::JobLoad> Scheduler::load_by_job() const {
+  std::map<std::string, JobLoad> out;
+  for (const auto& [id, j] : jobs_) {
+    if (j.failed || j.cancelled) continue;
+    JobLoad& load = out[id];
+    for (const FrameState& f : j.frames) load.queued += queued_in(j, f);
+  }
+  for (const auto& [id, l] : leases_)
+    if (l.live)
+      if (auto it = out.find(l.task.job_id); it != out.end()) ++it->second.leased;
+  return out;
+}
+
 }  // namespace rf

@@ -111,6 +111,11 @@ class Scheduler {
   // Queued or leased tasks this worker could still get (for --exit-when-idle).
   bool work_left_for(const std::string& worker_id, const JobFilter& may = {}) const;
   size_t queued_tasks() const;
+  // Per job (failed and cancelled ones left out): tasks waiting, and live leases.
+  struct JobLoad {
+    uint64_t queued = 0, leased = 0;
+  };
+  std::map<std::string, JobLoad> load_by_job() const;
   // Records held (tasks with leases, failures or exclusions; leases): for tests of the bound.
   size_t task_records() const { return tasks_.size(); }
   size_t lease_records() const { return leases_.size(); }

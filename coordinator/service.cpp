@@ -17,6 +17,7 @@
 #include <optional>
 
 #include "coordinator/core.h"
+#include "coordinator/metrics.h"
 #include "engine/digest.h"  // read_file_bytes
 #include "farm/auth.h"
 #include "farm/chunking.h"
@@ -472,6 +473,7 @@ struct CoordinatorServer::Impl {
   std::unique_ptr<WorkerServiceImpl> workers;
   std::unique_ptr<grpc::Server> server;
   std::unique_ptr<grpc::Server> health_server;  // --health-listen: the health service alone
+  std::unique_ptr<MetricsServer> metrics;       // --metrics-listen; goes before the core
   int port = 0, health_port = 0;
 };
 
@@ -527,6 +529,8 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   };
   set_storage("");
   impl_->core->set_storage_listener(set_storage);
+  if (!o.metrics_listen.empty())
+    impl_->metrics = std::make_unique<MetricsServer>(o.metrics_listen, *impl_->core);
 }
 
 CoordinatorServer::~CoordinatorServer() { shutdown(); }
@@ -534,6 +538,8 @@ CoordinatorServer::~CoordinatorServer() { shutdown(); }
 int CoordinatorServer::port() const { return impl_->port; }
 
 int CoordinatorServer::health_port() const { return impl_->health_port; }
+
+int CoordinatorServer::metrics_port() const { return impl_->metrics ? impl_->metrics->port() : 0; }
 
 void CoordinatorServer::reload_tokens() { impl_->gate->reload(); }
 
@@ -572,6 +578,9 @@ int run_coordinator(const CoordinatorOptions& o) {
   if (!o.health_listen.empty())
     spdlog::info("health service alone, plaintext, on {} (health port {})", o.health_listen,
                  server.health_port());
+  if (!o.metrics_listen.empty())
+    spdlog::info("Prometheus metrics on http://{}/metrics (metrics port {})", o.metrics_listen,
+                 server.metrics_port());
   int sig = 0;
   for (;;) {
     sigwait(&set, &sig);

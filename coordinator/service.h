@@ -23,6 +23,8 @@ struct CoordinatorOptions {
   std::string tls_cert, tls_key, tls_client_ca;
   // A second, plaintext listener serving only the health service (for probes without TLS).
   std::string health_listen;
+  // Prometheus metrics over plain HTTP at /metrics (coordinator/metrics.h); empty: none.
+  std::string metrics_listen;
   double lease_seconds = 30;
   uint32_t window_frames = 4;
   JobLimits limits;                        // per job (core.h)
@@ -38,10 +40,11 @@ class CoordinatorServer {
   // with a message naming the address or file on failure.
   explicit CoordinatorServer(const CoordinatorOptions& options);
   ~CoordinatorServer();
-  int port() const;         // the bound port (useful with --listen HOST:0)
-  int health_port() const;  // --health-listen's bound port (0 without it)
-  void wait();              // until shutdown() is called
-  void shutdown();          // stops accepting, ends streams, waits for handlers
+  int port() const;          // the bound port (useful with --listen HOST:0)
+  int health_port() const;   // --health-listen's bound port (0 without it)
+  int metrics_port() const;  // --metrics-listen's bound port (0 without it)
+  void wait();               // until shutdown() is called
+  void shutdown();           // stops accepting, ends streams, waits for handlers
   // Re-reads the token file; on an error keeps the tokens it has and rethrows.
   void reload_tokens();
 

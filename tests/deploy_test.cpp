@@ -5,8 +5,12 @@
 // contract). (deploy/check.sh checks the manifests and scripts statically.)
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <ctime>
 #include <filesystem>
+#include <fstream>
 #include <string>
+#include <thread>
 
 #include "engine/buffer_file.h"
 #include "engine/digest.h"
@@ -78,6 +82,39 @@ TEST(DeploySlurm, CoordinatorLessArrayTasksMergeToOneLocalRender) {
       sbatch_script("", "merge.sbatch", dir + "/out " + dir + "/out/frame2.exr");
   EXPECT_NE(bad.exit_code, 0) << bad.output;
   EXPECT_FALSE(std::filesystem::exists(dir + "/out/frame2.exr"));
+}
+
+// The container health checks (deploy/healthcheck.sh): a worker's is its heartbeat file, which
+// must stay fresh while the worker idles and while its coordinator is away (the check is of the
+// worker itself: a coordinator outage must not make every worker unhealthy and restarted).
+TEST(DeployHealth, AWorkersHeartbeatStaysFreshWhileItWaitsForItsCoordinator) {
+  test::Farm farm("deploy-heartbeat", /*lease_seconds=*/3);
+  std::string beat = farm.dir() + "/worker.heartbeat";
+  test::Process& worker = farm.worker({"--heartbeat-file", beat});
+  auto mtime = [&] {
+    std::error_code ec;
+    auto t = std::filesystem::last_write_time(beat, ec);
+    return ec ? std::filesystem::file_time_type::min() : t;
+  };
+  auto fresh_within = [&](double seconds) {  // a beat newer than now - seconds appears in time
+    auto start = std::filesystem::file_time_type::clock::now();
+    for (int i = 0; i < int(seconds * 20) + 40; ++i) {
+      if (mtime() >= start) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return false;
+  };
+  ASSERT_TRUE(fresh_within(5)) << worker.log();
+  ASSERT_TRUE(fresh_within(5)) << "idle, it beats at each poll: " << worker.log();
+  farm.stop_coordinator();
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  // Waiting for the coordinator with backoff (at most 15 s between tries).
+  EXPECT_TRUE(fresh_within(20)) << worker.log();
+  EXPECT_TRUE(worker.running()) << worker.log();
+  std::string text;
+  std::ifstream(beat) >> text;
+  EXPECT_NEAR(std::stod(text), double(std::time(nullptr)), 30) << "it holds its Unix time";
+  farm.start_coordinator(farm.port());
 }
 
 }  // namespace

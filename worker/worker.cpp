@@ -1,13 +1,17 @@
 #include "worker/worker.h"
 
+#include <fcntl.h>
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <condition_variable>
 #include <cstdlib>
+#include <cstring>
 #include <ctime>
 #include <deque>
 #include <filesystem>
@@ -103,6 +107,10 @@ class Worker {
   // Sleeps with exponential, jittered backoff (capped); false if a stop was requested.
   bool backoff(int attempt);
   bool sleep_unless_stopped(double seconds);
+  // Rewrites --heartbeat-file (at most once a second; from any thread).
+  void beat();
+  std::atomic<int64_t> last_beat_ns_{0};
+  std::atomic<bool> beat_warned_{false};
   bool stopping() const { return stop_.load(); }
   // The coordinator answered: the --give-up-after clock starts again.
   void heard_from_coordinator() { last_contact_ns_ = Clock::now().time_since_epoch().count(); }
@@ -203,7 +211,23 @@ bool Worker::backoff(int attempt) {
   return sleep_unless_stopped(backoff_seconds(attempt, 0.25, 15, rng_));
 }
 
+void Worker::beat() {
+  if (o_.heartbeat_file.empty()) return;
+  int64_t now = Clock::now().time_since_epoch().count(), last = last_beat_ns_.load();
+  if (now - last < std::chrono::nanoseconds(std::chrono::seconds(1)).count() ||
+      !last_beat_ns_.compare_exchange_strong(last, now))
+    return;
+  std::string text = std::to_string(std::time(nullptr)) + "\n";
+  int fd = ::open(o_.heartbeat_file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  bool ok = fd >= 0 && ::write(fd, text.data(), text.size()) == ssize_t(text.size());
+  if (fd >= 0) ::close(fd);
+  if (!ok && !beat_warned_.exchange(true))
+    spdlog::warn("--heartbeat-file {}: cannot write it ({}); health checks reading it will fail",
+                 o_.heartbeat_file, std::strerror(errno));
+}
+
 bool Worker::sleep_unless_stopped(double seconds) {
+  beat();
   std::unique_lock lock(m_);
   cv_.wait_for(lock, std::chrono::milliseconds(int64_t(seconds * 1000)),
                [&] { return stopping(); });
@@ -405,6 +429,7 @@ void Worker::run_task(const pb::Task& task) {
     bool was_stopping = stopping();  // a signal moves the wake-up to the drain deadline
     cv_.wait_until(lock, wake, [&] { return finished || stopping() != was_stopping; });
     if (finished) break;
+    beat();
     if (stopping() && Clock::now() >= stop_at_ + std::chrono::duration<double>(o_.drain_seconds)) {
       lock.unlock();
       spdlog::info("task {}: not finished within the drain time; handing it back", task.task_id());
@@ -430,9 +455,11 @@ void Worker::run_task(const pb::Task& task) {
                      s.error_message());
         renewing = false;
       }
-      next_renew = Clock::now() + std::chrono::duration<double>(keepalive_seconds_);
       lock.lock();
     }
+    // Also once the lease ended: the next wake-up is a keepalive away, not a spin.
+    if (Clock::now() >= next_renew)
+      next_renew = Clock::now() + std::chrono::duration<double>(keepalive_seconds_);
   }
   lock.unlock();
   render.join();
@@ -496,6 +523,7 @@ int Worker::serve() {
                lease_seconds_, cache_dir_);
   int tasks = 0, attempt = 0;
   while (!stopping()) {
+    beat();
     pb::LeaseRequest req;
     req.set_worker_id(worker_id_);
     grpc::ClientContext ctx;

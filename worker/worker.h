@@ -27,6 +27,10 @@ struct WorkerOptions {
   int max_tasks = 0;  // exit after this many tasks (0: no limit); for tests and benches
   // Exit 1 after this long without an answer from the coordinator (0: keep trying for ever).
   double give_up_after = 0;
+  // Rewritten (its time, in Unix seconds) at least every max(15 s, lease / 3) while the worker's
+  // loops turn, whether or not the coordinator answers: a container health check reads its age
+  // (deploy/Dockerfile). Empty: none.
+  std::string heartbeat_file;
 };
 
 // Runs until signalled (or idle with exit_when_idle). A coordinator that goes away (stopped,

@@ -1,0 +1,178 @@
+#include "coordinator/metrics.h"
+
+#include <prometheus/collectable.h>
+#include <prometheus/exposer.h>
+#include <prometheus/metric_family.h>
+
+#include <cmath>
+#include <iterator>
+#include <limits>
+#include <stdexcept>
+
+namespace rf {
+
+namespace {
+
+using prometheus::ClientMetric;
+using prometheus::MetricFamily;
+using prometheus::MetricType;
+
+MetricFamily family(const char* name, const char* help, MetricType type) {
+  MetricFamily f;
+  f.name = name;
+  f.help = help;
+  f.type = type;
+  return f;
+}
+
+ClientMetric value(MetricType type, double v, std::vector<ClientMetric::Label> labels = {}) {
+  ClientMetric m;
+  m.label = std::move(labels);
+  (type == MetricType::Counter ? m.counter.value : m.gauge.value) = v;
+  return m;
+}
+
+MetricFamily single(const char* name, const char* help, MetricType type, double v) {
+  MetricFamily f = family(name, help, type);
+  f.metric.push_back(value(type, v));
+  return f;
+}
+
+const char* state_label(JobState s) {
+  switch (s) {
+    case JobState::Queued:
+      return "queued";
+    case JobState::Running:
+      return "running";
+    case JobState::Completed:
+      return "completed";
+    case JobState::Failed:
+      return "failed";
+    case JobState::Cancelled:
+      return "cancelled";
+  }
+  return "unknown";
+}
+
+}  // namespace
+
+std::vector<MetricFamily> metric_families(const CoordinatorMetrics& m) {
+  const auto C = MetricType::Counter, G = MetricType::Gauge;
+  const CoordinatorMetrics::Counters& c = m.counters;
+  std::vector<MetricFamily> out;
+  out.push_back(single("rayfarm_tasks_queued", "Tasks waiting for a worker, over all jobs", G,
+                       double(m.tasks_queued)));
+  out.push_back(single("rayfarm_tasks_in_flight", "Tasks leased to a worker now, over all jobs", G,
+                       double(m.tasks_leased)));
+  out.push_back(
+      single("rayfarm_tasks_leased_total", "Tasks handed to workers", C, double(c.tasks_leased)));
+  out.push_back(
+      single("rayfarm_tasks_completed_total", "Task results merged", C, double(c.tasks_completed)));
+  out.push_back(single("rayfarm_tasks_failed_total", "Task failures reported by workers", C,
+                       double(c.tasks_failed)));
+  out.push_back(single("rayfarm_tasks_handed_back_total",
+                       "Tasks returned unfinished by workers shutting down", C,
+                       double(c.tasks_handed_back)));
+  out.push_back(single("rayfarm_leases_expired_total",
+                       "Leases not renewed in time (a crashed, stalled or cut-off worker)", C,
+                       double(c.leases_expired)));
+  out.push_back(single("rayfarm_results_refused_total",
+                       "Task results refused by the checks (counted against their worker)", C,
+                       double(c.results_refused)));
+  out.push_back(single("rayfarm_samples_merged_total", "Camera samples in merged task results", C,
+                       double(c.samples_merged)));
+  out.push_back(single("rayfarm_merged_bytes_total", "Encoded sample-buffer bytes merged", C,
+                       double(c.bytes_merged)));
+  out.push_back(single("rayfarm_core_seconds_total",
+                       "Worker CPU seconds spent on the merged results", C, c.core_seconds));
+  out.push_back(single("rayfarm_workers_registered", "Workers registered and not refused", G,
+                       double(m.workers_registered)));
+  out.push_back(single("rayfarm_workers_connected", "Workers heard from within one lease time", G,
+                       double(m.workers_connected)));
+  out.push_back(single("rayfarm_storage_ok",
+                       "1 while the coordinator can store results, 0 while it cannot (disk full)",
+                       G, m.storage_ok ? 1 : 0));
+
+  MetricFamily lease = family("rayfarm_lease_duration_seconds",
+                              "Time the coordinator takes to answer a lease request (lock wait, "
+                              "scheduling, the lease's database row)",
+                              MetricType::Histogram);
+  ClientMetric h;
+  h.histogram.sample_count = c.lease_calls;
+  h.histogram.sample_sum = c.lease_seconds;
+  uint64_t cumulative = 0;
+  for (size_t i = 0; i < std::size(CoordinatorMetrics::kLeaseBuckets); ++i) {
+    cumulative += i < c.lease_buckets.size() ? c.lease_buckets[i] : 0;
+    h.histogram.bucket.push_back({cumulative, CoordinatorMetrics::kLeaseBuckets[i]});
+  }
+  h.histogram.bucket.push_back({c.lease_calls, std::numeric_limits<double>::infinity()});
+  lease.metric.push_back(h);
+  out.push_back(std::move(lease));
+
+  MetricFamily jobs = family("rayfarm_jobs", "Jobs known to the coordinator, by state", G);
+  for (JobState s : {JobState::Queued, JobState::Running, JobState::Completed, JobState::Failed,
+                     JobState::Cancelled})
+    jobs.metric.push_back(
+        value(G, double(m.jobs_by_state[size_t(s)]), {{"state", state_label(s)}}));
+  out.push_back(std::move(jobs));
+
+  MetricFamily queued = family("rayfarm_job_tasks_queued",
+                               "Tasks of a queued or running job waiting for a worker", G);
+  MetricFamily leased =
+      family("rayfarm_job_tasks_in_flight", "Tasks of a running job leased to a worker now", G);
+  MetricFamily rel_mse = family("rayfarm_frame_relmse",
+                                "Estimated relative MSE of a rendering frame's merged image", G);
+  MetricFamily eta =
+      family("rayfarm_frame_eta_seconds", "Estimated seconds until a rendering frame is done", G);
+  MetricFamily progress =
+      family("rayfarm_frame_progress_ratio", "Passes merged over passes of a rendering frame", G);
+  for (const CoordinatorMetrics::Job& j : m.jobs) {
+    queued.metric.push_back(value(G, double(j.tasks_queued), {{"job", j.job_id}}));
+    leased.metric.push_back(value(G, double(j.tasks_leased), {{"job", j.job_id}}));
+    for (const FrameStatus& f : j.frames) {
+      std::vector<ClientMetric::Label> labels = {{"frame", std::to_string(f.frame)},
+                                                 {"job", j.job_id}};
+      const FrameProgress& p = f.progress;
+      if (p.passes_merged >= 2 && std::isfinite(p.rel_mse))  // known from two passes on
+        rel_mse.metric.push_back(value(G, p.rel_mse, labels));
+      if (std::isfinite(p.eta_seconds) && p.eta_seconds >= 0)
+        eta.metric.push_back(value(G, p.eta_seconds, labels));
+      if (p.passes_total > 0)
+        progress.metric.push_back(value(G, double(p.passes_merged) / p.passes_total, labels));
+    }
+  }
+  for (MetricFamily* f : {&queued, &leased, &rel_mse, &eta, &progress})
+    out.push_back(std::move(*f));
+  return out;
+}
+
+class MetricsServer::Collector : public prometheus::Collectable {
+ public:
+  explicit Collector(const Coordinator& core) : core_(core) {}
+  std::vector<MetricFamily> Collect() const override { return metric_families(core_.metrics()); }
+
+ private:
+  const Coordinator& core_;
+};
+
+MetricsServer::MetricsServer(const std::string& listen, const Coordinator& core)
+    : collector_(std::make_shared<Collector>(core)) {
+  try {
+    exposer_ = std::make_unique<prometheus::Exposer>(listen, /*num_threads=*/2);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("coordinator: cannot listen on --metrics-listen " + listen +
+                             " (HOST:PORT with HOST an IP address; " + e.what() + ")");
+  }
+  exposer_->RegisterCollectable(collector_, "/metrics");
+}
+
+MetricsServer::~MetricsServer() {
+  if (exposer_) exposer_->RemoveCollectable(collector_, "/metrics");
+}
+
+int MetricsServer::port() const {
+  std::vector<int> ports = exposer_->GetListeningPorts();
+  return ports.empty() ? 0 : ports.front();
+}
+
+}  // namespace rf
