@@ -14,7 +14,8 @@ set -eu
 role=$(tr '\0' '\n' </proc/1/cmdline | sed -n 2p)
 case "$role" in
   coordinator)
-    exec rayfarm health "${RAYFARM_HEALTH_ADDR:-127.0.0.1:7071}"
+    # Plaintext whatever RAYFARM_TLS_CA says: the health-only port never serves TLS.
+    exec env -u RAYFARM_TLS_CA rayfarm health "${RAYFARM_HEALTH_ADDR:-127.0.0.1:7071}"
     ;;
   worker)
     file=${RAYFARM_HEARTBEAT_FILE:-}

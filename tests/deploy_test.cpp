@@ -9,12 +9,15 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <regex>
 #include <string>
 #include <thread>
 
 #include "engine/buffer_file.h"
 #include "engine/digest.h"
 #include "tests/support/farm.h"
+#include "tests/support/process.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -115,6 +118,60 @@ TEST(DeployHealth, AWorkersHeartbeatStaysFreshWhileItWaitsForItsCoordinator) {
   std::ifstream(beat) >> text;
   EXPECT_NEAR(std::stod(text), double(std::time(nullptr)), 30) << "it holds its Unix time";
   farm.start_coordinator(farm.port());
+}
+
+// The image's HEALTHCHECK script (deploy/healthcheck.sh) run for real: a coordinator and a
+// worker each as PID 1 of their own PID namespace (as in a container; unshare), the script
+// entered into that namespace (nsenter). The coordinator's check asks its health-only port and
+// fails on a port nobody serves; the worker's reads its heartbeat and fails when it is too old.
+TEST(DeployHealth, TheImagesHealthCheckAsksTheCoordinatorAndTheWorkerThemselves) {
+  if (test::run_command("unshare --pid --fork --mount-proc true").exit_code != 0)
+    GTEST_SKIP() << "this machine forbids PID namespaces (unshare needs root or CAP_SYS_ADMIN)";
+  std::string dir = test::make_temp_dir("deploy-healthcheck");
+  std::string bin = std::filesystem::path(test::rayfarm_binary()).parent_path().string();
+  auto as_pid1 = [&](const std::string& name, std::vector<std::string> args) {
+    std::vector<std::string> argv = {"/usr/bin/unshare", "--pid",        "--fork",
+                                     "--mount-proc",     "--kill-child", test::rayfarm_binary()};
+    argv.insert(argv.end(), args.begin(), args.end());
+    return std::make_unique<test::Process>(argv, dir + "/" + name + ".log");
+  };
+  // The script inside the namespace of `p` (whose child is that namespace's PID 1).
+  auto check = [&](const test::Process& p, const std::string& env) {
+    test::CommandResult child = test::run_command("pgrep -P " + std::to_string(p.pid()));
+    std::string pid = child.output.substr(0, child.output.find('\n'));
+    return test::run_command("nsenter --target " + pid + " --pid --mount env PATH=" + bin +
+                             ":$PATH " + env + " sh " + test::source_dir() +
+                             "/deploy/healthcheck.sh");
+  };
+
+  auto coordinator =
+      as_pid1("coordinator", {"coordinator", "--listen", "127.0.0.1:0", "--health-listen",
+                              "127.0.0.1:0", "--state-dir", dir + "/state"});
+  ASSERT_TRUE(coordinator->wait_for_log("(health port", 60)) << coordinator->log();
+  std::smatch m;
+  std::string log = coordinator->log();
+  ASSERT_TRUE(std::regex_search(log, m, std::regex("\\(port ([0-9]+)\\)"))) << log;
+  std::string port = m[1];
+  ASSERT_TRUE(std::regex_search(log, m, std::regex("health port ([0-9]+)"))) << log;
+  std::string health = m[1];
+  test::CommandResult ok = check(*coordinator, "RAYFARM_HEALTH_ADDR=127.0.0.1:" + health);
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_NE(ok.output.find("SERVING"), std::string::npos) << ok.output;
+  test::CommandResult nobody = check(*coordinator, "RAYFARM_HEALTH_ADDR=127.0.0.1:1");
+  EXPECT_NE(nobody.exit_code, 0) << nobody.output;
+
+  std::string beat = dir + "/worker.heartbeat";
+  auto worker = as_pid1("worker", {"worker", "--coordinator", "127.0.0.1:" + port,
+                                   "--heartbeat-file", beat, "--cache-dir", dir + "/cache"});
+  ASSERT_TRUE(worker->wait_for_log("connected", 60)) << worker->log();
+  test::CommandResult fresh = check(*worker, "RAYFARM_HEARTBEAT_FILE=" + beat);
+  EXPECT_EQ(fresh.exit_code, 0) << fresh.output;
+  EXPECT_NE(fresh.output.find("heartbeat"), std::string::npos) << fresh.output;
+  test::CommandResult old =
+      check(*worker, "RAYFARM_HEARTBEAT_FILE=" + beat + " RAYFARM_HEARTBEAT_MAX_AGE=0");
+  EXPECT_EQ(old.exit_code, 1) << old.output;
+  test::CommandResult none = check(*worker, "RAYFARM_HEARTBEAT_FILE=" + dir + "/absent");
+  EXPECT_EQ(none.exit_code, 1) << none.output;
 }
 
 }  // namespace
