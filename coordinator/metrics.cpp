@@ -160,8 +160,8 @@ MetricsServer::MetricsServer(const std::string& listen, const Coordinator& core)
   try {
     exposer_ = std::make_unique<prometheus::Exposer>(listen, /*num_threads=*/2);
   } catch (const std::exception& e) {
-    throw std::runtime_error("coordinator: cannot listen on --metrics-listen " + listen +
-                             " (HOST:PORT with HOST an IP address; " + e.what() + ")");
+    throw std::runtime_error("coordinator: cannot listen on --metrics-listen " + listen + " (" +
+                             std::string(e.what()) + ")");
   }
   exposer_->RegisterCollectable(collector_, "/metrics");
 }

@@ -398,8 +398,11 @@ TEST(Farm, ACutLinkIsNoticedWithinALeaseAndTheJobCompletesAsTheLocalRender) {
             {net.coordinator_ns(), "0.0.0.0", Partitionable::coordinator_host(1)});
   farm.client_token_file = client.file;
   farm.worker_token_file = worker.file;
-  // Tasks of about a second each with two workers on two cores.
-  const std::string job_args = kCornell + " --spp 4096 --passes 16 --res 64x64";
+  // Tasks of about a second each with two workers on two cores (under the sanitizers, 8x fewer
+  // samples for tasks of a few seconds: with 4096 spp the test took 766 s there).
+  const int spp = test::kAddressSanitizer ? 512 : 4096;
+  const std::string job_args =
+      kCornell + " --spp " + std::to_string(spp) + " --passes 16 --res 64x64";
   std::string job = farm.submit(job_args + " --tile-size 64");
   auto coordinator_at = [&](int n) {
     return Partitionable::coordinator_host(n) + ":" + std::to_string(farm.port());
@@ -439,7 +442,7 @@ TEST(Farm, ACutLinkIsNoticedWithinALeaseAndTheJobCompletesAsTheLocalRender) {
   ASSERT_EQ(farm.client("watch " + job).exit_code, 0) << farm.coordinator().log();
   nlohmann::json s = farm.status(job);
   EXPECT_EQ(s["frames"][0]["passes_merged"], 16);
-  EXPECT_DOUBLE_EQ(s["frames"][0]["spp"].get<double>(), 4096.0);  // the spp asked, no more
+  EXPECT_DOUBLE_EQ(s["frames"][0]["spp"].get<double>(), double(spp));  // the spp asked, no more
   // The cut-off worker is still there and spoke with the coordinator again after the link came
   // back (its held result answered, or a new lease).
   EXPECT_TRUE(cut.running()) << cut.log();
@@ -475,8 +478,11 @@ TEST(Farm, NoiseTargetStopsAtTheSamePassAsTheLocalRender) {
 
 TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
   Farm farm("farm-midjob");
-  // About 0.05 s per pass, 3 s in all: time to fetch while it runs, even on a loaded machine.
-  std::string job = farm.submit(kCornell + " --spp 2048 --passes 64 --res 64x64 --frames 1");
+  // About 0.05 s per pass, 3 s in all: time to fetch while it runs, even on a loaded machine
+  // (under the sanitizers 8x fewer samples give passes of about that length: 325 s otherwise).
+  const int spp = test::kAddressSanitizer ? 256 : 2048;
+  std::string job = farm.submit(kCornell + " --spp " + std::to_string(spp) +
+                                " --passes 64 --res 64x64 --frames 1");
   Process& worker = farm.worker();
   nlohmann::json s;
   for (int i = 0; i < 3000; ++i) {
@@ -557,8 +563,12 @@ TEST(Farm, PerFramePatternRendersEachFramesOwnSceneAndAMissingFrameFileIsRefused
 
 TEST(Farm, SigtermDrainsOrHandsBackTheTaskInFlight) {
   Farm farm("farm-sigterm");
-  // Two tasks of about a second each (one 96x96 tile per pass).
-  std::string job = farm.submit(kCornell + " --spp 1024 --passes 2 --res 96x96");
+  // Two tasks of about a second each (one 96x96 tile per pass); under the sanitizers 8x fewer
+  // samples keep them a few seconds (with 1024 spp they took 45 s each, and beside another test
+  // the first outlasted the 60 s the test waits for its drain).
+  const int spp = test::kAddressSanitizer ? 128 : 1024;
+  std::string job =
+      farm.submit(kCornell + " --spp " + std::to_string(spp) + " --passes 2 --res 96x96");
   Process& drains = farm.worker({"--drain-seconds", "60"});
   ASSERT_TRUE(drains.wait_for_log(": leased", 30)) << drains.log();
   drains.signal(SIGTERM);
