@@ -4,6 +4,7 @@
 #include <prometheus/exposer.h>
 #include <prometheus/metric_family.h>
 
+#include <cctype>
 #include <cmath>
 #include <iterator>
 #include <limits>
@@ -38,20 +39,11 @@ MetricFamily single(const char* name, const char* help, MetricType type, double 
   return f;
 }
 
-const char* state_label(JobState s) {
-  switch (s) {
-    case JobState::Queued:
-      return "queued";
-    case JobState::Running:
-      return "running";
-    case JobState::Completed:
-      return "completed";
-    case JobState::Failed:
-      return "failed";
-    case JobState::Cancelled:
-      return "cancelled";
-  }
-  return "unknown";
+// "queued", "running", ...: job_state_name() without its JOB_ prefix, in lower case.
+std::string state_label(JobState s) {
+  std::string name = std::string(job_state_name(s)).substr(4);
+  for (char& c : name) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return name;
 }
 
 }  // namespace
