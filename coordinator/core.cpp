@@ -1183,7 +1183,6 @@ CoordinatorMetrics Coordinator::metrics() const {
     if (terminal(job->state)) continue;
     CoordinatorMetrics::Job j;
     j.job_id = id;
-    j.state = job->state;
     if (auto it = load.find(id); it != load.end()) {
       j.tasks_queued = it->second.queued;
       j.tasks_leased = it->second.leased;

@@ -174,7 +174,6 @@ struct CoordinatorMetrics {
                                              0.05,   0.1,   0.25,   0.5,   1,    2.5};
   struct Job {
     std::string job_id;
-    JobState state = JobState::Queued;
     uint64_t tasks_queued = 0;        // waiting for a worker, in every frame (not only the window)
     uint64_t tasks_leased = 0;        // leased now
     std::vector<FrameStatus> frames;  // frames with a merged pass and not done
@@ -314,6 +313,7 @@ class Coordinator {
   // find_or_throw, refusing another tenant's job.                                 // under mu_
   std::shared_ptr<JobRecord> find_for(const std::string& id, const Caller& caller) const;
   // The worker's registration checked against the caller; throws if unknown or not theirs.
+  // A worker that passes is noted as heard from now (last_seen_: workers connected).
   void check_worker(const std::string& worker_id, const Caller& caller) const;  // under mu_
   // The lease is known and held by worker_id (and for `task` when given): true; false when it  //
   // under mu_ is retired (ended with its task settled); throws otherwise.
