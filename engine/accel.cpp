@@ -33,51 +33,13 @@ void init_ray(RTCRay& r, Vec3 o, Vec3 d, float tmax) {
   r.flags = 0;
 }
 
-// std::nextafter(v, +inf) and (v, -inf) for finite v by stepping the bit pattern (pbrt-v4's
-// NextFloatUp/Down): the same values, without the library call's checks (2% of a path render).
-inline float next_float_up(float v) {
-  if (std::isinf(v) && v > 0) return v;
-  if (v == -0.0f) v = 0.0f;
-  uint32_t bits;
-  std::memcpy(&bits, &v, 4);
-  bits = v >= 0 ? bits + 1 : bits - 1;
-  std::memcpy(&v, &bits, 4);
-  return v;
-}
-inline float next_float_down(float v) {
-  if (std::isinf(v) && v < 0) return v;
-  if (v == 0.0f) v = -0.0f;
-  uint32_t bits;
-  std::memcpy(&bits, &v, 4);
-  bits = v > 0 ? bits - 1 : bits + 1;
-  std::memcpy(&v, &bits, 4);
-  return v;
-}
-}  // namespace
-
-Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
-  float d = dot(abs(ng), p_error);
-  Vec3 offset = ng * d;
-  if (dot(w, ng) < 0) offset = -offset;
-  Vec3 po = p + offset;
-  for (int i = 0; i < 3; ++i) {
-    if (offset[i] > 0)
-      po[i] = next_float_up(po[i]);
-    else if (offset[i] < 0)
-      po[i] = next_float_down(po[i]);
-  }
-  return po;
-}
-
-namespace {
-
 // One Embree geometry of a mesh (triangles, or Embree's sphere primitive for an exact sphere),
 // attached to `scene` under `id`.
 void attach_mesh(RTCDevice device, RTCScene scene, const Mesh& m, unsigned id) {
   if (m.sphere) {
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_SPHERE_POINT);
-    auto* v = static_cast<float*>(
-        rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 4 * sizeof(float), 1));
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                          RTC_FORMAT_FLOAT4, 4 * sizeof(float), 1));
     v[0] = m.sphere->center.x, v[1] = m.sphere->center.y, v[2] = m.sphere->center.z;
     v[3] = m.sphere->radius;
     rtcCommitGeometry(g);
@@ -104,7 +66,8 @@ void attach_mesh(RTCDevice device, RTCScene scene, const Mesh& m, unsigned id) {
 void transform_hit_point(const Mat4& m, Vec3& p, Vec3& p_error) {
   Vec3 w = m.point(p), e;
   for (int i = 0; i < 3; ++i) {
-    float lin = std::fabs(m.m[i][0] * p.x) + std::fabs(m.m[i][1] * p.y) + std::fabs(m.m[i][2] * p.z);
+    float lin =
+        std::fabs(m.m[i][0] * p.x) + std::fabs(m.m[i][1] * p.y) + std::fabs(m.m[i][2] * p.z);
     float err = std::fabs(m.m[i][0]) * p_error.x + std::fabs(m.m[i][1]) * p_error.y +
                 std::fabs(m.m[i][2]) * p_error.z;
     e[i] = (1 + gamma_n(3)) * err + gamma_n(3) * (lin + std::fabs(m.m[i][3]));
@@ -233,10 +196,6 @@ bool Accel::occluded(Vec3 o, Vec3 d, float tmax) const {
   init_ray(r, o, d, tmax);
   rtcOccluded1(rtc_scene_, &ctx, &r);
   return r.tfar < 0;  // Embree sets tfar to -inf on a hit
-}
-
-Ray Accel::spawn(const SurfaceHit& from, Vec3 w) const {
-  return {offset_ray_origin(from.p, from.p_error, from.ng, w), w, kInf};
 }
 
 bool Accel::visible(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const {

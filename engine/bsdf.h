@@ -52,8 +52,8 @@ struct BsdfParams {
 
 // The material's constant values (ignores its textures).
 inline BsdfParams constant_params(const Material& m) {
-  return {m.type, m.reflectance.value, m.specular.value, m.roughness.value, m.ior, m.eta,
-          m.k,    m.conductor_tint, m.separable_masking};
+  return {m.type, m.reflectance.value, m.specular.value,   m.roughness.value, m.ior, m.eta,
+          m.k,    m.conductor_tint,    m.separable_masking};
 }
 
 class Bsdf {
@@ -106,6 +106,20 @@ class Bsdf {
     Vec3 lo, li;
     if (!to_lobe(wo, wi, lo, li)) return 0.0f;
     return std::visit([&](const auto& l) { return l.pdf(lo, li, mode); }, lobe_);
+  }
+  // eval() and pdf() of one pair, the pair moved to the lobe's frame once (next-event
+  // estimation needs both); the same values as the two calls.
+  RGB eval_pdf(Vec3 wo, Vec3 wi, float& pdf_out,
+               TransportMode mode = TransportMode::Radiance) const {
+    Vec3 lo, li;
+    pdf_out = 0.0f;
+    if (!to_lobe(wo, wi, lo, li)) return RGB(0.0f);
+    return std::visit(
+        [&](const auto& l) {
+          pdf_out = l.pdf(lo, li, mode);
+          return l.eval(lo, li, mode);
+        },
+        lobe_);
   }
   // Samples wi given wo; on success s holds wi (world), f, pdf and the lobe's kind.
   bool sample(Vec3 wo, float uc, Vec2 u, TransportMode mode, BsdfSample& s) const {

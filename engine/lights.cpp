@@ -182,11 +182,14 @@ void LightSet::build_bvh(const std::string& mode) {
 size_t LightSet::select(float u_select, float& ux) const {
   const size_t ng = groups_.size();
   if (ng == 0) return kNoLight;
-  // First cdf entry > u: the group whose interval [cdf_g, cdf_g+1) holds u.
-  size_t g =
-      size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) - (cdf_.begin() + 1));
-  g = std::min(g, ng - 1);
-  while (cdf_[g + 1] == cdf_[g] && g > 0) --g;  // a zero-width interval cannot be selected
+  // First cdf entry > u: the group whose interval [cdf_g, cdf_g+1) holds u (one group: it).
+  size_t g = 0;
+  if (ng > 1) {
+    g = size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) -
+               (cdf_.begin() + 1));
+    g = std::min(g, ng - 1);
+    while (cdf_[g + 1] == cdf_[g] && g > 0) --g;  // a zero-width interval cannot be selected
+  }
   const Group& gr = groups_[g];
   size_t i = gr.first;
   if (gr.count > 1) {
@@ -256,7 +259,9 @@ bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightS
 
 // A uniformly distributed point of an area light's primitive (density 1 / area), its error bound
 // and its unit normal (outward for spheres).
-void LightSet::sample_surface(const Tri& tri, Vec2 u, Vec3& q, Vec3& q_error, Vec3& n) const {
+// Inlined into its callers (a call per light sample, with three vectors returned through memory).
+[[gnu::always_inline]] inline void LightSet::sample_surface(const Tri& tri, Vec2 u, Vec3& q,
+                                                            Vec3& q_error, Vec3& n) const {
   if (tri.sphere) {
     sphere_surface_point(*tri.sphere, tri.sphere->center + sample_uniform_sphere(u), q, q_error, n);
     return;

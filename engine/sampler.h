@@ -168,15 +168,16 @@ class SobolSampler {
     h = hash_combine(h, (uint64_t(frame) << 32) | pass);
     h = hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
     key_ = hash_combine(h, sample_index >> 32);
+    key_term_ = 0x9e3779b97f4a7c15ULL + (key_ << 6) + (key_ >> 2);
     index_reversed_ = reverse_bits32(uint32_t(sample_index));
     dimension_ = 0;
   }
   float get_1d() {
-    uint64_t h = hash_combine(key_, dimension_++);
+    uint64_t h = dimension_hash();
     return fraction_to_float(scrambled_sobol(shuffled_index(uint32_t(h)), 0, uint32_t(h >> 32)));
   }
   Vec2 get_2d() {
-    uint64_t h = hash_combine(key_, dimension_++);
+    uint64_t h = dimension_hash();
     uint32_t index = shuffled_index(uint32_t(h));
     return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
             fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
@@ -188,7 +189,9 @@ class SobolSampler {
   uint32_t shuffled_index(uint32_t seed) const {
     return reverse_bits32(lk_hash(index_reversed_, seed));
   }
-  uint64_t key_ = 0;
+  // hash_combine(key_, dimension_++), its key-only terms summed once per sample (the same value).
+  uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(dimension_++) + key_term_)); }
+  uint64_t key_ = 0, key_term_ = 0;
   uint32_t index_reversed_ = 0;
   uint32_t dimension_ = 0;
 };

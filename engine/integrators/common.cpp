@@ -50,11 +50,12 @@ RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf
                      float u_light, Vec2 u_point, TraceCounters& counters) {
   LightSample ls;
   if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls)) return RGB(0.0f);
-  RGB f = bsdf.eval(wo, ls.wi);
+  float bsdf_pdf;
+  RGB f = bsdf.eval_pdf(wo, ls.wi, bsdf_pdf);
   if (is_black(f)) return RGB(0.0f);
   ++counters.rays;
   if (!light_visible(ctx, hit, ls)) return RGB(0.0f);
-  float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf.pdf(wo, ls.wi));
+  float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
   float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
   return f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
 }
