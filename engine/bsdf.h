@@ -134,6 +134,15 @@ class Bsdf {
     float go = dot(wo, ng_), gi = dot(s.wi, ng_);
     return s.is_transmission ? go * gi < 0 : go * gi > 0;
   }
+  // Whether sample() reads uc (a lobe choice) and u (a direction); a caller may then skip drawing
+  // the one it does not read (Sampler::skip_1d / skip_2d), which leaves every value unchanged.
+  bool sample_uses_choice() const {
+    return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kUsesChoice; }, lobe_);
+  }
+  bool sample_uses_direction() const {
+    return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kUsesDirection; },
+                      lobe_);
+  }
   // Only delta lobes (smooth conductor, dielectric, thin dielectric): light sampling is useless.
   bool is_delta() const {
     return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kDelta; }, lobe_);

@@ -64,6 +64,8 @@ class IndependentSampler {
     float a = get_1d();
     return {a, get_1d()};
   }
+  void skip_1d() { ++dimension_; }
+  void skip_2d() { dimension_ += 2; }
   uint32_t dimension() const { return dimension_; }
 
  private:
@@ -182,6 +184,8 @@ class SobolSampler {
     return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
             fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
   }
+  void skip_1d() { ++dimension_; }
+  void skip_2d() { ++dimension_; }
   uint32_t dimension() const { return dimension_; }
 
  private:
@@ -223,6 +227,13 @@ class Sampler {
   }
   float get_1d() { return sobol_active_ ? sobol_.get_1d() : independent_.get_1d(); }
   Vec2 get_2d() { return sobol_active_ ? sobol_.get_2d() : independent_.get_2d(); }
+  // Consume the dimension get_1d / get_2d would, without computing its value: for numbers a
+  // caller would not read. Every later number is the one it would have been.
+  void skip_1d() { sobol_active_ ? sobol_.skip_1d() : independent_.skip_1d(); }
+  void skip_2d() { sobol_active_ ? sobol_.skip_2d() : independent_.skip_2d(); }
+  // get_1d / get_2d when `needed`, else the skip and 0.
+  float get_1d_if(bool needed) { return needed ? get_1d() : (skip_1d(), 0.0f); }
+  Vec2 get_2d_if(bool needed) { return needed ? get_2d() : (skip_2d(), Vec2{0.0f, 0.0f}); }
   Kind kind() const { return kind_; }
 
  private:

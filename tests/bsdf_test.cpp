@@ -293,6 +293,47 @@ TEST(BsdfSampling, SampleMatchesEvalAndPdf) {
   EXPECT_GT(delta, 20000);
 }
 
+// sample_uses_choice() / sample_uses_direction() say which random numbers sample() reads; the
+// path tracer skips drawing the others (Sampler::skip_1d / skip_2d). A lobe that declares a
+// number unread must sample the same (bit for bit) whatever that number is, or skipping it would
+// change images. Exact comparison: the same code on the same inputs.
+TEST(BsdfSampling, UnreadRandomNumbersChangeNothing) {
+  std::vector<BsdfParams> kinds = {diffuse(RGB(0.3f, 0.6f, 0.9f)),
+                                   conductor(0),
+                                   conductor(0.4f),
+                                   dielectric(0),
+                                   dielectric(0.5f),
+                                   thin_dielectric(),
+                                   plastic(0),
+                                   plastic(0.3f)};
+  Vec3 ng = normalize(Vec3(0.1f, -0.3f, 1.0f));
+  Vec3 ns = normalize(Vec3(0.4f, 0.1f, 1.0f));
+  Rng rng(23);
+  int unread = 0;
+  for (const BsdfParams& p : kinds) {
+    Bsdf b = Bsdf::make(p, ns, ng);
+    bool uses_uc = b.sample_uses_choice(), uses_u = b.sample_uses_direction();
+    unread += int(!uses_uc) + int(!uses_u);
+    for (int k = 0; k < 4000; ++k) {
+      Vec3 wo = uniform_sphere(rng);
+      float uc = rng.uniform(), uc2 = uses_uc ? uc : rng.uniform();
+      Vec2 u = rng.uniform2(), u2 = uses_u ? u : rng.uniform2();
+      BsdfSample a, c;
+      bool ok_a = b.sample(wo, uc, u, TransportMode::Radiance, a);
+      bool ok_c = b.sample(wo, uc2, u2, TransportMode::Radiance, c);
+      ASSERT_EQ(ok_a, ok_c) << "material type " << int(p.type);
+      if (!ok_a) continue;
+      ASSERT_TRUE(a.wi.x == c.wi.x && a.wi.y == c.wi.y && a.wi.z == c.wi.z && a.f[0] == c.f[0] &&
+                  a.f[1] == c.f[1] && a.f[2] == c.f[2] && a.pdf_solid_angle == c.pdf_solid_angle &&
+                  a.is_delta == c.is_delta && a.is_transmission == c.is_transmission &&
+                  a.eta == c.eta)
+          << "material type " << int(p.type) << " reads a number it declares unread";
+    }
+  }
+  EXPECT_EQ(unread, 6);  // smooth conductor: both; diffuse, rough conductor: uc; smooth and
+                         // thin dielectric: u
+}
+
 // The pdf integrates to at most 1 over the sphere (and to 1 where no sample can be lost).
 // Tolerance 1e-5: the quadrature's absolute error bound (see BsdfChiSquare).
 TEST(BsdfSampling, PdfIntegratesToAtMostOne) {

@@ -310,6 +310,29 @@ TEST(SamplerTest, SobolIsUnbiasedOverPasses) {
     }
 }
 
+// skip_1d / skip_2d consume exactly the dimension get_1d / get_2d would: whatever mix of draws
+// and skips came before, every later number is the one a sampler that drew everything returns.
+TEST(Sampler, SkippedDimensionsLeaveLaterNumbersUnchanged) {
+  for (Sampler::Kind kind :
+       {Sampler::Kind::Independent, Sampler::Kind::Sobol, Sampler::Kind::SobolSequence}) {
+    Sampler all(kind, 16), skipping(kind, 16);
+    for (int sample = 0; sample < 64; ++sample) {
+      all.start_camera_sample(7, 1, 2, 30, 40, uint64_t(sample));
+      skipping.start_camera_sample(7, 1, 2, 30, 40, uint64_t(sample));
+      for (int k = 0; k < 40; ++k) {
+        bool two = (k * 7 + sample) % 3 == 0, skip = (k * 5 + sample) % 4 == 0;
+        if (two) {
+          Vec2 a = all.get_2d(), b = skipping.get_2d_if(!skip);
+          if (!skip) ASSERT_TRUE(a.x == b.x && a.y == b.y) << kind_name(kind) << " slot " << k;
+        } else {
+          float a = all.get_1d(), b = skipping.get_1d_if(!skip);
+          if (!skip) ASSERT_EQ(a, b) << kind_name(kind) << " slot " << k;
+        }
+      }
+    }
+  }
+}
+
 TEST(Sampler, IsAPureFunctionOfItsKey) {
   IndependentSampler a, b;
   a.start_camera_sample(1, 2, 3, 4, 5, 6);

@@ -29,6 +29,9 @@ struct ConductorFresnel {
 struct ConductorBxdf {
   static constexpr bool kTwoSided = true;
   static constexpr bool kDelta = true;
+  // Which of sample()'s random numbers it reads (the sampler skips the others' work).
+  static constexpr bool kUsesChoice = false;     // uc
+  static constexpr bool kUsesDirection = false;  // u
 
   ConductorFresnel fresnel;
 

@@ -21,6 +21,9 @@ namespace rf {
 struct DielectricBxdf {
   static constexpr bool kTwoSided = false;
   static constexpr bool kDelta = true;
+  // Which of sample()'s random numbers it reads (the sampler skips the others' work).
+  static constexpr bool kUsesChoice = true;      // uc
+  static constexpr bool kUsesDirection = false;  // u
 
   float eta = 1.5f;
   RGB tint{1.0f};

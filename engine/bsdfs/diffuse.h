@@ -15,6 +15,9 @@ namespace rf {
 struct DiffuseBxdf {
   static constexpr bool kTwoSided = true;
   static constexpr bool kDelta = false;
+  // Which of sample()'s random numbers it reads (the sampler skips the others' work).
+  static constexpr bool kUsesChoice = false;    // uc
+  static constexpr bool kUsesDirection = true;  // u
 
   RGB reflectance;
 

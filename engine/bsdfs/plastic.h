@@ -46,6 +46,9 @@ namespace rf {
 struct PlasticBxdf {
   static constexpr bool kTwoSided = true;
   static constexpr bool kDelta = false;
+  // Which of sample()'s random numbers it reads (the sampler skips the others' work).
+  static constexpr bool kUsesChoice = true;     // uc
+  static constexpr bool kUsesDirection = true;  // u
 
   RGB reflectance{0.5f};
   RGB tint{1.0f};

@@ -27,6 +27,9 @@ namespace rf {
 struct RoughConductorBxdf {
   static constexpr bool kTwoSided = true;
   static constexpr bool kDelta = false;
+  // Which of sample()'s random numbers it reads (the sampler skips the others' work).
+  static constexpr bool kUsesChoice = false;    // uc
+  static constexpr bool kUsesDirection = true;  // u
 
   TrowbridgeReitz distrib;
   ConductorFresnel fresnel;

@@ -30,6 +30,9 @@ namespace rf {
 struct RoughDielectricBxdf {
   static constexpr bool kTwoSided = false;
   static constexpr bool kDelta = false;
+  // Which of sample()'s random numbers it reads (the sampler skips the others' work).
+  static constexpr bool kUsesChoice = true;     // uc
+  static constexpr bool kUsesDirection = true;  // u
 
   TrowbridgeReitz distrib;
   float eta = 1.5f;

@@ -40,7 +40,7 @@ inline Ray start_camera_sample(const RenderContext& ctx, Sampler& sampler, const
                                int x, int y, uint64_t index, float& filter_weight) {
   sampler.start_camera_sample(ctx.scene.render.seed, task.frame, task.pass, x, y, index);
   FilterSample fs = sample_filter(ctx.scene.film.filter, sampler.get_2d());
-  Vec2 u_lens = sampler.get_2d();
+  Vec2 u_lens = sampler.get_2d_if(ctx.camera.lens_radius() > 0);  // a pinhole reads none
   filter_weight = fs.weight;
   return ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
                                  u_lens);

@@ -40,17 +40,18 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
 
     Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
 
-    // Next-event estimation (the dimensions are drawn either way, so a material change does
-    // not reshuffle the random numbers of later bounces).
-    float u_light = sampler.get_1d();
-    Vec2 u_point = sampler.get_2d();
-    if (!bsdf.is_delta())
-      radiance += beta * light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters);
+    // Next-event estimation. Every vertex consumes the same dimensions whether or not it reads
+    // them (skipped ones cost nothing), so a material change does not reshuffle the random
+    // numbers of later bounces.
+    const bool nee = !bsdf.is_delta();
+    float u_light = sampler.get_1d_if(nee);
+    Vec2 u_point = sampler.get_2d_if(nee);
+    if (nee) radiance += beta * light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters);
 
     // BSDF sampling for the next vertex.
     BsdfSample bs;
-    float uc = sampler.get_1d();
-    Vec2 u = sampler.get_2d();
+    float uc = sampler.get_1d_if(bsdf.sample_uses_choice());
+    Vec2 u = sampler.get_2d_if(bsdf.sample_uses_direction());
     if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) break;
     float cos_i = std::fabs(dot(bs.wi, bsdf.shading_normal()));
     beta *= bs.f * (cos_i / bs.pdf_solid_angle);
@@ -61,8 +62,9 @@ RGB path_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceCoun
     prev_n = receiver_normal(bsdf, wo);
     ray = ctx.accel.spawn(hit, bs.wi);
 
-    float u_rr = sampler.get_1d();
-    if (depth + 1 >= settings.rr_min_depth) {
+    const bool roulette = depth + 1 >= settings.rr_min_depth;
+    float u_rr = sampler.get_1d_if(roulette);
+    if (roulette) {
       float survive = std::min(1.0f, max_component(beta * eta_scale));
       if (u_rr >= survive) break;
       beta = beta / survive;
