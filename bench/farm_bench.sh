@@ -17,6 +17,7 @@ DIR=$(mktemp -d)
 trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$DIR"' EXIT
 
 start_coordinator() {
+  : >"$DIR/coord-$1.log"  # exists before the poll below reads it (the & subshell opens it late)
   $B coordinator --listen 127.0.0.1:0 --state-dir "$DIR/state-$1" >"$DIR/coord-$1.log" 2>&1 &
   COORD=$!
   for _ in $(seq 500); do

@@ -34,6 +34,7 @@ DIR=$(mktemp -d /tmp/rayfarm-soak.XXXXXX)
 trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
 echo "soak: $WORKERS simulated workers, $JOBS jobs of $PASSES passes, $(nproc) cores; in $DIR"
 
+: >"$DIR/coordinator.log"  # exists before the poll below reads it (the & subshell opens it late)
 $B coordinator --listen 127.0.0.1:0 --state-dir "$DIR/state" --lease-seconds 10 \
   >"$DIR/coordinator.log" 2>&1 &
 COORD=$!

@@ -258,6 +258,7 @@ T_MERGE=$((SECONDS - T_MERGE))
 farm() {
   local tag=$1 bin=$2 dir="$WORK/farm-$1"
   mkdir -p "$dir/out"
+  : >"$dir/coordinator.log"  # exists before the poll below reads it (the & subshell opens it late)
   "$bin" coordinator --listen 127.0.0.1:0 --state-dir "$dir/state" >"$dir/coordinator.log" 2>&1 &
   local coord=$!
   PIDS+=("$coord")
