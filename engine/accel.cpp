@@ -206,6 +206,31 @@ bool Accel::visible(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) 
   return !occluded(o, d, 1.0f - 1e-4f);
 }
 
+void Accel::cast8(const Ray* rays, int n, float* t) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  alignas(32) RTCRayHit8 rh;
+  alignas(32) int valid[8];
+  for (int i = 0; i < 8; ++i) {
+    const bool on = i < n;
+    valid[i] = on ? -1 : 0;
+    const Ray& r = rays[on ? i : 0];
+    rh.ray.org_x[i] = r.o.x, rh.ray.org_y[i] = r.o.y, rh.ray.org_z[i] = r.o.z;
+    rh.ray.dir_x[i] = r.d.x, rh.ray.dir_y[i] = r.d.y, rh.ray.dir_z[i] = r.d.z;
+    rh.ray.tnear[i] = 0.0f;
+    rh.ray.tfar[i] = r.tmax;
+    rh.ray.time[i] = 0.0f;
+    rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.ray.id[i] = unsigned(i);
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+  }
+  rtcIntersect8(valid, rtc_scene_, &ctx, &rh);
+  for (int i = 0; i < n; ++i)
+    t[i] = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? kInf : rh.ray.tfar[i];
+}
+
 float Accel::cast(Vec3 o, Vec3 d) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);

@@ -94,6 +94,9 @@ class Accel {
 
   // Embree's bare cast for the baseline benchmark: hit distance or infinity, no shading.
   float cast(Vec3 o, Vec3 d) const;
+  // The same for up to 8 rays at once with Embree's 8-wide packet query (rtcIntersect8), for the
+  // benchmark that asks whether packets pay (bench/bench.cpp); t[i] for i < n.
+  void cast8(const Ray* rays, int n, float* t) const;
 
   const Scene& scene() const { return scene_; }
   // The mesh of a surface id (see above): its material, emission and object-space geometry.

@@ -19,8 +19,10 @@ TEST(Accel, SpawnedRaysDoNotHitTheirOwnSurfaceFarFromTheOrigin) {
   Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
   Mesh quad;
   quad.material = 0;
-  Mat4 xf = Mat4::translate({1e4f, 2e4f, -3e4f}) * Mat4::rotate({1, 1, 0}, 37) * Mat4::scale(Vec3(500));
-  for (Vec3 p : {Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(1, 1, 0), Vec3(-1, 1, 0)}) quad.positions.push_back(xf.point(p));
+  Mat4 xf =
+      Mat4::translate({1e4f, 2e4f, -3e4f}) * Mat4::rotate({1, 1, 0}, 37) * Mat4::scale(Vec3(500));
+  for (Vec3 p : {Vec3(-1, -1, 0), Vec3(1, -1, 0), Vec3(1, 1, 0), Vec3(-1, 1, 0)})
+    quad.positions.push_back(xf.point(p));
   quad.indices = {0, 1, 2, 0, 2, 3};
   Scene s = test::make_scene({m}, {quad}, {0, 0, 0}, {0, 0, -1}, 4, 4, "far");
   Accel accel(s);
@@ -44,7 +46,6 @@ TEST(Accel, SpawnedRaysDoNotHitTheirOwnSurfaceFarFromTheOrigin) {
   EXPECT_EQ(self_hits, 0);
 }
 
-
 // Exact spheres (Embree's sphere primitive): hits at the analytic distance with the outward
 // normal, make_sphere's uv, and rays spawned from either side (reflection outside, transmission
 // inside) never re-hit their own surface at the origin of the next ray, also far from the origin
@@ -62,7 +63,8 @@ void check_sphere_hits(const Accel& accel, const SphereShape& s, uint64_t seed) 
   for (int i = 0; i < 20000; ++i) {
     smp.start_light_path(seed, 0, 0, uint64_t(i));
     Vec3 target_n = sample_uniform_sphere(smp.get_2d());
-    Vec3 o = s.center + target_n * (s.radius * 3.0f) + sample_uniform_sphere(smp.get_2d()) * s.radius;
+    Vec3 o =
+        s.center + target_n * (s.radius * 3.0f) + sample_uniform_sphere(smp.get_2d()) * s.radius;
     Vec3 d = normalize(s.center + target_n * s.radius * 0.5f - o);
     SurfaceHit hit;
     ASSERT_TRUE(accel.intersect(Ray{o, d, kInf}, hit)) << i;
@@ -88,10 +90,52 @@ void check_sphere_hits(const Accel& accel, const SphereShape& s, uint64_t seed) 
   EXPECT_EQ(self_hits, 0);
 }
 
+// The benchmark's packet query (Accel::cast8) answers like the single-ray one, for full and
+// partial packets (lanes past n unused), hits and misses: a triangle quad and an exact sphere.
+TEST(Accel, PacketCastsEqualSingleCasts) {
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
+  Mesh quad;
+  quad.material = 0;
+  for (Vec3 p : {Vec3(-1, -1, -3), Vec3(1, -1, -3), Vec3(1, 1, -3), Vec3(-1, 1, -3)})
+    quad.positions.push_back(p);
+  quad.indices = {0, 1, 2, 0, 2, 3};
+  Mesh sphere;
+  sphere.sphere = test_sphere({0.5f, 0.2f, -2.0f}, 0.4f);
+  Scene s = test::make_scene({m}, {quad, sphere}, {0, 0, 0}, {0, 0, -1}, 4, 4, "packets");
+  Accel accel(s);
+  IndependentSampler smp;
+  int hits = 0, misses = 0, quad_hits = 0, sphere_hits = 0, quad_differ = 0, sphere_differ = 0;
+  for (int packet = 0; packet < 2000; ++packet) {
+    Ray rays[8];
+    const int n = 1 + packet % 8;
+    for (int i = 0; i < n; ++i) {
+      smp.start_light_path(5, 0, 0, uint64_t(packet * 8 + i));
+      Vec2 u = smp.get_2d();
+      rays[i] = Ray{{0, 0, 0}, normalize(Vec3(1.6f * u.x - 0.8f, 1.6f * u.y - 0.8f, -1.0f)), kInf};
+    }
+    float t[8];
+    accel.cast8(rays, n, t);
+    for (int i = 0; i < n; ++i) {
+      float single = accel.cast(rays[i].o, rays[i].d);
+      ASSERT_EQ(t[i] < kInf, single < kInf) << "packet " << packet << " lane " << i;
+      if (single < kInf) {
+        EXPECT_NEAR(t[i], single, 1e-5f * single) << "packet " << packet << " lane " << i;
+        (single > 2.9f ? quad_hits : sphere_hits) += 1;
+        if (t[i] != single) (single > 2.9f ? quad_differ : sphere_differ) += 1;
+      }
+      (t[i] < kInf ? hits : misses) += 1;
+    }
+  }
+  EXPECT_GT(hits, 1000);
+  EXPECT_GT(misses, 1000);
+  std::printf("quad: %d of %d hits differ in t; sphere: %d of %d\n", quad_differ, quad_hits,
+              sphere_differ, sphere_hits);
+}
+
 TEST(AccelSphere, HitsAreAnalyticAndSpawnedRaysAreRobust) {
   Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
-  for (SphereShape s : {test_sphere({0.3f, -0.2f, 0.1f}, 0.7f), test_sphere({1e4f, -2e4f, 3e4f}, 50.0f),
-                        test_sphere({2, 0, 0}, 1e-3f)}) {
+  for (SphereShape s : {test_sphere({0.3f, -0.2f, 0.1f}, 0.7f),
+                        test_sphere({1e4f, -2e4f, 3e4f}, 50.0f), test_sphere({2, 0, 0}, 1e-3f)}) {
     Mesh sphere;
     sphere.sphere = s;
     Scene sc = test::make_scene({m}, {sphere}, {0, 0, 0}, {0, 0, -1}, 4, 4, "sphere");
@@ -111,7 +155,8 @@ TEST(AccelSphere, UvFollowsTheUvSphereParametrisation) {
   Mesh exact, tess;
   exact.sphere = turned;
   MeshData d = tessellate_sphere(turned, 64, 128);
-  tess.positions = d.positions, tess.normals = d.normals, tess.uvs = d.uvs, tess.indices = d.indices;
+  tess.positions = d.positions, tess.normals = d.normals, tess.uvs = d.uvs,
+  tess.indices = d.indices;
   Scene a = test::make_scene({m}, {exact}, {0, 0, 0}, {0, 0, -1}, 4, 4, "uv_exact");
   Scene b = test::make_scene({m}, {tess}, {0, 0, 0}, {0, 0, -1}, 4, 4, "uv_tess");
   Accel ea(a), eb(b);
@@ -137,7 +182,8 @@ TEST(AccelSphere, InstancedSphereHitsLikeThePlacedOne) {
   unit.sphere = test_sphere({0, 0, 0}, 1.0f);
   Scene sc = test::make_scene({m}, {}, {0, 0, 0}, {0, 0, -1}, 4, 4, "inst_sphere");
   sc.objects.push_back({"ball", {unit}});
-  Mat4 xf = Mat4::translate({3, -1, 2}) * Mat4::rotate({1, 2, 3}, 50) * Mat4::scale(Vec3(-0.5f, 0.5f, 0.5f));
+  Mat4 xf = Mat4::translate({3, -1, 2}) * Mat4::rotate({1, 2, 3}, 50) *
+            Mat4::scale(Vec3(-0.5f, 0.5f, 0.5f));
   sc.instances.push_back({0, xf});
   Accel accel(sc);
   check_sphere_hits(accel, test_sphere({3, -1, 2}, 0.5f), 7);
