@@ -109,23 +109,16 @@ void packet_comparison(const Renderer& r, int spp) {
       }
   // Rays/s of one way of casting all rays, in chunks of 4096 over all cores.
   auto rate = [&](const std::vector<Ray>& rays, bool packets) {
-    std::atomic<uint64_t> hits{0};
     auto t0 = Clock::now();
     const size_t chunk = 4096;
     tbb::parallel_for(size_t(0), (rays.size() + chunk - 1) / chunk, [&](size_t c) {
       size_t b = c * chunk, e = std::min(rays.size(), b + chunk);
-      uint64_t n = 0;
       float t[8];
-      if (packets) {
-        for (size_t i = b; i < e; i += 8) {
-          int m = int(std::min<size_t>(8, e - i));
-          r.accel().cast8(&rays[i], m, t);
-          for (int j = 0; j < m; ++j) n += t[j] < kInf;
-        }
-      } else {
-        for (size_t i = b; i < e; ++i) n += r.accel().cast(rays[i].o, rays[i].d) < kInf;
-      }
-      hits += n;
+      if (packets)
+        for (size_t i = b; i < e; i += 8)
+          r.accel().cast8(&rays[i], int(std::min<size_t>(8, e - i)), t);
+      else
+        for (size_t i = b; i < e; ++i) r.accel().cast(rays[i].o, rays[i].d);
     });
     return double(rays.size()) / seconds_since(t0);
   };
