@@ -92,6 +92,10 @@ void check_sphere_hits(const Accel& accel, const SphereShape& s, uint64_t seed) 
 
 // The benchmark's packet query (Accel::cast8) answers like the single-ray one, for full and
 // partial packets (lanes past n unused), hits and misses: a triangle quad and an exact sphere.
+// Hit or miss must agree exactly; t within 1e-5 relative, because Embree's packet kernel for
+// spheres rounds differently from its single-ray one (about 1 in 8 sphere hits differ in the
+// last bits here; triangles agree bit for bit), while a wrong lane or component is off by far
+// more. The counts of exact differences are printed, not asserted: they depend on Embree's ISA.
 TEST(Accel, PacketCastsEqualSingleCasts) {
   Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
   Mesh quad;
