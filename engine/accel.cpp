@@ -75,6 +75,25 @@ void transform_hit_point(const Mat4& m, Vec3& p, Vec3& p_error) {
   p = w, p_error = e;
 }
 
+// The distance along o + t d to the sphere, computed in double from the ray and the sphere alone:
+// the root of |o + t d - c|^2 = r^2 nearest Embree's t_embree (which picks the near or far one).
+// Embree's single-ray and packet kernels round t differently in the last bits; this way a hit
+// does not depend on which of them found it. Embree's t where the ray only grazes.
+float sphere_distance(const SphereShape& s, Vec3 o, Vec3 d, float t_embree) {
+  const double ox = double(o.x) - s.center.x, oy = double(o.y) - s.center.y,
+               oz = double(o.z) - s.center.z;
+  const double a = double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z;
+  const double b = ox * d.x + oy * d.y + oz * d.z;  // half the linear coefficient
+  const double c = ox * ox + oy * oy + oz * oz - double(s.radius) * s.radius;
+  const double disc = b * b - a * c;
+  if (!(disc >= 0) || !(a > 0)) return t_embree;
+  // The two roots without cancellation: q / a and c / q.
+  const double q = b >= 0 ? -(b + std::sqrt(disc)) : -(b - std::sqrt(disc));
+  const double t0 = q / a, t1 = q != 0 ? c / q : t0;
+  const double t = std::fabs(t0 - t_embree) <= std::fabs(t1 - t_embree) ? t0 : t1;
+  return std::isfinite(t) ? float(t) : t_embree;
+}
+
 }  // namespace
 
 Accel::Accel(const Scene& scene) : scene_(scene) {
@@ -136,33 +155,67 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(rtc_scene_, &ctx, &rh);
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+  hit_from_embree(ray, rh.hit.geomID, rh.hit.primID, rh.hit.instID[0], rh.hit.u, rh.hit.v,
+                  rh.ray.tfar, hit);
+  return true;
+}
 
+void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* found) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
+  const RTCHit16& h = packet.rh.hit;
+  for (int i = 0; i < n; ++i) {
+    if (!packet.active(i)) continue;
+    found[i] = h.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+    if (found[i])
+      hit_from_embree(packet.ray(i), h.geomID[i], h.primID[i], h.instID[0][i], h.u[i], h.v[i],
+                      packet.rh.ray.tfar[i], hits[i]);
+  }
+}
+
+void Accel::occluded_packet(RayPacket& packet, int n, bool* blocked) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  rtcOccluded16(packet.valid, rtc_scene_, &ctx, &packet.rh.ray);
+  for (int i = 0; i < n; ++i)
+    if (packet.active(i)) blocked[i] = packet.rh.ray.tfar[i] < 0;  // Embree: -inf on a hit
+}
+
+void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsigned inst_id, float u,
+                            float v, float t, SurfaceHit& hit) const {
   const Instance* inst = nullptr;
-  uint32_t surface = rh.hit.geomID;
-  if (rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID) {
-    inst = &scene_.instances[rh.hit.instID[0] - scene_.meshes.size()];
-    surface = object_first_surface_[inst->object] + rh.hit.geomID;
+  uint32_t surface = geom;
+  if (inst_id != RTC_INVALID_GEOMETRY_ID) {
+    inst = &scene_.instances[inst_id - scene_.meshes.size()];
+    surface = object_first_surface_[inst->object] + geom;
   }
   const Mesh& m = *surfaces_[surface];
-  uint32_t prim = rh.hit.primID;
-  hit.t = rh.ray.tfar;
+  hit.t = t;
   hit.mesh = surface;
   hit.prim = prim;
   if (m.sphere) {
-    // Rebuilt from the ray (in the object's space for an instance) and projected onto the sphere.
-    Vec3 near = ray.o + ray.d * rh.ray.tfar;
-    if (inst) near = instance_inverse_[rh.hit.instID[0] - scene_.meshes.size()].point(near);
+    // Rebuilt from the ray (in the object's space for an instance) at our own distance and
+    // projected onto the sphere.
+    Vec3 o = ray.o, d = ray.d;
+    if (inst) {
+      const Mat4& inv = instance_inverse_[inst_id - scene_.meshes.size()];
+      o = inv.point(o), d = inv.vector(d);
+    }
+    t = sphere_distance(*m.sphere, o, d, t);
+    hit.t = t;
+    Vec3 near = o + d * t;
     sphere_surface_point(*m.sphere, near, hit.p, hit.p_error, hit.ng, &hit.uv);
     hit.ns = hit.ng;
     if (inst) {
       transform_hit_point(inst->to_world, hit.p, hit.p_error);
       hit.ng = hit.ns = normalize(inst->to_world.normal(hit.ng));
     }
-    return true;
+    return;
   }
   uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
   Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
-  float b1 = rh.hit.u, b2 = rh.hit.v, b0 = 1.0f - b1 - b2;
+  float b1 = u, b2 = v, b0 = 1.0f - b1 - b2;
   hit.p = b0 * p0 + b1 * p1 + b2 * p2;
   // Error of the barycentric interpolation (pbrt-v4 Triangle::InteractionFromIntersection).
   hit.p_error = gamma_n(7) * (abs(b0 * p0) + abs(b1 * p1) + abs(b2 * p2));
@@ -186,7 +239,6 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   } else {
     hit.uv = {b1, b2};
   }
-  return true;
 }
 
 bool Accel::occluded(Vec3 o, Vec3 d, float tmax) const {
@@ -196,14 +248,6 @@ bool Accel::occluded(Vec3 o, Vec3 d, float tmax) const {
   init_ray(r, o, d, tmax);
   rtcOccluded1(rtc_scene_, &ctx, &r);
   return r.tfar < 0;  // Embree sets tfar to -inf on a hit
-}
-
-bool Accel::visible(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const {
-  Vec3 o = offset_ray_origin(from.p, from.p_error, from.ng, to - from.p);
-  Vec3 target = offset_ray_origin(to, to_error, to_ng, o - to);
-  Vec3 d = target - o;
-  // Direction unnormalised: t in (0, 1) spans the segment; stop just short of the target.
-  return !occluded(o, d, 1.0f - 1e-4f);
 }
 
 void Accel::cast8(const Ray* rays, int n, float* t) const {

@@ -38,25 +38,39 @@ void add_escaped(const RenderContext& ctx, Vec3 dir, bool prev_delta, float prev
   radiance += beta * le * w;
 }
 
+Ray light_shadow_ray(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
+  if (ls.is_infinite) return ctx.accel.spawn(hit, ls.wi);
+  return ctx.accel.shadow_ray(hit, ls.p, ls.p_error, ls.n);
+}
+
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
-  if (ls.is_infinite) {
-    Ray r = ctx.accel.spawn(hit, ls.wi);
-    return !ctx.accel.occluded(r.o, r.d, kInf);
-  }
-  return ctx.accel.visible(hit, ls.p, ls.p_error, ls.n);
+  Ray r = light_shadow_ray(ctx, hit, ls);
+  return !ctx.accel.occluded(r.o, r.d, r.tmax);
+}
+
+bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf,
+                                 Vec3 wo, float u_light, Vec2 u_point, RGB& contribution,
+                                 Ray& shadow) {
+  contribution = RGB(0.0f);
+  LightSample ls;
+  if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls)) return false;
+  float bsdf_pdf;
+  RGB f = bsdf.eval_pdf(wo, ls.wi, bsdf_pdf);
+  if (is_black(f)) return false;
+  shadow = light_shadow_ray(ctx, hit, ls);
+  float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
+  float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
+  contribution = f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
+  return true;
 }
 
 RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
                      float u_light, Vec2 u_point, TraceCounters& counters) {
-  LightSample ls;
-  if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls)) return RGB(0.0f);
-  float bsdf_pdf;
-  RGB f = bsdf.eval_pdf(wo, ls.wi, bsdf_pdf);
-  if (is_black(f)) return RGB(0.0f);
+  RGB c;
+  Ray shadow;
+  if (!light_sample_mis_unshadowed(ctx, hit, bsdf, wo, u_light, u_point, c, shadow))
+    return RGB(0.0f);
   ++counters.rays;
-  if (!light_visible(ctx, hit, ls)) return RGB(0.0f);
-  float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
-  float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
-  return f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
+  return ctx.accel.occluded(shadow.o, shadow.d, shadow.tmax) ? RGB(0.0f) : c;
 }
 }  // namespace rf

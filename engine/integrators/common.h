@@ -75,7 +75,9 @@ struct TraceCounters {
 // width, and the BSDF they make.
 BsdfParams material_params_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
 Bsdf bsdf_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width);
-// Whether a light sample is visible from a hit (a ray to infinity for infinite lights).
+// The shadow ray from a hit to a light sample (a ray to infinity for infinite lights).
+Ray light_shadow_ray(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);
+// Whether a light sample is visible from a hit: nothing blocks light_shadow_ray.
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls);
 
 // The receiver normal light selection may use at a surface with this BSDF and outgoing direction
@@ -90,6 +92,12 @@ inline Vec3 receiver_normal(const Bsdf& bsdf, Vec3 wo) {
 // against BSDF sampling (1 for delta lights); f * Le * |cos| * w / pdf, or 0 when occluded.
 RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf, Vec3 wo,
                      float u_light, Vec2 u_point, TraceCounters& counters);
+// light_sample_mis without its shadow test, for callers that cast shadow rays in packets: the
+// contribution if unoccluded and the shadow ray that decides it. False (contribution 0, no ray to
+// cast) when no light was sampled or the BSDF is black towards it.
+bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf,
+                                 Vec3 wo, float u_light, Vec2 u_point, RGB& contribution,
+                                 Ray& shadow);
 // A camera path with throughput beta left the scene in direction dir: adds the environment's
 // radiance to `radiance`, weighted by the power heuristic against light sampling when the last
 // scattering was not a delta one (prev_bsdf_pdf: that BSDF sample's solid-angle density).

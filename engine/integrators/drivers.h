@@ -22,7 +22,9 @@
 #include <time.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
+#include <type_traits>
 #include <vector>
 
 #include "engine/filter.h"
@@ -151,11 +153,21 @@ inline void environment_camera_samples(const RenderContext& ctx, const TaskKey& 
 
 }  // namespace driver_detail
 
+// An estimator that traces the camera samples of one pixel together (render_camera_paths):
+// estimate(rays, samplers, n, radiance, counters) for n <= Accel::kPacket samples.
+template <class Estimate>
+constexpr bool kPacketEstimator =
+    std::is_invocable_v<Estimate&, const Ray*, Sampler*, int, RGB*, TraceCounters&>;
+
 // One pass of camera paths over task.rect: spp_per_pass samples per pixel, each
 // estimate(ray, sampler, counters) -> RGB radiance along the camera ray. With kSplats the rect
 // must be the whole frame and the estimator is estimate(ray, sampler, splats, counters): rows are
 // traced in chunks whose splat lists are added in chunk order, and the buffer's light-path count
 // is its camera sample count (every camera sample carries one light subpath).
+// A packet estimator (kPacketEstimator, no splats) gets the pixel's samples in groups of
+// Accel::kPacket in sample order, each with its own sampler, and returns their radiances: the
+// groups depend on the pixel and the pass only, never on the tile, so tiles stay bit-identical
+// to the whole frame.
 template <bool kSplats, class Estimate>
 SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, bool parallel,
                                  Estimate&& estimate) {
@@ -173,21 +185,42 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
     double t0 = driver_detail::thread_cpu_seconds();
     TraceCounters counters;
     uint64_t nonfinite = 0;
-    Sampler sampler(kind, ctx.scene.render.spp_per_pass());
-    SplatTarget target{splats, w, h, &ctx.scene.film.filter};
-    for (int y = y_begin; y < y_end; ++y)
-      for (int x = rect.x0; x < rect.x1(); ++x)
-        for (uint64_t s = 0; s < spp; ++s) {
-          float filter_weight;
-          Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
-          if (aovs) buf.add_aov_sample(x, y, aov_sample(ctx, ray, counters));
-          RGB l;
-          if constexpr (kSplats)
-            l = estimate(ray, sampler, target, counters);
-          else
-            l = estimate(ray, sampler, counters);
-          buf.add_sample(x, y, l * filter_weight, nonfinite);
-        }
+    if constexpr (!kSplats && kPacketEstimator<Estimate>) {
+      constexpr int K = Accel::kPacket;
+      std::array<Sampler, K> samplers;
+      samplers.fill(Sampler(kind, spp));
+      Ray rays[K];
+      float filter_weight[K];
+      RGB l[K];
+      for (int y = y_begin; y < y_end; ++y)
+        for (int x = rect.x0; x < rect.x1(); ++x)
+          for (uint64_t s0 = 0; s0 < spp; s0 += K) {
+            const int n = int(std::min<uint64_t>(K, spp - s0));
+            for (int i = 0; i < n; ++i) {
+              rays[i] = start_camera_sample(ctx, samplers[size_t(i)], task, x, y, s0 + uint64_t(i),
+                                            filter_weight[i]);
+              if (aovs) buf.add_aov_sample(x, y, aov_sample(ctx, rays[i], counters));
+            }
+            estimate(static_cast<const Ray*>(rays), samplers.data(), n, l, counters);
+            for (int i = 0; i < n; ++i) buf.add_sample(x, y, l[i] * filter_weight[i], nonfinite);
+          }
+    } else {
+      Sampler sampler(kind, spp);
+      SplatTarget target{splats, w, h, &ctx.scene.film.filter};
+      for (int y = y_begin; y < y_end; ++y)
+        for (int x = rect.x0; x < rect.x1(); ++x)
+          for (uint64_t s = 0; s < spp; ++s) {
+            float filter_weight;
+            Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
+            if (aovs) buf.add_aov_sample(x, y, aov_sample(ctx, ray, counters));
+            RGB l;
+            if constexpr (kSplats)
+              l = estimate(ray, sampler, target, counters);
+            else
+              l = estimate(ray, sampler, counters);
+            buf.add_sample(x, y, l * filter_weight, nonfinite);
+          }
+    }
     tally.add(counters, t0, nonfinite);
   };
 

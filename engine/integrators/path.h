@@ -17,8 +17,15 @@
 #include <string>
 
 #include "engine/integrators/module.h"
+#include "engine/math.h"
 
 namespace rf {
+
+// The radiances of n <= Accel::kPacket camera samples of one pixel (rays started with their
+// samplers): traced together with Embree's packet queries when `packets` and n > 1, else one by
+// one with single-ray queries; the same bits either way.
+void path_radiance(const RenderContext& ctx, const Ray* rays, Sampler* samplers, int n,
+                   RGB* radiance, TraceCounters& counters, bool packets = true);
 
 struct PathIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "path";
