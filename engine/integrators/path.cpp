@@ -136,7 +136,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
     for (int i = 0; i < n; ++i)
-      if (nee_done[i])  // path_radiance adds beta * (term or 0) at every NEE vertex
+      if (nee_done[i])  // beta * (term or 0) at every NEE vertex, occluded or not, as K = 1 adds
         radiance[i] +=
             lanes[i].nee_beta * (shadow.active(i) && !blocked[i] ? lanes[i].nee : RGB(0.0f));
   }
