@@ -134,46 +134,33 @@ void packet_comparison(const Renderer& r, int spp) {
 }
 
 // The path tracer's two ways of casting (path_radiance): each pixel's samples one at a time with
-// single-ray queries, and 16 at a time in lockstep with packet queries; one pass of the frame on
-// all cores each, the scene's sampler, three rounds alternating the two (the best of each: this
-// VM's speed drifts by 10-30% over seconds). Samples/s of both, and how many samples differ in any
-// bit (0 is path.cpp's contract).
-void path_packet_comparison(const Renderer& r, int spp) {
+// single-ray queries, and 16 at a time in lockstep with packet queries; one pass of the frame
+// through the render driver on all cores each, three rounds alternating the two (the best of
+// each: this VM's speed drifts by 10-30% over seconds). Samples/s of both, and how many pixel
+// sums differ in any bit (0 is path.cpp's contract).
+void path_packet_comparison(const Renderer& r) {
   const RenderContext& ctx = r.context();
-  const Scene& s = r.scene();
-  const int w = s.film.width, h = s.film.height;
-  const Sampler::Kind kind = kind_from_name(s.render.sampler);
-  const TaskKey task{0, Rect{0, 0, w, h}, 0};
-  std::vector<RGB> out[2];
+  const TaskKey task{0, Rect{0, 0, r.scene().film.width, r.scene().film.height}, 0};
+  SampleBuffer out[2];
   double rate[2] = {0, 0};
   for (int round = 0; round < 6; ++round) {
-    const int mode = round % 2;
-    out[mode].resize(size_t(w) * size_t(h) * size_t(spp));
+    const bool packets = round % 2 == 1;
     auto t0 = Clock::now();
-    tbb::parallel_for(0, h, [&](int y) {
-      TraceCounters counters;
-      std::vector<Sampler> samplers(size_t(Accel::kPacket), Sampler(kind, uint64_t(spp)));
-      Ray rays[Accel::kPacket];
-      float filter_weight;
-      for (int x = 0; x < w; ++x)
-        for (int s0 = 0; s0 < spp; s0 += Accel::kPacket) {
-          const int n = std::min(Accel::kPacket, spp - s0);
-          for (int i = 0; i < n; ++i)
-            rays[i] = start_camera_sample(ctx, samplers[size_t(i)], task, x, y, uint64_t(s0 + i),
-                                          filter_weight);
-          RGB* l = &out[mode][(size_t(y) * size_t(w) + size_t(x)) * size_t(spp) + size_t(s0)];
-          path_radiance(ctx, rays, samplers.data(), n, l, counters, mode == 1);
-        }
-    });
-    rate[mode] = std::max(rate[mode], double(out[mode].size()) / seconds_since(t0));
+    out[packets] = render_camera_paths<false>(
+        ctx, task, true,
+        [&](const Ray* rays, Sampler* samplers, int n, RGB* radiance, TraceCounters& counters) {
+          path_radiance(ctx, rays, samplers, n, radiance, counters, packets);
+        });
+    rate[packets] =
+        std::max(rate[packets], double(out[packets].total_samples()) / seconds_since(t0));
   }
   size_t differ = 0;
-  for (size_t i = 0; i < out[0].size(); ++i)
-    differ += std::memcmp(&out[0][i], &out[1][i], sizeof(RGB)) != 0;
+  for (size_t i = 0; i < out[0].sum.size(); i += 3)
+    differ += std::memcmp(&out[0].sum[i], &out[1].sum[i], 3 * sizeof(out[0].sum[i])) != 0;
   std::printf(
       "  path, single-ray queries vs 16-sample packets: %.3f / %.3f Msamples/s (x%.2f), %zu of %zu "
-      "samples differ\n",
-      rate[0] / 1e6, rate[1] / 1e6, rate[1] / rate[0], differ, out[0].size());
+      "pixels differ\n",
+      rate[0] / 1e6, rate[1] / 1e6, rate[1] / rate[0], differ, out[0].sum.size() / 3);
 }
 
 void bench_scene(const std::string& label, const Scene& scene, int spp) {
@@ -198,7 +185,7 @@ void bench_scene(const std::string& label, const Scene& scene, int spp) {
       label.c_str(), tris, build_s, samples / secs / 1e6, path_rays / 1e6, bare / 1e6,
       path_rays / bare);
   packet_comparison(r, spp);
-  path_packet_comparison(r, spp);
+  path_packet_comparison(r);
 }
 
 // The Cornell box plus about `triangles` triangles of rippled spheres: one diffuse sphere, or four

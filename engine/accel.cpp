@@ -191,7 +191,6 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
     surface = object_first_surface_[inst->object] + geom;
   }
   const Mesh& m = *surfaces_[surface];
-  hit.t = t;
   hit.mesh = surface;
   hit.prim = prim;
   if (m.sphere) {
@@ -202,9 +201,8 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
       const Mat4& inv = instance_inverse_[inst_id - scene_.meshes.size()];
       o = inv.point(o), d = inv.vector(d);
     }
-    t = sphere_distance(*m.sphere, o, d, t);
-    hit.t = t;
-    Vec3 near = o + d * t;
+    hit.t = sphere_distance(*m.sphere, o, d, t);
+    Vec3 near = o + d * hit.t;
     sphere_surface_point(*m.sphere, near, hit.p, hit.p_error, hit.ng, &hit.uv);
     hit.ns = hit.ng;
     if (inst) {
@@ -213,6 +211,7 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
     }
     return;
   }
+  hit.t = t;
   uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
   Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
   float b1 = u, b2 = v, b0 = 1.0f - b1 - b2;

@@ -88,12 +88,13 @@ class Accel {
   // The same queries for up to kPacket rays at once, through Embree's 16-wide packet queries.
   // A RayPacket holds the rays in Embree's layout between queries: set(i, ray) makes lane i
   // active with that ray, clear(i) inactive; the queries trace the active lanes only and give,
-  // lane by lane, what intersect / occluded give for the same ray (on triangles; on Embree's
-  // sphere primitive the packet kernel may round t differently in the last bits, so a caller that
-  // must be bit-identical across tiles forms its packets from a fixed set of samples: one
-  // pixel's, see the path integrator). Coherent rays (the samples of one pixel, shadow rays
-  // towards one light) traverse the BVH together: 1.3x to 3x the single-ray rate
-  // (docs/performance.md).
+  // lane by lane, what intersect / occluded give for the same ray: Embree's triangle kernels agree
+  // bit for bit, and a sphere hit takes rayfarm's own distance (hit_from_embree), since Embree's
+  // packet and single-ray sphere kernels round t differently. A grazing occlusion test could
+  // still differ between kernels, so a caller that must be bit-identical across tiles forms its
+  // packets from a fixed set of samples (one pixel's, see the path integrator). Coherent rays
+  // (the samples of one pixel, shadow rays towards one light) traverse the BVH together: 1.3x to
+  // 3x the single-ray rate (docs/performance.md).
   static constexpr int kPacket = 16;
   struct RayPacket {
     RayPacket() { std::memset(static_cast<void*>(this), 0, sizeof(*this)); }
@@ -116,7 +117,7 @@ class Accel {
     alignas(64) RTCRayHit16 rh;
     alignas(64) int valid[kPacket];
   };
-  // Closest hits of the active lanes i < n: found[i], and hits[i] when found (t in rh.ray.tfar).
+  // Closest hits of the active lanes i < n: found[i], and hits[i] when found.
   void intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* found) const;
   // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i], i < n.
   void occluded_packet(RayPacket& packet, int n, bool* blocked) const;
