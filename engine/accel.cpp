@@ -165,6 +165,29 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
   rtcInitIntersectContext(&ctx);
   rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
   const RTCHit16& h = packet.rh.hit;
+  // The lanes' hits are scattered over the meshes: fetch every lane's index triple first, then
+  // its vertices, so that the lanes' cache misses overlap instead of following one another (on a
+  // million triangles, hit_from_embree was 12% of a render waiting on them).
+  const Mesh* meshes[kPacket];
+  for (int i = 0; i < n; ++i) {
+    meshes[i] = nullptr;
+    if (!packet.active(i) || h.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    const Mesh& m = *surfaces_[surface_of(h.geomID[i], h.instID[0][i])];
+    if (m.sphere) continue;
+    meshes[i] = &m;
+    __builtin_prefetch(&m.indices[3 * size_t(h.primID[i])]);
+    __builtin_prefetch(&m.indices[3 * size_t(h.primID[i]) + 2]);
+  }
+  for (int i = 0; i < n; ++i) {
+    const Mesh* m = meshes[i];
+    if (!m) continue;
+    const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
+    for (int k = 0; k < 3; ++k) {
+      __builtin_prefetch(&m->positions[idx[k]]);
+      if (!m->normals.empty()) __builtin_prefetch(&m->normals[idx[k]]);
+      if (!m->uvs.empty()) __builtin_prefetch(&m->uvs[idx[k]]);
+    }
+  }
   for (int i = 0; i < n; ++i) {
     if (!packet.active(i)) continue;
     found[i] = h.geomID[i] != RTC_INVALID_GEOMETRY_ID;
@@ -185,11 +208,8 @@ void Accel::occluded_packet(RayPacket& packet, int n, bool* blocked) const {
 void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsigned inst_id, float u,
                             float v, float t, SurfaceHit& hit) const {
   const Instance* inst = nullptr;
-  uint32_t surface = geom;
-  if (inst_id != RTC_INVALID_GEOMETRY_ID) {
-    inst = &scene_.instances[inst_id - scene_.meshes.size()];
-    surface = object_first_surface_[inst->object] + geom;
-  }
+  if (inst_id != RTC_INVALID_GEOMETRY_ID) inst = &scene_.instances[inst_id - scene_.meshes.size()];
+  const uint32_t surface = surface_of(geom, inst_id);
   const Mesh& m = *surfaces_[surface];
   hit.mesh = surface;
   hit.prim = prim;

@@ -151,6 +151,11 @@ class Accel {
   const Mesh& mesh(uint32_t surface) const { return *surfaces_[surface]; }
 
  private:
+  // The surface id of Embree's (geometry, instance) pair.
+  uint32_t surface_of(unsigned geom, unsigned inst_id) const {
+    if (inst_id == RTC_INVALID_GEOMETRY_ID) return geom;
+    return object_first_surface_[scene_.instances[inst_id - scene_.meshes.size()].object] + geom;
+  }
   // The surface interaction of an Embree hit of `ray` (geometry, primitive, instance ids,
   // barycentrics u, v and distance t as Embree reports them).
   void hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsigned inst_id, float u,
