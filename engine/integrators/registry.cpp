@@ -109,7 +109,8 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // lights, two-step light selection (issue 12). 3: the light BVH; "auto" uses it with many lights.
 // 4: the conductor Fresnel term in real arithmetic (the same function, rounded differently).
 // 5: a hit on an exact sphere at rayfarm's own distance (Accel::hit_from_embree), not Embree's.
-constexpr int kEstimatorVersion = 5;
+// 6: Embree's medium-quality BVH (a ray through a shared edge may take the other triangle).
+constexpr int kEstimatorVersion = 6;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
