@@ -327,6 +327,15 @@ class PlyReader {
 
   double read(PlyType t) { return format_ == PlyFormat::Ascii ? read_ascii(t) : read_binary(t); }
 
+  // At most how many rows of `e` the rest of the data can hold (each row takes at least a byte
+  // per value in ascii, its fixed-size values in binary): a bound for reserving memory.
+  uint64_t rows_that_fit(const PlyElement& e) const {
+    uint64_t min_row = 0;
+    for (const PlyProperty& p : e.properties)
+      min_row += format_ == PlyFormat::Ascii ? 1 : ply_size(p.is_list ? p.count_type : p.type);
+    return (data_.size() - pos_) / std::max<uint64_t>(min_row, 1);
+  }
+
  private:
   double read_ascii(PlyType t) {
     while (pos_ < data_.size() && std::isspace(static_cast<unsigned char>(data_[pos_]))) {
@@ -429,6 +438,13 @@ void read_ply_vertices(PlyReader& r, const PlyElement& e, MeshData& m) {
   int v = find_property(e, {"v", "t", "texture_v", "texture_t"});
   bool has_uv = u >= 0 && v >= 0;
   std::vector<double> val, unused;
+  // Sized once (the count is checked against the data as the rows are read, so a lying header
+  // costs at most this reservation, capped): a million vertices would otherwise be copied ~20
+  // times as the vectors grow.
+  const size_t expect = size_t(std::min<uint64_t>(e.count, r.rows_that_fit(e)));
+  m.positions.reserve(expect);
+  if (has_n) m.normals.reserve(expect);
+  if (has_uv) m.uvs.reserve(expect);
   for (uint64_t row = 0; row < e.count; ++row) {
     r.set_row(e, row);
     read_ply_row(r, e, -1, val, unused);
@@ -449,6 +465,7 @@ void read_ply_faces(PlyReader& r, const PlyElement& e, uint64_t vertex_count, Me
   if (list < 0) r.fail("element 'face' needs a list property 'vertex_indices' or 'vertex_index'");
   if (!ply_is_integer(e.properties[list].type)) r.fail("face vertex indices must be integers");
   std::vector<double> val, ids;
+  m.indices.reserve(3 * size_t(std::min<uint64_t>(e.count, r.rows_that_fit(e))));  // triangles
   for (uint64_t row = 0; row < e.count; ++row) {
     r.set_row(e, row);
     read_ply_row(r, e, list, val, ids);
