@@ -69,7 +69,7 @@ TEST(MitsubaXml, DefaultsSubstitutionIncludeSensorFilmSampler) {
   EXPECT_FLOAT_EQ(s.film.filter.radius, 1.0f);  // Mitsuba truncates at 4 sigma
   EXPECT_EQ(s.render.integrator.type(), "path");
   EXPECT_EQ(s.render.integrator.max_depth, 5);  // Mitsuba's 6 counts the emitter vertex
-  EXPECT_EQ(s.render.integrator.rr_min_depth, 2);
+  EXPECT_EQ(s.render.integrator.rr_min_depth, 3);  // rr_depth 3: roulette from the third vertex
   // fov 30 across x (Mitsuba's default axis) of a 2:1 film: the shorter axis (y) sees
   // 2 atan(tan(15 deg) / 2).
   EXPECT_NEAR(s.camera.fov_deg, 2 * std::atan(std::tan(15 * kPi / 180) / 2) * 180 / kPi, 1e-4);
@@ -175,7 +175,7 @@ TEST(MitsubaXml, Integrators) {
   i = load_integrator(
       "<integrator type=\"path\"><integer name=\"max_depth\" value=\"-1\"/></integrator>");
   EXPECT_EQ(i.max_depth, 1024);
-  EXPECT_EQ(i.rr_min_depth, 4);  // Mitsuba's rr_depth 5
+  EXPECT_EQ(i.rr_min_depth, 5);  // Mitsuba's rr_depth 5: roulette from the fifth vertex
   i = load_integrator(
       "<integrator type=\"ptracer\"><integer name=\"max_depth\" value=\"8\"/></integrator>");
   EXPECT_EQ(i.type(), "light");

@@ -152,7 +152,7 @@ class MitsubaParser {
     if (!have_integrator) {
       scene_.render.integrator = IntegratorSettings{};
       scene_.render.integrator.max_depth = kInfiniteDepth;
-      scene_.render.integrator.rr_min_depth = 4;
+      scene_.render.integrator.rr_min_depth = 5;  // Mitsuba's rr_depth default (below)
     }
     for (auto& [key, b] : bsdfs_)
       if (!b.used && !b.unsupported.empty())
@@ -421,7 +421,11 @@ class MitsubaParser {
     out.max_depth = max_depth == -1 ? kInfiniteDepth : max_depth - 1;
     int rr_depth = get_int(p, "rr_depth", 5);
     if (rr_depth < 1) fail(*p.find("rr_depth"), "@value: rr_depth must be at least 1");
-    out.rr_min_depth = std::max(1, rr_depth - 1);
+    // Mitsuba counts depth after a vertex's BSDF sample (1 at the camera ray's hit) and plays
+    // roulette once depth >= rr_depth; rayfarm plays it at vertex depth + 1 >= rr_min_depth: the
+    // same vertex for the same number (unlike max_depth, whose Mitsuba count includes the
+    // emitter vertex).
+    out.rr_min_depth = rr_depth;
     if (get_bool(p, "hide_emitters", false))
       doc_.warn(*p.find("hide_emitters"),
                 "not supported: emitters seen directly by the camera are rendered (their light is "
