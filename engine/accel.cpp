@@ -104,8 +104,8 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
   // Medium (Embree's default, binned SAH without spatial splits): on the million-triangle benchmark
   // scene it builds in 0.6 s less than high quality (1.35 s against 1.95 s for a whole 1-spp
   // render) and traces as fast within this machine's noise, here and on the Cornell box and
-  // veach-mis (docs/performance.md, "Fixed costs of a render"). Which triangle of a shared edge a ray
-  // hits can depend on the tree, so the choice is part of the estimator version (registry.cpp).
+  // veach-mis (docs/performance.md, "Fixed costs of a render"). Which triangle of a shared edge a
+  // ray hits can depend on the tree, so the choice is part of the estimator version (registry.cpp).
   rtcSetSceneBuildQuality(rtc_scene_, RTC_BUILD_QUALITY_MEDIUM);
   for (size_t i = 0; i < scene.meshes.size(); ++i) {
     surfaces_.push_back(&scene.meshes[i]);

@@ -35,6 +35,7 @@ using mitsuba::Node;
 
 // Mitsuba's max_depth -1 (unbounded) becomes this many scattering events.
 constexpr int kInfiniteDepth = 1024;
+constexpr int kMitsubaRrDepth = 5;  // Mitsuba's path tracers' rr_depth default
 constexpr double kPiD = 3.14159265358979323846;
 
 // A plugin element and its children (properties and nested plugins), with what was read.
@@ -152,7 +153,7 @@ class MitsubaParser {
     if (!have_integrator) {
       scene_.render.integrator = IntegratorSettings{};
       scene_.render.integrator.max_depth = kInfiniteDepth;
-      scene_.render.integrator.rr_min_depth = 5;  // Mitsuba's rr_depth default (below)
+      scene_.render.integrator.rr_min_depth = kMitsubaRrDepth;  // as rr_depth maps (below)
     }
     for (auto& [key, b] : bsdfs_)
       if (!b.used && !b.unsupported.empty())
@@ -419,7 +420,7 @@ class MitsubaParser {
       fail(*p.find("max_depth"), "@value: max_depth must be -1 (unbounded) or at least 1, got " +
                                      std::to_string(max_depth));
     out.max_depth = max_depth == -1 ? kInfiniteDepth : max_depth - 1;
-    int rr_depth = get_int(p, "rr_depth", 5);
+    int rr_depth = get_int(p, "rr_depth", kMitsubaRrDepth);
     if (rr_depth < 1) fail(*p.find("rr_depth"), "@value: rr_depth must be at least 1");
     // Mitsuba counts depth after a vertex's BSDF sample (1 at the camera ray's hit) and plays
     // roulette once depth >= rr_depth; rayfarm plays it at vertex depth + 1 >= rr_min_depth: the
