@@ -189,6 +189,7 @@ class SobolSampler {
   uint32_t dimension() const { return dimension_; }
 
  private:
+  friend class Sampler;  // its lockstep draws (get_lanes) share dimension_hash() across lanes
   // owen_scramble(sample index, seed), its first reversal done once per sample.
   uint32_t shuffled_index(uint32_t seed) const {
     return reverse_bits32(lk_hash(index_reversed_, seed));
@@ -236,7 +237,21 @@ class Sampler {
   Vec2 get_2d_if(bool needed) { return needed ? get_2d() : (skip_2d(), Vec2{0.0f, 0.0f}); }
   Kind kind() const { return kind_; }
 
+  // Lockstep draws for the samples of one pixel traced together (the path tracer's packets).
+  // draws[k] is 1 (a get_1d), 2 (a get_2d) or 0 (a skip): for each j < n, lane i = lane[j] gets
+  // out[k][c][i] = coordinate c of its k-th draw, bit for bit what s[i] would give drawing them
+  // one by one, with the same dimensions consumed. Sobol samplers started for one pixel and pass
+  // and at one dimension share each dimension's hash, and their per-sample scrambles run in SIMD
+  // where the CPU has it; otherwise (the independent kind, or lanes whose keys differ) each lane
+  // draws alone. The entries of lanes not named are left unspecified.
+  static constexpr int kMaxLanes = 16;
+  using LaneDraws = float[2][kMaxLanes];
+  static void get_lanes(Sampler* s, const int* lane, int n, const uint8_t* draws, int count,
+                        LaneDraws* out);
+
  private:
+  // Whether lanes lane[0..n) can share one dimension hash (see get_lanes).
+  static bool sobol_lockstep(const Sampler* s, const int* lane, int n);
   // The pass key of SobolSequence's scrambles: one for all passes, apart from Sobol's passes.
   static constexpr uint32_t kSequencePass = 0xffffffffu;
   Kind kind_;

@@ -312,7 +312,7 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
     SCOPED_TRACE(file);
     SceneOverrides ov;
     ov.width = 24, ov.height = 16, ov.spp = 16, ov.passes = 1;
-    for (const char* sampler : {"sobol-sequence", "independent"}) {
+    for (const char* sampler : {"sobol-sequence", "sobol", "independent"}) {
       SCOPED_TRACE(sampler);
       ov.sampler = sampler;
       Scene s = load_scene(root + file, ov);

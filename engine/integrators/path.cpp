@@ -53,7 +53,16 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   Lane lanes[K];
   Packet rays, shadow;
   SurfaceHit hits[K];
-  bool found[K], nee_done[K], blocked[K];
+  bool found[K], nee_done[K], blocked[K] = {};
+  // With a Sobol sampler the lanes that shade a vertex draw its numbers together, in the order one
+  // lane draws them (Sampler::get_lanes): all of them, read or not, where one lane alone skips
+  // the unread ones; a skip and a draw consume the same dimension, so the values are the same.
+  static_assert(K <= Sampler::kMaxLanes);
+  const bool lockstep_draws = K > 1 && samplers[0].kind() != Sampler::Kind::Independent;
+  // A vertex's draws: light choice, light point, lobe choice, direction, roulette (or its skip).
+  enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
+  int shading[K];
+  Sampler::LaneDraws u[kVertexDraws];
   int live = n;
   for (int i = 0; i < n; ++i) {
     rays.set(i, camera_rays[i]);
@@ -63,6 +72,14 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   for (int depth = 0; live > 0; ++depth) {
     counters.rays += uint64_t(live);
     intersect(ctx.accel, rays, n, hits, found);
+    const bool roulette = depth + 1 >= settings.rr_min_depth;
+    if (lockstep_draws && depth < settings.max_depth) {
+      int m = 0;
+      for (int i = 0; i < n; ++i)
+        if (rays.active(i) && found[i]) shading[m++] = i;
+      const uint8_t draws[kVertexDraws] = {1, 2, 1, 2, uint8_t(roulette ? 1 : 0)};
+      Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
+    }
     bool any_shadow = false;
     for (int i = 0; i < n; ++i) {
       nee_done[i] = false;
@@ -96,8 +113,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       }
       Bsdf bsdf = bsdf_at(ctx, hit, a.cone_width);
       const bool nee = !bsdf.is_delta();
-      float u_light = sampler.get_1d_if(nee);
-      Vec2 u_point = sampler.get_2d_if(nee);
+      float u_light = lockstep_draws ? u[kULight][0][i] : sampler.get_1d_if(nee);
+      Vec2 u_point =
+          lockstep_draws ? Vec2{u[kUPoint][0][i], u[kUPoint][1][i]} : sampler.get_2d_if(nee);
       if (nee) {
         nee_done[i] = true;
         a.nee_beta = a.beta;
@@ -109,9 +127,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         }
       }
       BsdfSample bs;
-      float uc = sampler.get_1d_if(bsdf.sample_uses_choice());
-      Vec2 u = sampler.get_2d_if(bsdf.sample_uses_direction());
-      if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) {
+      float uc = lockstep_draws ? u[kUChoice][0][i] : sampler.get_1d_if(bsdf.sample_uses_choice());
+      Vec2 u_dir = lockstep_draws ? Vec2{u[kUDir][0][i], u[kUDir][1][i]}
+                                  : sampler.get_2d_if(bsdf.sample_uses_direction());
+      if (!bsdf.sample(wo, uc, u_dir, TransportMode::Radiance, bs)) {
         end();
         continue;
       }
@@ -123,8 +142,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       a.prev_p = hit.p;
       a.prev_n = receiver_normal(bsdf, wo);
       rays.set(i, ctx.accel.spawn(hit, bs.wi));
-      const bool roulette = depth + 1 >= settings.rr_min_depth;
-      float u_rr = sampler.get_1d_if(roulette);
+      float u_rr = lockstep_draws ? u[kURoulette][0][i] : sampler.get_1d_if(roulette);
       if (roulette) {
         float survive = std::min(1.0f, max_component(a.beta * a.eta_scale));
         if (u_rr >= survive) {
