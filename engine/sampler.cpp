@@ -9,27 +9,21 @@ namespace {
 
 constexpr int kLanes = Sampler::kMaxLanes;
 
-// fraction_to_float through a signed conversion (the value is below 2^24, so exact either way),
-// which every SIMD level has.
-inline float fraction_to_float_lane(uint32_t x) { return float(int32_t(x >> 8)) * 0x1p-24f; }
-
-// SobolSampler::get_1d for kLanes samples at one dimension, lane j's bit-reversed sample index
-// r[j], seeds lo and hi from the dimension's hash. All lanes, used or not (no remainder loop).
-// Integer operations only, so every clone gives the same bits (engine/simd.h).
+// sobol_draw_1d for kLanes samples at one dimension slot (hash h), lane j's bit-reversed sample
+// index r[j]. All lanes, used or not (no remainder loop). Integer operations and exact
+// conversions only, so every clone gives the same bits (engine/simd.h).
 RF_SIMD_CLONES
-void sobol_1d_lanes(const uint32_t* __restrict r, uint32_t lo, uint32_t hi, float* __restrict out) {
-  for (int j = 0; j < kLanes; ++j)
-    out[j] = fraction_to_float_lane(reverse_bits32(lk_hash(reverse_bits32(lk_hash(r[j], lo)), hi)));
+void sobol_1d_lanes(const uint32_t* __restrict r, uint64_t h, float* __restrict out) {
+  for (int j = 0; j < kLanes; ++j) out[j] = sobol_draw_1d(r[j], h);
 }
 
-// SobolSampler::get_2d likewise: both coordinates from one shuffled index, dimension 1's seed hi2.
+// sobol_draw_2d likewise, the two coordinates into a and b.
 RF_SIMD_CLONES
-void sobol_2d_lanes(const uint32_t* __restrict r, uint32_t lo, uint32_t hi, uint32_t hi2,
-                    float* __restrict a, float* __restrict b) {
+void sobol_2d_lanes(const uint32_t* __restrict r, uint64_t h, float* __restrict a,
+                    float* __restrict b) {
   for (int j = 0; j < kLanes; ++j) {
-    const uint32_t index = reverse_bits32(lk_hash(r[j], lo));
-    a[j] = fraction_to_float_lane(reverse_bits32(lk_hash(index, hi)));
-    b[j] = fraction_to_float_lane(reverse_bits32(lk_hash(sobol_sample_reversed(index, 1), hi2)));
+    const Vec2 v = sobol_draw_2d(r[j], h);
+    a[j] = v.x, b[j] = v.y;
   }
 }
 
@@ -77,9 +71,9 @@ void Sampler::get_lanes(Sampler* s, const int* lane, int n, const uint8_t* draws
     }
     const uint64_t h = first.dimension_hash();
     if (draws[k] == 1)
-      sobol_1d_lanes(r, uint32_t(h), uint32_t(h >> 32), out[k][0]);
+      sobol_1d_lanes(r, h, out[k][0]);
     else
-      sobol_2d_lanes(r, uint32_t(h), uint32_t(h >> 32), uint32_t(mix64(h)), out[k][0], out[k][1]);
+      sobol_2d_lanes(r, h, out[k][0], out[k][1]);
   }
   for (int j = 1; j < n; ++j) s[lane[j]].sobol_.dimension_ = first.dimension_;
 }

@@ -145,8 +145,25 @@ inline uint32_t scrambled_sobol(uint32_t index, int dimension, uint32_t seed) {
   return reverse_bits32(lk_hash(sobol_sample_reversed(index, dimension), seed));
 }
 
-// 32-bit fixed-point fraction to a float in [0, 1): the top 24 bits, exactly representable.
-inline float fraction_to_float(uint32_t x) { return float(x >> 8) * 0x1p-24f; }
+// 32-bit fixed-point fraction to a float in [0, 1): the top 24 bits, exactly representable (the
+// conversion is from a signed int, which every SIMD level has; below 2^24 it is the same value).
+inline float fraction_to_float(uint32_t x) { return float(int32_t(x >> 8)) * 0x1p-24f; }
+
+// One sample's Sobol draw at a dimension slot with hash h (SobolSampler below; also a loop body
+// over lanes, Sampler::get_lanes): the sample index, bit-reversed, Owen-scrambled with the slot's
+// seed (its shuffle), then each coordinate scrambled with its own seed.
+inline uint32_t sobol_shuffled_index(uint32_t index_reversed, uint64_t h) {
+  return reverse_bits32(lk_hash(index_reversed, uint32_t(h)));
+}
+inline float sobol_draw_1d(uint32_t index_reversed, uint64_t h) {
+  return fraction_to_float(
+      scrambled_sobol(sobol_shuffled_index(index_reversed, h), 0, uint32_t(h >> 32)));
+}
+inline Vec2 sobol_draw_2d(uint32_t index_reversed, uint64_t h) {
+  uint32_t index = sobol_shuffled_index(index_reversed, h);
+  return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
+          fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
+}
 
 // Padded, shuffled, Owen-scrambled 2D Sobol. Every get_1d/get_2d call is one dimension slot d,
 // and draws from Sobol dimensions 0 (and 1), the (0,2)-sequence, independently of other slots:
@@ -174,26 +191,14 @@ class SobolSampler {
     index_reversed_ = reverse_bits32(uint32_t(sample_index));
     dimension_ = 0;
   }
-  float get_1d() {
-    uint64_t h = dimension_hash();
-    return fraction_to_float(scrambled_sobol(shuffled_index(uint32_t(h)), 0, uint32_t(h >> 32)));
-  }
-  Vec2 get_2d() {
-    uint64_t h = dimension_hash();
-    uint32_t index = shuffled_index(uint32_t(h));
-    return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
-            fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
-  }
+  float get_1d() { return sobol_draw_1d(index_reversed_, dimension_hash()); }
+  Vec2 get_2d() { return sobol_draw_2d(index_reversed_, dimension_hash()); }
   void skip_1d() { ++dimension_; }
   void skip_2d() { ++dimension_; }
   uint32_t dimension() const { return dimension_; }
 
  private:
   friend class Sampler;  // its lockstep draws (get_lanes) share dimension_hash() across lanes
-  // owen_scramble(sample index, seed), its first reversal done once per sample.
-  uint32_t shuffled_index(uint32_t seed) const {
-    return reverse_bits32(lk_hash(index_reversed_, seed));
-  }
   // hash_combine(key_, dimension_++), its key-only terms summed once per sample (the same value).
   uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(dimension_++) + key_term_)); }
   uint64_t key_ = 0, key_term_ = 0;
