@@ -38,24 +38,29 @@ struct SurfaceHit {
 };
 
 // std::nextafter(v, +inf) and (v, -inf) for finite v by stepping the bit pattern (pbrt-v4's
-// NextFloatUp/Down): the same values, without the library call's checks.
-inline float next_float_up(float v) {
-  if (std::isinf(v) && v > 0) return v;
-  if (v == -0.0f) v = 0.0f;
-  uint32_t bits;
-  std::memcpy(&bits, &v, 4);
-  bits = v >= 0 ? bits + 1 : bits - 1;
-  std::memcpy(&v, &bits, 4);
+// NextFloatUp/Down): the same values, without the library call's checks. Written as selects
+// without branches, so that loops over lanes that offset rays vectorise (the path tracer's).
+inline uint32_t float_bits(float v) {
+  uint32_t b;
+  std::memcpy(&b, &v, 4);
+  return b;
+}
+inline float bits_float(uint32_t b) {
+  float v;
+  std::memcpy(&v, &b, 4);
   return v;
 }
+inline float next_float_up(float v) {
+  uint32_t b = float_bits(v);
+  uint32_t up = v >= 0 ? b + 1 : b - 1;
+  up = b == 0x80000000u ? 1u : up;  // -0 steps as +0
+  return bits_float(v == kInf ? b : up);
+}
 inline float next_float_down(float v) {
-  if (std::isinf(v) && v < 0) return v;
-  if (v == 0.0f) v = -0.0f;
-  uint32_t bits;
-  std::memcpy(&bits, &v, 4);
-  bits = v > 0 ? bits - 1 : bits + 1;
-  std::memcpy(&v, &bits, 4);
-  return v;
+  uint32_t b = float_bits(v);
+  uint32_t down = v > 0 ? b - 1 : b + 1;
+  down = b == 0 ? 0x80000001u : down;  // +0 steps as -0
+  return bits_float(v == -kInf ? b : down);
 }
 
 // Moves p off its surface along ng, towards the side w points to, by the hit's error bound
@@ -68,7 +73,8 @@ inline Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
   if (dot(w, ng) < 0) offset = -offset;
   Vec3 po = p + offset;
   auto away = [](float v, float off) {
-    return off > 0 ? next_float_up(v) : off < 0 ? next_float_down(v) : v;
+    float r = off > 0 ? next_float_up(v) : v;
+    return off < 0 ? next_float_down(v) : r;
   };
   return {away(po.x, offset.x), away(po.y, offset.y), away(po.z, offset.z)};
 }
@@ -130,7 +136,11 @@ class Accel {
   // to_ng and error to_error): both ends offset off their surfaces, the direction unnormalised
   // so that t in (0, 1) spans the segment, tmax just short of the target.
   Ray shadow_ray(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const {
-    Vec3 o = offset_ray_origin(from.p, from.p_error, from.ng, to - from.p);
+    return shadow_segment(from.p, from.p_error, from.ng, to, to_error, to_ng);
+  }
+  // The same from a point p with error p_error on a surface with geometric normal ng.
+  static Ray shadow_segment(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 to, Vec3 to_error, Vec3 to_ng) {
+    Vec3 o = offset_ray_origin(p, p_error, ng, to - p);
     Vec3 target = offset_ray_origin(to, to_error, to_ng, o - to);
     return {o, target - o, 1.0f - 1e-4f};
   }

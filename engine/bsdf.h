@@ -62,7 +62,7 @@ class Bsdf {
   static Bsdf make(const BsdfParams& p, Vec3 ns, Vec3 ng) {
     Bsdf b;
     b.ng_ = ng;
-    b.frame_ = Frame::from_normal(dot(ns, ng) < 0 ? -ns : ns);
+    b.frame_ = shading_frame(ns, ng);
     ConductorFresnel fr{p.eta, p.k, p.specular, p.conductor_tint};
     TrowbridgeReitz tr{p.alpha, p.alpha, p.separable_masking};
     bool smooth = TrowbridgeReitz::effectively_smooth(p.alpha);
@@ -128,11 +128,34 @@ class Bsdf {
     bool mirror = two_sided() && lo.z < 0;
     if (mirror) lo.z = -lo.z;
     bool ok = std::visit([&](const auto& l) { return l.sample(lo, uc, u, mode, s); }, lobe_);
-    if (!ok) return false;
+    return ok && sample_to_world(frame_, ng_, wo, mirror, s);
+  }
+  // The pieces of a Bsdf for code that keeps a lobe's frame itself (the path tracer's lanes,
+  // whose loops over a packet's diffuse vertices vectorise): the frame make() builds; the end of
+  // sample(), which takes the lobe's sample (wo mirrored when `mirror`) to the world and applies
+  // the geometric consistency rule; to_lobe().
+  static Frame shading_frame(Vec3 ns, Vec3 ng) {
+    return Frame::from_normal(dot(ns, ng) < 0 ? -ns : ns);
+  }
+  static bool sample_to_world(const Frame& frame, Vec3 ng, Vec3 wo, bool mirror, BsdfSample& s) {
     if (mirror) s.wi.z = -s.wi.z;
-    s.wi = frame_.to_world(s.wi);
-    float go = dot(wo, ng_), gi = dot(s.wi, ng_);
+    s.wi = frame.to_world(s.wi);
+    float go = dot(wo, ng), gi = dot(s.wi, ng);
     return s.is_transmission ? go * gi < 0 : go * gi > 0;
+  }
+  static bool to_lobe(const Frame& frame, Vec3 ng, bool two_sided, Vec3 wo, Vec3 wi, Vec3& lo,
+                      Vec3& li) {
+    // Selects rather than early returns, so that the lanes' loops vectorise; lo and li are
+    // meaningless when it returns false.
+    float go = dot(wo, ng), gi = dot(wi, ng);
+    lo = frame.to_local(wo);
+    li = frame.to_local(wi);
+    float g = go * gi, l = lo.z * li.z;
+    bool ok = (g != 0) & (l != 0) & ((g > 0) == (l > 0));
+    bool mirror = two_sided && lo.z < 0;
+    lo.z = mirror ? -lo.z : lo.z;
+    li.z = mirror ? -li.z : li.z;
+    return ok;
   }
   // Whether sample() reads uc (a lobe choice) and u (a direction); a caller may then skip drawing
   // the one it does not read (Sampler::skip_1d / skip_2d), which leaves every value unchanged.
@@ -168,16 +191,7 @@ class Bsdf {
   // World pair to the lobe's local pair (mirrored for two-sided lobes); false when the pair
   // fails the geometric consistency rule.
   bool to_lobe(Vec3 wo, Vec3 wi, Vec3& lo, Vec3& li) const {
-    float go = dot(wo, ng_), gi = dot(wi, ng_);
-    lo = frame_.to_local(wo);
-    li = frame_.to_local(wi);
-    if (go * gi == 0 || lo.z * li.z == 0) return false;
-    if ((go * gi > 0) != (lo.z * li.z > 0)) return false;
-    if (two_sided() && lo.z < 0) {
-      lo.z = -lo.z;
-      li.z = -li.z;
-    }
-    return true;
+    return to_lobe(frame_, ng_, two_sided(), wo, wi, lo, li);
   }
 
   Frame frame_;

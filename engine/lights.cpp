@@ -113,6 +113,9 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
   }
   if (!groups_.empty()) cdf_.back() = 1.0;
   build_bvh(scene.render.light_selection);
+  triangles_by_power_ =
+      !tris_.empty() && punctual_.empty() && !env_ && !uses_bvh() &&
+      std::none_of(tris_.begin(), tris_.end(), [](const Tri& t) { return t.sphere; });
 }
 
 void LightSet::build_bvh(const std::string& mode) {
@@ -239,22 +242,27 @@ bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightS
   ls = LightSample{};
   ls.light = uint32_t(i);
   bool ok = false;
-  float pdf_direction = 1.0f;  // delta lights: the selection probability alone
+  ls.pdf_solid_angle = 1.0f;  // delta lights: the selection probability alone
   if (i < tris_.size()) {
     ok = sample_area(tris_[i], p, u_point, ls);
-    pdf_direction = ls.pdf_solid_angle;
   } else if (i < tris_.size() + punctual_.size()) {
     ok = sample_punctual(punctual_[i - tris_.size()], p, ls);
   } else {
-    ok = env_->sample(u_point, ls.wi, ls.radiance, pdf_direction);
+    ok = env_->sample(u_point, ls.wi, ls.radiance, ls.pdf_solid_angle);
     ls.is_infinite = true;
     ls.distance = 2.0f * radius_;
     ls.p = p + ls.wi * ls.distance;
     ls.n = -ls.wi;
   }
-  if (!ok || is_black(ls.radiance)) return false;
-  ls.pdf_solid_angle = pmf * pdf_direction;
-  return std::isfinite(ls.pdf_solid_angle) && ls.pdf_solid_angle > 0;
+  return with_selection(ok, pmf, ls);
+}
+
+bool LightSet::pick_triangle(float u_select, float& ux, TriangleLight& light) const {
+  size_t i = select(u_select, ux);
+  if (i == kNoLight) return false;
+  const Tri& t = tris_[i];
+  light = {t.p0, t.p1, t.p2, t.n, t.area, pmf_[i], *scene_.meshes[t.mesh].emission};
+  return true;
 }
 
 // A uniformly distributed point of an area light's primitive (density 1 / area), its error bound
@@ -266,11 +274,7 @@ bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightS
     sphere_surface_point(*tri.sphere, tri.sphere->center + sample_uniform_sphere(u), q, q_error, n);
     return;
   }
-  Vec2 b = sample_uniform_triangle(u);
-  float b2 = 1.0f - b.x - b.y;
-  q = b.x * tri.p0 + b.y * tri.p1 + b2 * tri.p2;
-  constexpr float g7 = 7 * std::numeric_limits<float>::epsilon() * 0.5f;
-  q_error = g7 * (abs(b.x * tri.p0) + abs(b.y * tri.p1) + abs(b2 * tri.p2));
+  triangle_point(tri.p0, tri.p1, tri.p2, u, q, q_error);
   n = tri.n;
 }
 
@@ -319,17 +323,7 @@ bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) cons
     ls.pdf_solid_angle = 1.0f / (2 * kPi * one_minus_cos_max);
     return true;
   }
-  sample_surface(tri, u, ls.p, ls.p_error, ls.n);
-  Vec3 d = ls.p - p;
-  float dist2 = length_sq(d);
-  if (!(dist2 > 0) || !(tri.area > 0)) return false;
-  ls.distance = std::sqrt(dist2);
-  ls.wi = d / ls.distance;
-  float cos_light = std::fabs(dot(ls.n, ls.wi));
-  ls.radiance = emitted(m, ls.n, -ls.wi);
-  if (!(cos_light > 0)) return false;
-  ls.pdf_solid_angle = dist2 / (tri.area * cos_light);
-  return true;
+  return sample_triangle_area(tri.p0, tri.p1, tri.p2, tri.n, tri.area, *m.emission, p, u, ls);
 }
 
 bool LightSet::sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const {

@@ -44,6 +44,7 @@
 #include "engine/accel.h"
 #include "engine/envmap.h"
 #include "engine/light_bvh.h"
+#include "engine/sampling.h"
 #include "engine/scene.h"
 
 namespace rf {
@@ -158,9 +159,33 @@ class LightSet {
 
   // Radiance a surface point of `mesh` emits in direction w (world), given its geometric normal.
   static RGB emitted(const Mesh& mesh, Vec3 ng, Vec3 w) {
-    if (!mesh.emission) return RGB(0.0f);
-    if (!mesh.emission->two_sided && dot(ng, w) <= 0) return RGB(0.0f);
-    return mesh.emission->radiance;
+    return mesh.emission ? emitted(*mesh.emission, ng, w) : RGB(0.0f);
+  }
+  // (Black as +0 through a bit mask rather than a branch: the lanes' loops run it, and GCC 12
+  // does not vectorise the select of flags a branch here turns is_black(radiance) into.)
+  static RGB emitted(const Emission& e, Vec3 ng, Vec3 w) {
+    uint32_t keep = e.two_sided || !(dot(ng, w) <= 0) ? ~0u : 0u;
+    auto masked = [keep](float v) { return bits_float(float_bits(v) & keep); };
+    return {masked(e.radiance.x), masked(e.radiance.y), masked(e.radiance.z)};
+  }
+
+  // For kernels that sample lights for many shading points at once (the path tracer's lanes,
+  // whose loops vectorise): when every light is a triangle picked by power (no light BVH, no
+  // sphere, point or infinite light), triangles_by_power() is true and sample() is
+  // pick_triangle() followed by sample_triangle() with the same numbers, bit for bit.
+  struct TriangleLight {
+    Vec3 p0, p1, p2, n;  // vertices and unit normal
+    float area = 0, pmf = 0;
+    Emission emission;
+  };
+  bool triangles_by_power() const { return triangles_by_power_; }
+  // The light that u_select and u_point.x pick, with u_point.x rescaled (select()); false when
+  // nothing can be picked. Only when triangles_by_power().
+  bool pick_triangle(float u_select, float& ux, TriangleLight& light) const;
+  [[gnu::always_inline]] static bool sample_triangle(const TriangleLight& t, Vec3 p, Vec2 u,
+                                                     LightSample& ls) {
+    bool ok = sample_triangle_area(t.p0, t.p1, t.p2, t.n, t.area, t.emission, p, u, ls);
+    return with_selection(ok, t.pmf, ls);
   }
 
  private:
@@ -174,6 +199,40 @@ class LightSet {
     uint32_t first, count;
   };
   size_t select(float u_select, float& ux) const;
+  // A uniform point of a triangle (density 1 / area) and its error bound.
+  [[gnu::always_inline]] static void triangle_point(Vec3 p0, Vec3 p1, Vec3 p2, Vec2 u, Vec3& q,
+                                                    Vec3& q_error) {
+    Vec2 b = sample_uniform_triangle(u);
+    float b2 = 1.0f - b.x - b.y;
+    q = b.x * p0 + b.y * p1 + b2 * p2;
+    constexpr float g7 = 7 * std::numeric_limits<float>::epsilon() * 0.5f;
+    q_error = g7 * (abs(b.x * p0) + abs(b.y * p1) + abs(b2 * p2));
+  }
+  // sample_area() of a triangle: a uniform point, its area density converted to solid angle as
+  // seen from p (without selection), the radiance it sends towards p.
+  [[gnu::always_inline]] static bool sample_triangle_area(Vec3 p0, Vec3 p1, Vec3 p2, Vec3 n,
+                                                          float area, const Emission& e, Vec3 p,
+                                                          Vec2 u, LightSample& ls) {
+    triangle_point(p0, p1, p2, u, ls.p, ls.p_error);
+    ls.n = n;
+    Vec3 d = ls.p - p;
+    float dist2 = length_sq(d);
+    ls.distance = std::sqrt(dist2);
+    ls.wi = d / ls.distance;
+    float cos_light = std::fabs(dot(ls.n, ls.wi));
+    ls.radiance = emitted(e, ls.n, -ls.wi);
+    ls.pdf_solid_angle = dist2 / (area * cos_light);
+    return (dist2 > 0) & (area > 0) & (cos_light > 0);  // no early return: see with_selection
+  }
+  // The end of sample_selected(): a sample that succeeded with a non-black radiance, its density
+  // times the selection probability pmf, finite and positive.
+  // (Selects, no early return: it runs in the lanes' vectorised loops.)
+  [[gnu::always_inline]] static bool with_selection(bool ok, float pmf, LightSample& ls) {
+    bool good = ok & !is_black(ls.radiance);
+    float pdf = pmf * ls.pdf_solid_angle;
+    ls.pdf_solid_angle = good ? pdf : ls.pdf_solid_angle;
+    return good & std::isfinite(pdf) & (pdf > 0);
+  }
   // Point sampling of light i once it is selected with probability pmf.
   bool sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const;
   void build_bvh(const std::string& mode);
@@ -207,6 +266,7 @@ class LightSet {
   // choosing among them, and the infinite lights with their cumulative power share.
   LightBvh bvh_;
   float bvh_share_ = 0;
+  bool triangles_by_power_ = false;
   std::vector<uint32_t> infinite_;
   std::vector<double> infinite_cdf_;  // infinite_.size() + 1 entries, within the infinite lights
 };

@@ -57,7 +57,7 @@ inline Vec3 vmax(Vec3 a, Vec3 b) {
 inline bool is_finite(Vec3 a) {
   return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
 }
-inline bool is_black(Vec3 a) { return a.x == 0 && a.y == 0 && a.z == 0; }
+inline bool is_black(Vec3 a) { return (a.x == 0) & (a.y == 0) & (a.z == 0); }
 
 // RGB radiance / throughput: linear Rec.709 primaries (DESIGN.md "Pixels, filters and splats").
 using RGB = Vec3;

@@ -6,25 +6,28 @@
 namespace rf {
 
 // Uniform point on the unit disk (Shirley-Chiu concentric mapping: low distortion, so
-// stratification of u survives).
-inline Vec2 sample_concentric_disk(Vec2 u) {
+// stratification of u survives), in polar form: the point is (r cos theta, r sin theta). Apart
+// from the cosine and sine so that a loop over lanes can vectorise the rest (the path tracer's
+// lanes); (0, 0) for the centre, whose r cos 0 and r sin 0 are +0.
+inline void concentric_disk_polar(Vec2 u, float& r, float& theta) {
   float ox = 2.0f * u.x - 1.0f, oy = 2.0f * u.y - 1.0f;
-  if (ox == 0 && oy == 0) return {0, 0};
+  bool x_major = std::fabs(ox) > std::fabs(oy);
+  r = x_major ? ox : oy;
+  theta = x_major ? (kPi / 4) * (oy / ox) : (kPi / 2) - (kPi / 4) * (ox / oy);
+  if (ox == 0 && oy == 0) r = 0, theta = 0;
+}
+inline Vec2 sample_concentric_disk(Vec2 u) {
   float r, theta;
-  if (std::fabs(ox) > std::fabs(oy)) {
-    r = ox;
-    theta = (kPi / 4) * (oy / ox);
-  } else {
-    r = oy;
-    theta = (kPi / 2) - (kPi / 4) * (ox / oy);
-  }
+  concentric_disk_polar(u, r, theta);
   return {r * std::cos(theta), r * std::sin(theta)};
 }
 
 // Cosine-weighted direction about +z (Malley's method on the concentric disk); pdf = cos/pi.
-inline Vec3 sample_cosine_hemisphere(Vec2 u) {
-  Vec2 d = sample_concentric_disk(u);
+inline Vec3 cosine_hemisphere_from_disk(Vec2 d) {
   return {d.x, d.y, safe_sqrt(1.0f - d.x * d.x - d.y * d.y)};
+}
+inline Vec3 sample_cosine_hemisphere(Vec2 u) {
+  return cosine_hemisphere_from_disk(sample_concentric_disk(u));
 }
 inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta * kInvPi; }
 

@@ -31,7 +31,12 @@ struct DiffuseBxdf {
   }
   bool sample(Vec3 wo, float /*uc*/, Vec2 u, TransportMode, BsdfSample& s) const {
     if (wo.z <= 0) return false;
-    s.wi = sample_cosine_hemisphere(u);
+    return sample_from_disk(sample_concentric_disk(u), s);
+  }
+  // sample()'s direction from its point d on the concentric disk (the path tracer's lanes take
+  // the disk's cosine and sine apart), for wo above the surface.
+  bool sample_from_disk(Vec2 d, BsdfSample& s) const {
+    s.wi = cosine_hemisphere_from_disk(d);
     s.pdf_solid_angle = cosine_hemisphere_pdf(s.wi.z);
     if (!(s.pdf_solid_angle > 0)) return false;
     s.f = reflectance * kInvPi;

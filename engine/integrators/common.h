@@ -69,6 +69,7 @@ struct RenderContext {
 // Per-thread counters an integrator updates; summed into the task's buffer.
 struct TraceCounters {
   uint64_t rays = 0;
+  uint64_t lane_vertices = 0;  // path vertices shaded in the vectorised lanes (DiffuseLanes)
 };
 
 // The material's parameters at a hit, textures resolved with a ray-cone footprint of the given

@@ -2,6 +2,7 @@
 #include "engine/integrators/path.h"
 
 #include "engine/integrators/drivers.h"
+#include "engine/simd.h"
 
 namespace rf {
 
@@ -28,6 +29,121 @@ void occluded(const Accel& accel, Accel::RayPacket& p, int n, bool* blocked) {
 }
 void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
   blocked[0] = accel.occluded(p.r.o, p.r.d, p.r.tmax);
+}
+
+// A packet's vertices on plain diffuse surfaces (no texture), shaded together when every light is
+// a triangle picked by power (LightSet::triangles_by_power): light sample, MIS weight and shadow
+// ray, BSDF sample, throughput, spawned ray and roulette, each a loop over the vertices' arrays.
+// The loops call the one-vertex code (LightSet::sample_triangle, Bsdf's pieces, DiffuseBxdf,
+// offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so the compiled
+// vector loops give each vertex the bits the one-lane path gives it (the packet test holds them
+// to that); only the disk's cosine and sine, library calls, run lane by lane between the loops.
+struct DiffuseLanes {
+  static constexpr int N = Accel::kPacket;
+  using V3 = float[3][N];
+  static Vec3 get(const V3& a, int j) { return {a[0][j], a[1][j], a[2][j]}; }
+  static void put(V3& a, int j, Vec3 v) { a[0][j] = v.x, a[1][j] = v.y, a[2][j] = v.z; }
+
+  int m = 0;
+  int lane[N];
+  // The vertex: hit point and its error, geometric and shading normals, direction to the previous
+  // vertex, albedo, throughput and eta scale; the numbers of the BSDF sample and of roulette.
+  V3 p, p_error, ng, ns, wo, reflectance, beta;
+  float eta_scale[N], u_dir[2][N], u_rr[N];
+  int roulette[N];  // whether roulette runs at this depth (per lane: the vectoriser wants arrays)
+  // The light pick (light_ok), the point numbers (x rescaled by the pick) and the picked triangle.
+  int light_ok[N];  // flags as int: the vectoriser handles no bool arrays
+  float u_point[2][N], l_area[N], l_pmf[N];
+  V3 l_p0, l_p1, l_p2, l_n, l_radiance;
+  int l_two_sided[N];
+  // Next-event estimation: whether it has a shadow ray, the ray (tmax 1 - 1e-4), the term.
+  int nee_ok[N];
+  V3 shadow_o, shadow_d, nee;
+  // The BSDF sample: its disk point (polar form first), whether wo was mirrored, whether it goes
+  // on.
+  float disk_r[N], disk_theta[N], disk[2][N];
+  int mirror[N], sample_ok[N];
+  // The continuation: receiver normal, spawned ray, new throughput, BSDF pdf, whether it lives on.
+  V3 receiver_n, ray_o, ray_d, beta_out;
+  float bsdf_pdf[N];
+  int continues[N], survives[N];
+};
+
+RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
+  using D = DiffuseLanes;
+  RF_IVDEP
+  for (int j = 0; j < L.m; ++j) {
+    const Vec3 p = D::get(L.p, j), p_error = D::get(L.p_error, j), ng = D::get(L.ng, j);
+    const Vec3 wo = D::get(L.wo, j);
+    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    const DiffuseBxdf lobe{D::get(L.reflectance, j)};
+    // light_sample_mis_unshadowed() with LightSet::sample() as pick + sample_triangle.
+    LightSet::TriangleLight t{D::get(L.l_p0, j),
+                              D::get(L.l_p1, j),
+                              D::get(L.l_p2, j),
+                              D::get(L.l_n, j),
+                              L.l_area[j],
+                              L.l_pmf[j],
+                              {D::get(L.l_radiance, j), L.l_two_sided[j] != 0}};
+    LightSample ls;
+    bool ok = LightSet::sample_triangle(t, p, {L.u_point[0][j], L.u_point[1][j]}, ls);
+    // Bsdf::eval_pdf.
+    Vec3 lo, li;
+    bool pair = Bsdf::to_lobe(frame, ng, DiffuseBxdf::kTwoSided, wo, ls.wi, lo, li);
+    RGB f_pair = lobe.eval(lo, li, TransportMode::Radiance);
+    float bsdf_pdf = pair ? lobe.pdf(lo, li, TransportMode::Radiance) : 0.0f;
+    RGB f = pair ? f_pair : RGB(0.0f);
+    // !is_black(f), spelt as the lobe's own condition (f is R / pi above both lobe directions) so
+    // that GCC 12 vectorises it (it does not vectorise the select of flags is_black(f) becomes).
+    bool f_nonzero = !(lo.z <= 0) & !(li.z <= 0) & !is_black(lobe.reflectance * kInvPi);
+    ok = ok & (L.light_ok[j] != 0) & pair & f_nonzero;
+    Ray shadow = Accel::shadow_segment(p, p_error, ng, ls.p, ls.p_error, ls.n);
+    float w = power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
+    float cos_i = std::fabs(dot(ls.wi, frame.n));
+    RGB c = f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
+    L.nee_ok[j] = ok;
+    D::put(L.shadow_o, j, shadow.o);
+    D::put(L.shadow_d, j, shadow.d);
+    D::put(L.nee, j, ok ? c : RGB(0.0f));
+    D::put(L.receiver_n, j, dot(wo, ng) >= 0 ? ng : -ng);
+    // Bsdf::sample up to the lobe's disk point.
+    Vec3 lo_wo = frame.to_local(wo);
+    bool mirror = lo_wo.z < 0;
+    float z = mirror ? -lo_wo.z : lo_wo.z;
+    L.mirror[j] = mirror;
+    L.sample_ok[j] = !(lo_wo.z == 0) && !(z <= 0);
+    concentric_disk_polar({L.u_dir[0][j], L.u_dir[1][j]}, L.disk_r[j], L.disk_theta[j]);
+  }
+}
+
+RF_SIMD_CLONES void diffuse_lanes_continue(DiffuseLanes& L) {
+  using D = DiffuseLanes;
+  RF_IVDEP
+  for (int j = 0; j < L.m; ++j) {
+    const Vec3 p = D::get(L.p, j), p_error = D::get(L.p_error, j), ng = D::get(L.ng, j);
+    const Vec3 wo = D::get(L.wo, j);
+    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    BsdfSample bs;
+    bool ok =
+        DiffuseBxdf{D::get(L.reflectance, j)}.sample_from_disk({L.disk[0][j], L.disk[1][j]}, bs);
+    ok = Bsdf::sample_to_world(frame, ng, wo, L.mirror[j] != 0, bs) & ok & (L.sample_ok[j] != 0);
+    float cos_i = std::fabs(dot(bs.wi, frame.n));
+    RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
+    D::put(L.ray_o, j, offset_ray_origin(p, p_error, ng, bs.wi));
+    D::put(L.ray_d, j, bs.wi);
+    L.bsdf_pdf[j] = bs.pdf_solid_angle;
+    float survive = std::min(1.0f, max_component(beta * L.eta_scale[j]));
+    L.continues[j] = ok;
+    bool roulette = L.roulette[j] != 0;
+    L.survives[j] = !(roulette & (L.u_rr[j] >= survive));
+    D::put(L.beta_out, j, roulette ? beta / survive : beta);
+  }
+}
+
+// Whether a material is diffuse with constant parameters (DiffuseLanes).
+bool plain_diffuse(const Material& m) {
+  return m.type == MaterialType::Diffuse && m.reflectance.texture < 0 && m.specular.texture < 0 &&
+         m.roughness.texture < 0;
 }
 
 // The path estimator for n <= K camera samples of one pixel, traced in lockstep: at every depth
@@ -63,6 +179,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
   int shading[K];
   Sampler::LaneDraws u[kVertexDraws];
+  // With lockstep draws and triangle lights only, diffuse vertices are shaded together.
+  const bool diffuse_lanes = lockstep_draws && ctx.lights.triangles_by_power();
+  DiffuseLanes dl;
   int live = n;
   for (int i = 0; i < n; ++i) {
     rays.set(i, camera_rays[i]);
@@ -81,6 +200,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
     }
     bool any_shadow = false;
+    dl.m = 0;
     for (int i = 0; i < n; ++i) {
       nee_done[i] = false;
       shadow.clear(i);
@@ -109,6 +229,26 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       }
       if (depth == settings.max_depth) {
         end();
+        continue;
+      }
+      if (diffuse_lanes && plain_diffuse(ctx.scene.materials[mesh.material])) {
+        const int j = dl.m++;
+        using D = DiffuseLanes;
+        dl.lane[j] = i;
+        D::put(dl.p, j, hit.p), D::put(dl.p_error, j, hit.p_error);
+        D::put(dl.ng, j, hit.ng), D::put(dl.ns, j, hit.ns), D::put(dl.wo, j, wo);
+        D::put(dl.reflectance, j, ctx.scene.materials[mesh.material].reflectance.value);
+        D::put(dl.beta, j, a.beta);
+        dl.eta_scale[j] = a.eta_scale;
+        dl.u_dir[0][j] = u[kUDir][0][i], dl.u_dir[1][j] = u[kUDir][1][i];
+        dl.u_rr[j] = u[kURoulette][0][i], dl.roulette[j] = roulette;
+        float ux = u[kUPoint][0][i];
+        LightSet::TriangleLight t;
+        dl.light_ok[j] = ctx.lights.pick_triangle(u[kULight][0][i], ux, t);
+        dl.u_point[0][j] = ux, dl.u_point[1][j] = u[kUPoint][1][i];
+        D::put(dl.l_p0, j, t.p0), D::put(dl.l_p1, j, t.p1), D::put(dl.l_p2, j, t.p2);
+        D::put(dl.l_n, j, t.n), D::put(dl.l_radiance, j, t.emission.radiance);
+        dl.l_area[j] = t.area, dl.l_pmf[j] = t.pmf, dl.l_two_sided[j] = t.emission.two_sided;
         continue;
       }
       Bsdf bsdf = bsdf_at(ctx, hit, a.cone_width);
@@ -150,6 +290,38 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           continue;
         }
         a.beta = a.beta / survive;
+      }
+    }
+    if (dl.m > 0) {
+      counters.lane_vertices += uint64_t(dl.m);
+      diffuse_lanes_nee(dl);
+      for (int j = 0; j < dl.m; ++j) {
+        dl.disk[0][j] = dl.disk_r[j] * std::cos(dl.disk_theta[j]);
+        dl.disk[1][j] = dl.disk_r[j] * std::sin(dl.disk_theta[j]);
+      }
+      diffuse_lanes_continue(dl);
+      using D = DiffuseLanes;
+      for (int j = 0; j < dl.m; ++j) {
+        const int i = dl.lane[j];
+        Lane& a = lanes[i];
+        nee_done[i] = true;
+        a.nee_beta = a.beta;
+        a.nee = D::get(dl.nee, j);
+        if (dl.nee_ok[j]) {
+          shadow.set(i, {D::get(dl.shadow_o, j), D::get(dl.shadow_d, j), 1.0f - 1e-4f});
+          any_shadow = true;
+          ++counters.rays;
+        }
+        if (!dl.continues[j] || !dl.survives[j]) {
+          rays.clear(i), --live;
+          continue;
+        }
+        a.beta = D::get(dl.beta_out, j);
+        a.prev_bsdf_pdf = dl.bsdf_pdf[j];
+        a.prev_delta = false;
+        a.prev_p = D::get(dl.p, j);
+        a.prev_n = D::get(dl.receiver_n, j);
+        rays.set(i, {D::get(dl.ray_o, j), D::get(dl.ray_d, j), kInf});
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
