@@ -323,7 +323,10 @@ bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) cons
     ls.pdf_solid_angle = 1.0f / (2 * kPi * one_minus_cos_max);
     return true;
   }
-  return sample_triangle_area(tri.p0, tri.p1, tri.p2, tri.n, tri.area, *m.emission, p, u, ls);
+  if (!tri.sphere)
+    return sample_triangle_area(tri.p0, tri.p1, tri.p2, tri.n, tri.area, *m.emission, p, u, ls);
+  sample_surface(tri, u, ls.p, ls.p_error, ls.n);  // a sphere seen from inside: uniform on it
+  return area_point_seen_from(p, tri.area, *m.emission, ls);
 }
 
 bool LightSet::sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const {

@@ -215,6 +215,12 @@ class LightSet {
                                                           Vec2 u, LightSample& ls) {
     triangle_point(p0, p1, p2, u, ls.p, ls.p_error);
     ls.n = n;
+    return area_point_seen_from(p, area, e, ls);
+  }
+  // The rest of sample_area() once ls holds a uniform point of the light's surface (p, p_error,
+  // n): its direction and distance from p, radiance and solid-angle density.
+  [[gnu::always_inline]] static bool area_point_seen_from(Vec3 p, float area, const Emission& e,
+                                                          LightSample& ls) {
     Vec3 d = ls.p - p;
     float dist2 = length_sq(d);
     ls.distance = std::sqrt(dist2);
