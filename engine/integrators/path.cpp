@@ -179,8 +179,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
   int shading[K];
   Sampler::LaneDraws u[kVertexDraws];
-  // With lockstep draws and triangle lights only, diffuse vertices are shaded together.
-  const bool diffuse_lanes = lockstep_draws && ctx.lights.triangles_by_power();
+  // With triangle lights only, diffuse vertices are shaded together.
+  const bool diffuse_lanes = K > 1 && ctx.lights.triangles_by_power();
   DiffuseLanes dl;
   int live = n;
   for (int i = 0; i < n; ++i) {
@@ -240,12 +240,20 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         D::put(dl.reflectance, j, ctx.scene.materials[mesh.material].reflectance.value);
         D::put(dl.beta, j, a.beta);
         dl.eta_scale[j] = a.eta_scale;
-        dl.u_dir[0][j] = u[kUDir][0][i], dl.u_dir[1][j] = u[kUDir][1][i];
-        dl.u_rr[j] = u[kURoulette][0][i], dl.roulette[j] = roulette;
-        float ux = u[kUPoint][0][i];
+        float u_light = u[kULight][0][i], u_rr = u[kURoulette][0][i];
+        Vec2 u_point{u[kUPoint][0][i], u[kUPoint][1][i]}, u_dir{u[kUDir][0][i], u[kUDir][1][i]};
+        if (!lockstep_draws) {  // in the one-lane order below; the lobe choice is not read
+          u_light = sampler.get_1d(), u_point = sampler.get_2d(), sampler.skip_1d();
+          u_dir = sampler.get_2d();
+          // Drawn before the sample is known to succeed: a lane whose sample fails ends, and
+          // nothing reads its sampler after that, so the extra draw changes no value.
+          u_rr = sampler.get_1d_if(roulette);
+        }
+        dl.u_dir[0][j] = u_dir.x, dl.u_dir[1][j] = u_dir.y;
+        dl.u_rr[j] = u_rr, dl.roulette[j] = roulette;
         LightSet::TriangleLight t;
-        dl.light_ok[j] = ctx.lights.pick_triangle(u[kULight][0][i], ux, t);
-        dl.u_point[0][j] = ux, dl.u_point[1][j] = u[kUPoint][1][i];
+        dl.light_ok[j] = ctx.lights.pick_triangle(u_light, u_point.x, t);
+        dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
         D::put(dl.l_p0, j, t.p0), D::put(dl.l_p1, j, t.p1), D::put(dl.l_p2, j, t.p2);
         D::put(dl.l_n, j, t.n), D::put(dl.l_radiance, j, t.emission.radiance);
         dl.l_area[j] = t.area, dl.l_pmf[j] = t.pmf, dl.l_two_sided[j] = t.emission.two_sided;
