@@ -59,8 +59,7 @@ struct DiffuseLanes {
   // Next-event estimation: whether it has a shadow ray, the ray (tmax 1 - 1e-4), the term.
   int nee_ok[N];
   V3 shadow_o, shadow_d, nee;
-  // The BSDF sample: its disk point (polar form first), whether wo was mirrored, whether it goes
-  // on.
+  // The BSDF sample's disk point (polar form first); wo mirrored; the sample not failed yet.
   float disk_r[N], disk_theta[N], disk[2][N];
   int mirror[N], sample_ok[N];
   // The continuation: receiver normal, spawned ray, new throughput, BSDF pdf, whether it lives on.
@@ -240,9 +239,13 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         D::put(dl.reflectance, j, ctx.scene.materials[mesh.material].reflectance.value);
         D::put(dl.beta, j, a.beta);
         dl.eta_scale[j] = a.eta_scale;
-        float u_light = u[kULight][0][i], u_rr = u[kURoulette][0][i];
-        Vec2 u_point{u[kUPoint][0][i], u[kUPoint][1][i]}, u_dir{u[kUDir][0][i], u[kUDir][1][i]};
-        if (!lockstep_draws) {  // in the one-lane order below; the lobe choice is not read
+        float u_light, u_rr = 0;
+        Vec2 u_point, u_dir;
+        if (lockstep_draws) {
+          u_light = u[kULight][0][i], u_point = {u[kUPoint][0][i], u[kUPoint][1][i]};
+          u_dir = {u[kUDir][0][i], u[kUDir][1][i]};
+          if (roulette) u_rr = u[kURoulette][0][i];
+        } else {  // in the one-lane order below; the lobe choice is not read
           u_light = sampler.get_1d(), u_point = sampler.get_2d(), sampler.skip_1d();
           u_dir = sampler.get_2d();
           // Drawn before the sample is known to succeed: a lane whose sample fails ends, and
