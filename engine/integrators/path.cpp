@@ -66,16 +66,29 @@ struct DiffuseLanes {
   V3 receiver_n, ray_o, ray_d, beta_out;
   float bsdf_pdf[N];
   int continues[N], survives[N];
+
+  // Lane j's vertex as the one-vertex code takes it.
+  struct Vertex {
+    Vec3 p, p_error, ng, wo;
+    Frame frame;
+    DiffuseBxdf lobe;
+  };
+  Vertex vertex(int j) const {
+    const Vec3 n = get(ng, j);
+    return {get(p, j),
+            get(p_error, j),
+            n,
+            get(wo, j),
+            Bsdf::shading_frame(get(ns, j), n),
+            DiffuseBxdf{get(reflectance, j)}};
+  }
 };
 
 RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
   using D = DiffuseLanes;
   RF_IVDEP
   for (int j = 0; j < L.m; ++j) {
-    const Vec3 p = D::get(L.p, j), p_error = D::get(L.p_error, j), ng = D::get(L.ng, j);
-    const Vec3 wo = D::get(L.wo, j);
-    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
-    const DiffuseBxdf lobe{D::get(L.reflectance, j)};
+    const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
     // light_sample_mis_unshadowed() with LightSet::sample() as pick + sample_triangle.
     LightSet::TriangleLight t{D::get(L.l_p0, j),
                               D::get(L.l_p1, j),
@@ -119,12 +132,9 @@ RF_SIMD_CLONES void diffuse_lanes_continue(DiffuseLanes& L) {
   using D = DiffuseLanes;
   RF_IVDEP
   for (int j = 0; j < L.m; ++j) {
-    const Vec3 p = D::get(L.p, j), p_error = D::get(L.p_error, j), ng = D::get(L.ng, j);
-    const Vec3 wo = D::get(L.wo, j);
-    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
     BsdfSample bs;
-    bool ok =
-        DiffuseBxdf{D::get(L.reflectance, j)}.sample_from_disk({L.disk[0][j], L.disk[1][j]}, bs);
+    bool ok = lobe.sample_from_disk({L.disk[0][j], L.disk[1][j]}, bs);
     ok = Bsdf::sample_to_world(frame, ng, wo, L.mirror[j] != 0, bs) & ok & (L.sample_ok[j] != 0);
     float cos_i = std::fabs(dot(bs.wi, frame.n));
     RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
