@@ -69,7 +69,9 @@ struct RenderContext {
 // Per-thread counters an integrator updates; summed into the task's buffer.
 struct TraceCounters {
   uint64_t rays = 0;
-  uint64_t lane_vertices = 0;  // path vertices shaded in the vectorised lanes (DiffuseLanes)
+  // Path vertices shaded in the vectorised lanes (DiffuseLanes); not summed into the buffer, the
+  // packet test reads it.
+  uint64_t lane_vertices = 0;
 };
 
 // The material's parameters at a hit, textures resolved with a ray-cone footprint of the given
