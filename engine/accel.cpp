@@ -1,6 +1,7 @@
 #include "engine/accel.h"
 
 #include "engine/shapes.h"
+#include "engine/simd.h"
 
 #include <spdlog/spdlog.h>
 
@@ -20,6 +21,63 @@ void embree_error(void*, RTCError code, const char* str) {
 constexpr float gamma_n(int n) {
   constexpr float eps = std::numeric_limits<float>::epsilon() * 0.5f;
   return (n * eps) / (1 - n * eps);
+}
+
+// The point, its error bound and the normals of a hit at barycentrics (b1, b2) of the triangle
+// (p0, p1, p2) with vertex normals n0, n1, n2, all zero for a mesh without normals (pbrt-v4
+// Triangle::InteractionFromIntersection). Written without branches: hit_from_embree calls it for
+// one hit and triangle_hits for a packet's lanes in a loop that vectorises, so both give the same
+// bits (exact IEEE operations, no contraction).
+inline void triangle_hit(Vec3 p0, Vec3 p1, Vec3 p2, Vec3 n0, Vec3 n1, Vec3 n2, float b1, float b2,
+                         Vec3& p, Vec3& p_error, Vec3& ng, Vec3& ns) {
+  float b0 = 1.0f - b1 - b2;
+  p = b0 * p0 + b1 * p1 + b2 * p2;
+  p_error = gamma_n(7) * (abs(b0 * p0) + abs(b1 * p1) + abs(b2 * p2));
+  ng = normalize(cross(p1 - p0, p2 - p0));
+  // Interpolated normals, else (none, or they cancel) ng; on ng's side.
+  Vec3 s = b0 * n0 + b1 * n1 + b2 * n2;
+  float len = length(s);
+  s = s * (1.0f / len);
+  const bool keep = len > 0;  // component selects: GCC 12 vectorises no select of a struct
+  s = {keep ? s.x : ng.x, keep ? s.y : ng.y, keep ? s.z : ng.z};
+  const bool flip = dot(s, ng) < 0;
+  ns = {flip ? -s.x : s.x, flip ? -s.y : s.y, flip ? -s.z : s.z};
+}
+
+// The triangle lanes of a packet (Accel::intersect_packet): each lane's triangle and barycentrics
+// gathered lane by lane, then the hits computed by one loop over the lanes (triangle_hits). The
+// loop runs over all N slots (the m gathered and zeros, whose results nobody reads), so that it has
+// no scalar remainder at any vector width.
+struct TriangleLanes {
+  static constexpr int N = Accel::kPacket;
+  using V3 = float[3][N];
+  static Vec3 get(const V3& a, int j) { return {a[0][j], a[1][j], a[2][j]}; }
+  static void put(V3& a, int j, Vec3 v) { a[0][j] = v.x, a[1][j] = v.y, a[2][j] = v.z; }
+  int m = 0;
+  int lane[N];
+  float b1[N], b2[N];
+  V3 p0, p1, p2, n0, n1, n2;  // the normals zero for a mesh without them
+  V3 p, p_error, ng, ns;
+};
+
+RF_SIMD_CLONES void triangle_hits(TriangleLanes& T) {
+  using T3 = TriangleLanes;
+  RF_IVDEP
+  for (int j = 0; j < TriangleLanes::N; ++j) {  // all N: see TriangleLanes
+    Vec3 p, p_error, ng, ns;
+    triangle_hit(T3::get(T.p0, j), T3::get(T.p1, j), T3::get(T.p2, j), T3::get(T.n0, j),
+                 T3::get(T.n1, j), T3::get(T.n2, j), T.b1[j], T.b2[j], p, p_error, ng, ns);
+    T3::put(T.p, j, p), T3::put(T.p_error, j, p_error);
+    T3::put(T.ng, j, ng), T3::put(T.ns, j, ns);
+  }
+}
+
+// The uv of a triangle hit: the mesh's, interpolated, else the barycentrics.
+inline Vec2 triangle_uv(const Mesh& m, uint32_t i0, uint32_t i1, uint32_t i2, float b1, float b2) {
+  if (m.uvs.empty()) return {b1, b2};
+  float b0 = 1.0f - b1 - b2;
+  Vec2 a = m.uvs[i0], b = m.uvs[i1], c = m.uvs[i2];
+  return {b0 * a.x + b1 * b.x + b2 * c.x, b0 * a.y + b1 * b.y + b2 * c.y};
 }
 
 void init_ray(RTCRay& r, Vec3 o, Vec3 d, float tmax) {
@@ -172,12 +230,15 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
   const RTCHit16& h = packet.rh.hit;
   // The lanes' hits are scattered over the meshes: fetch every lane's index triple first, then
   // its vertices, so that the lanes' cache misses overlap instead of following one another (on a
-  // million triangles, hit_from_embree was 12% of a render waiting on them).
+  // million triangles, hit_from_embree was 12% of a render waiting on them). Triangles of meshes
+  // placed without an instance are then computed together (triangle_hits); the other hits
+  // (spheres, instances) one by one.
   const Mesh* meshes[kPacket];
   for (int i = 0; i < n; ++i) {
     meshes[i] = nullptr;
     if (!packet.active(i) || h.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-    const Mesh& m = *surfaces_[surface_of(h.geomID[i], h.instID[0][i])];
+    if (h.instID[0][i] != RTC_INVALID_GEOMETRY_ID) continue;
+    const Mesh& m = *surfaces_[h.geomID[i]];
     if (m.sphere) continue;
     meshes[i] = &m;
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i])]);
@@ -193,12 +254,46 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
       if (!m->uvs.empty()) __builtin_prefetch(&m->uvs[idx[k]]);
     }
   }
+  using T3 = TriangleLanes;
+  // Per thread, zeroed once: the slots past m hold zeros or earlier lanes' data, never garbage.
+  thread_local TriangleLanes T{};
+  T.m = 0;
+  int slot[kPacket];
+  for (int i = 0; i < n; ++i) {
+    const Mesh* m = meshes[i];
+    if (!m) continue;
+    const int j = T.m++;
+    slot[i] = j;
+    T.lane[j] = i;
+    const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
+    T3::put(T.p0, j, m->positions[idx[0]]);
+    T3::put(T.p1, j, m->positions[idx[1]]);
+    T3::put(T.p2, j, m->positions[idx[2]]);
+    const bool normals = !m->normals.empty();
+    T3::put(T.n0, j, normals ? m->normals[idx[0]] : Vec3(0.0f));
+    T3::put(T.n1, j, normals ? m->normals[idx[1]] : Vec3(0.0f));
+    T3::put(T.n2, j, normals ? m->normals[idx[2]] : Vec3(0.0f));
+    T.b1[j] = h.u[i], T.b2[j] = h.v[i];
+  }
+  triangle_hits(T);
   for (int i = 0; i < n; ++i) {
     if (!packet.active(i)) continue;
     found[i] = h.geomID[i] != RTC_INVALID_GEOMETRY_ID;
-    if (found[i])
+    if (!found[i]) continue;
+    if (const Mesh* m = meshes[i]) {
+      const int j = slot[i];
+      SurfaceHit& hit = hits[i];
+      hit.p = T3::get(T.p, j), hit.p_error = T3::get(T.p_error, j);
+      hit.ng = T3::get(T.ng, j), hit.ns = T3::get(T.ns, j);
+      const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
+      hit.uv = triangle_uv(*m, idx[0], idx[1], idx[2], h.u[i], h.v[i]);
+      hit.t = packet.rh.ray.tfar[i];
+      hit.mesh = h.geomID[i];
+      hit.prim = h.primID[i];
+    } else {
       hit_from_embree(packet.ray(i), h.geomID[i], h.primID[i], h.instID[0][i], h.u[i], h.v[i],
                       packet.rh.ray.tfar[i], hits[i]);
+    }
   }
 }
 
@@ -238,31 +333,16 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
   }
   hit.t = t;
   uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
-  Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
-  float b1 = u, b2 = v, b0 = 1.0f - b1 - b2;
-  hit.p = b0 * p0 + b1 * p1 + b2 * p2;
-  // Error of the barycentric interpolation (pbrt-v4 Triangle::InteractionFromIntersection).
-  hit.p_error = gamma_n(7) * (abs(b0 * p0) + abs(b1 * p1) + abs(b2 * p2));
-  hit.ng = normalize(cross(p1 - p0, p2 - p0));
-  if (!m.normals.empty()) {
-    Vec3 ns = b0 * m.normals[i0] + b1 * m.normals[i1] + b2 * m.normals[i2];
-    float len = length(ns);
-    hit.ns = len > 0 ? ns / len : hit.ng;
-    if (dot(hit.ns, hit.ng) < 0) hit.ns = -hit.ns;
-  } else {
-    hit.ns = hit.ng;
-  }
+  const bool normals = !m.normals.empty();
+  triangle_hit(m.positions[i0], m.positions[i1], m.positions[i2],
+               normals ? m.normals[i0] : Vec3(0.0f), normals ? m.normals[i1] : Vec3(0.0f),
+               normals ? m.normals[i2] : Vec3(0.0f), u, v, hit.p, hit.p_error, hit.ng, hit.ns);
   if (inst) {  // object space to world space (flatten_instances' placement)
     transform_hit_point(inst->to_world, hit.p, hit.p_error);
     hit.ng = normalize(inst->to_world.normal(hit.ng));
     hit.ns = normalize(inst->to_world.normal(hit.ns));
   }
-  if (!m.uvs.empty()) {
-    Vec2 a = m.uvs[i0], b = m.uvs[i1], c = m.uvs[i2];
-    hit.uv = {b0 * a.x + b1 * b.x + b2 * c.x, b0 * a.y + b1 * b.y + b2 * c.y};
-  } else {
-    hit.uv = {b1, b2};
-  }
+  hit.uv = triangle_uv(m, i0, i1, i2, u, v);
 }
 
 bool Accel::occluded(Vec3 o, Vec3 d, float tmax) const {
