@@ -38,6 +38,10 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so the compiled
 // vector loops give each vertex the bits the one-lane path gives it (the packet test holds them
 // to that); only the disk's cosine and sine, library calls, run lane by lane between the loops.
+// The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
+// vertices; their results are never read): with a trip count that is a multiple of every vector
+// width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
+// (with 16-wide AVX-512 vectors, every m < 16).
 struct DiffuseLanes {
   static constexpr int N = Accel::kPacket;
   using V3 = float[3][N];
@@ -87,7 +91,7 @@ struct DiffuseLanes {
 RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
   using D = DiffuseLanes;
   RF_IVDEP
-  for (int j = 0; j < L.m; ++j) {
+  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
     const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
     // light_sample_mis_unshadowed() with LightSet::sample() as pick + sample_triangle.
     LightSet::TriangleLight t{D::get(L.l_p0, j),
@@ -131,7 +135,7 @@ RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
 RF_SIMD_CLONES void diffuse_lanes_continue(DiffuseLanes& L) {
   using D = DiffuseLanes;
   RF_IVDEP
-  for (int j = 0; j < L.m; ++j) {
+  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
     const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
     BsdfSample bs;
     bool ok = lobe.sample_from_disk({L.disk[0][j], L.disk[1][j]}, bs);
@@ -190,7 +194,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   Sampler::LaneDraws u[kVertexDraws];
   // With triangle lights only, diffuse vertices are shaded together.
   const bool diffuse_lanes = K > 1 && ctx.lights.triangles_by_power();
-  DiffuseLanes dl;
+  // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
+  thread_local DiffuseLanes dl{};
   int live = n;
   for (int i = 0; i < n; ++i) {
     rays.set(i, camera_rays[i]);
