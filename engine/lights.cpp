@@ -197,7 +197,16 @@ size_t LightSet::select(float u_select, float& ux) const {
   size_t i = gr.first;
   if (gr.count > 1) {
     auto begin = within_cdf_.begin() + gr.first, end = begin + gr.count;
-    i = size_t(std::upper_bound(begin, end, double(ux)) - within_cdf_.begin());
+    const double x = double(ux);
+    if (gr.count <= 16) {
+      // upper_bound's position in a sorted range is the number of entries it does not pass
+      // (!(x < c)); counted without branches: a search's branches mispredict on random u.
+      size_t k = 0;
+      for (auto c = begin; c != end; ++c) k += !(x < *c);
+      i = gr.first + k;
+    } else {
+      i = size_t(std::upper_bound(begin, end, x) - within_cdf_.begin());
+    }
     i = std::min(i, size_t(gr.first + gr.count - 1));
     while (pmf_[i] == 0 && i > gr.first) --i;
     double lo = i > gr.first ? within_cdf_[i - 1] : 0.0, hi = within_cdf_[i];
