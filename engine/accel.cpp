@@ -48,13 +48,7 @@ inline void triangle_hit(Vec3 p0, Vec3 p1, Vec3 p2, Vec3 n0, Vec3 n1, Vec3 n2, f
 // gathered lane by lane, then the hits computed by one loop over the lanes (triangle_hits). The
 // loop runs over all N slots (the m gathered and zeros, whose results nobody reads), so that it has
 // no scalar remainder at any vector width.
-struct TriangleLanes {
-  static constexpr int N = Accel::kPacket;
-  using V3 = float[3][N];
-  static Vec3 get(const V3& a, int j) { return {a[0][j], a[1][j], a[2][j]}; }
-  static void put(V3& a, int j, Vec3 v) { a[0][j] = v.x, a[1][j] = v.y, a[2][j] = v.z; }
-  int m = 0;
-  int lane[N];
+struct TriangleLanes : LaneSlots<Accel::kPacket> {
   float b1[N], b2[N];
   V3 p0, p1, p2, n0, n1, n2;  // the normals zero for a mesh without them
   V3 p, p_error, ng, ns;

@@ -4,6 +4,8 @@
 // level: integer arithmetic and exact IEEE operations (no FMA contraction: -ffp-contract=off).
 #pragma once
 
+#include "engine/math.h"
+
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define RF_SIMD_CLONES \
   [[gnu::target_clones("arch=x86-64-v4", "arch=x86-64-v3", "arch=x86-64-v2", "default")]]
@@ -18,3 +20,19 @@
 #else
 #define RF_IVDEP
 #endif
+
+namespace rf {
+
+// What a loop over lanes works on: 3-vectors as lane arrays (a[axis][slot]), and which packet lane
+// each of the first m slots holds (the loops themselves run over all N slots: no scalar remainder).
+template <int N_>
+struct LaneSlots {
+  static constexpr int N = N_;
+  using V3 = float[3][N];
+  static Vec3 get(const V3& a, int j) { return {a[0][j], a[1][j], a[2][j]}; }
+  static void put(V3& a, int j, Vec3 v) { a[0][j] = v.x, a[1][j] = v.y, a[2][j] = v.z; }
+  int m = 0;
+  int lane[N];
+};
+
+}  // namespace rf

@@ -42,14 +42,7 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // vertices; their results are never read): with a trip count that is a multiple of every vector
 // width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
 // (with 16-wide AVX-512 vectors, every m < 16).
-struct DiffuseLanes {
-  static constexpr int N = Accel::kPacket;
-  using V3 = float[3][N];
-  static Vec3 get(const V3& a, int j) { return {a[0][j], a[1][j], a[2][j]}; }
-  static void put(V3& a, int j, Vec3 v) { a[0][j] = v.x, a[1][j] = v.y, a[2][j] = v.z; }
-
-  int m = 0;
-  int lane[N];
+struct DiffuseLanes : LaneSlots<Accel::kPacket> {
   // The vertex: hit point and its error, geometric and shading normals, direction to the previous
   // vertex, albedo, throughput and eta scale; the numbers of the BSDF sample and of roulette.
   V3 p, p_error, ng, ns, wo, reflectance, beta;
