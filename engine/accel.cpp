@@ -227,14 +227,15 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
   // million triangles, hit_from_embree was 12% of a render waiting on them). Triangles of meshes
   // placed without an instance are then computed together (triangle_hits); the other hits
   // (spheres, instances) one by one.
-  const Mesh* meshes[kPacket];
+  const Mesh* meshes[kPacket];   // the triangle hits' meshes (prefetched)
+  const Mesh* batched[kPacket];  // those placed without an instance (triangle_hits)
   for (int i = 0; i < n; ++i) {
-    meshes[i] = nullptr;
+    meshes[i] = batched[i] = nullptr;
     if (!packet.active(i) || h.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-    if (h.instID[0][i] != RTC_INVALID_GEOMETRY_ID) continue;
-    const Mesh& m = *surfaces_[h.geomID[i]];
+    const Mesh& m = *surfaces_[surface_of(h.geomID[i], h.instID[0][i])];
     if (m.sphere) continue;
     meshes[i] = &m;
+    if (h.instID[0][i] == RTC_INVALID_GEOMETRY_ID) batched[i] = &m;
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i])]);
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i]) + 2]);
   }
@@ -252,12 +253,10 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
   // Per thread, zeroed once: the slots past m hold zeros or earlier lanes' data, never garbage.
   thread_local TriangleLanes T{};
   T.m = 0;
-  int slot[kPacket];
   for (int i = 0; i < n; ++i) {
-    const Mesh* m = meshes[i];
+    const Mesh* m = batched[i];
     if (!m) continue;
     const int j = T.m++;
-    slot[i] = j;
     T.lane[j] = i;
     const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
     T3::put(T.p0, j, m->positions[idx[0]]);
@@ -270,24 +269,24 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
     T.b1[j] = h.u[i], T.b2[j] = h.v[i];
   }
   triangle_hits(T);
+  for (int j = 0; j < T.m; ++j) {
+    const int i = T.lane[j];
+    const Mesh& m = *batched[i];
+    SurfaceHit& hit = hits[i];
+    hit.p = T3::get(T.p, j), hit.p_error = T3::get(T.p_error, j);
+    hit.ng = T3::get(T.ng, j), hit.ns = T3::get(T.ns, j);
+    const uint32_t* idx = &m.indices[3 * size_t(h.primID[i])];
+    hit.uv = triangle_uv(m, idx[0], idx[1], idx[2], h.u[i], h.v[i]);
+    hit.t = packet.rh.ray.tfar[i];
+    hit.mesh = h.geomID[i];
+    hit.prim = h.primID[i];
+  }
   for (int i = 0; i < n; ++i) {
     if (!packet.active(i)) continue;
     found[i] = h.geomID[i] != RTC_INVALID_GEOMETRY_ID;
-    if (!found[i]) continue;
-    if (const Mesh* m = meshes[i]) {
-      const int j = slot[i];
-      SurfaceHit& hit = hits[i];
-      hit.p = T3::get(T.p, j), hit.p_error = T3::get(T.p_error, j);
-      hit.ng = T3::get(T.ng, j), hit.ns = T3::get(T.ns, j);
-      const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
-      hit.uv = triangle_uv(*m, idx[0], idx[1], idx[2], h.u[i], h.v[i]);
-      hit.t = packet.rh.ray.tfar[i];
-      hit.mesh = h.geomID[i];
-      hit.prim = h.primID[i];
-    } else {
+    if (found[i] && !batched[i])
       hit_from_embree(packet.ray(i), h.geomID[i], h.primID[i], h.instID[0][i], h.u[i], h.v[i],
                       packet.rh.ray.tfar[i], hits[i]);
-    }
   }
 }
 
