@@ -302,8 +302,9 @@ TEST(IntegratorDeterminism, PassesAreReproducibleAndTileIndependent) {
 // changes bits. Scenes: triangles only (the Cornell boxes, JSON and the benchmark's Mitsuba XML:
 // their diffuse vertices are shaded in the vectorised lanes, whose loops must give the one-lane
 // bits too; broken once by scaling the lanes' BSDF pdf by 1.0001, and once by leaving out the
-// independent sampler's lobe-choice skip: 1,001 of 1,800 lanes differ), Embree's sphere
-// primitive as lights with
+// independent sampler's lobe-choice skip: 1,001 of 1,800 lanes differ; and, for the packet's
+// triangle-hit loop (Accel::intersect_packet), by scaling its point by 1 + 1e-7: 898 and 867 of
+// 1,800 lanes differ), Embree's sphere primitive as lights with
 // rough conductors (veach-mis), and spheres of every material under an environment map with a
 // textured floor (delta BSDFs, lanes escaping while others go on). Groups of 16, 7 and 2 lanes
 // (partial packets). Broken once by reading lane 0's shadow test for every lane: 171 to 460 of
