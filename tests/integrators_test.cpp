@@ -347,10 +347,10 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
       EXPECT_EQ(differing, 0) << "of " << lanes << " lanes";
       EXPECT_EQ(packet_rays.rays, single_rays.rays);
       EXPECT_GT(nonzero, lanes / 2) << "too few lit samples to compare";
-      // The Cornell boxes (diffuse, triangle lights) shade in the vectorised diffuse lanes, so
-      // the comparison above covers them; the others cannot.
-      const bool diffuse_lanes = std::string(file).rfind("cornell-box/", 0) == 0;
-      EXPECT_EQ(packet_rays.lane_vertices > 0, diffuse_lanes);
+      // Every scene has plain diffuse surfaces, shaded in the vectorised diffuse lanes (with
+      // their light samples in the lanes on the Cornell boxes, whose lights are triangles, taken
+      // one by one on the others), so the comparison above covers both kinds of lane.
+      EXPECT_GT(packet_rays.lane_vertices, 0u);
       EXPECT_EQ(single_rays.lane_vertices, 0u);
     }
   }

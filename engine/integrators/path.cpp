@@ -31,13 +31,17 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
   blocked[0] = accel.occluded(p.r.o, p.r.d, p.r.tmax);
 }
 
-// A packet's vertices on plain diffuse surfaces (no texture), shaded together when every light is
-// a triangle picked by power (LightSet::triangles_by_power): light sample, MIS weight and shadow
-// ray, BSDF sample, throughput, spawned ray and roulette, each a loop over the vertices' arrays.
-// The loops call the one-vertex code (LightSet::sample_triangle, Bsdf's pieces, DiffuseBxdf,
-// offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so the compiled
-// vector loops give each vertex the bits the one-lane path gives it (the packet test holds them
-// to that); only the disk's cosine and sine, library calls, run lane by lane between the loops.
+// A packet's vertices on plain diffuse surfaces (no texture), shaded together: light sample, MIS
+// weight and shadow ray, BSDF sample, throughput, spawned ray and roulette, each a loop over the
+// vertices' arrays. When every light is a triangle picked by power
+// (LightSet::triangles_by_power) the light sample is a loop too; with other lights (spheres,
+// environment, point lights, the light BVH) each vertex's light sample is taken one by one
+// (LightSet::sample, as light_sample_mis_unshadowed takes it) and its result goes into the arrays
+// (kGivenLight). The loops call the one-vertex code (LightSet::sample_triangle, Bsdf's pieces,
+// DiffuseBxdf, offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so
+// the compiled vector loops give each vertex the bits the one-lane path gives it (the packet test
+// holds them to that); only the disk's cosine and sine, library calls, run lane by lane between
+// the loops.
 // The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
 // vertices; their results are never read): with a trip count that is a multiple of every vector
 // width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
@@ -53,9 +57,16 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
   float u_point[2][N], l_area[N], l_pmf[N];
   V3 l_p0, l_p1, l_p2, l_n, l_radiance;
   int l_two_sided[N];
-  // Next-event estimation: whether it has a shadow ray, the ray (tmax 1 - 1e-4), the term.
+  // A light sample taken one by one (kGivenLight): direction, radiance (l_radiance), pdf
+  // including selection, whether the light is a delta light; light_ok says it succeeded.
+  V3 l_wi;
+  float l_pdf[N];
+  int l_delta[N];
+  // Next-event estimation: whether it has a shadow ray, the ray, the term. With triangle lights
+  // the loop computes the ray (tmax 1 - 1e-4); a light sample taken one by one brings its own.
   int nee_ok[N];
   V3 shadow_o, shadow_d, nee;
+  float shadow_tmax[N];
   // The BSDF sample's disk point (polar form first); wo mirrored; the sample not failed yet.
   float disk_r[N], disk_theta[N], disk[2][N];
   int mirror[N], sample_ok[N];
@@ -81,21 +92,30 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
   }
 };
 
+template <bool kGivenLight>
 RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
   using D = DiffuseLanes;
   RF_IVDEP
   for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
     const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
-    // light_sample_mis_unshadowed() with LightSet::sample() as pick + sample_triangle.
-    LightSet::TriangleLight t{D::get(L.l_p0, j),
-                              D::get(L.l_p1, j),
-                              D::get(L.l_p2, j),
-                              D::get(L.l_n, j),
-                              L.l_area[j],
-                              L.l_pmf[j],
-                              {D::get(L.l_radiance, j), L.l_two_sided[j] != 0}};
+    // light_sample_mis_unshadowed(), with LightSet::sample() as pick + sample_triangle or taken
+    // before the loop.
     LightSample ls;
-    bool ok = LightSet::sample_triangle(t, p, {L.u_point[0][j], L.u_point[1][j]}, ls);
+    bool ok = true;
+    if constexpr (kGivenLight) {
+      ls.wi = D::get(L.l_wi, j);
+      ls.radiance = D::get(L.l_radiance, j);
+      ls.pdf_solid_angle = L.l_pdf[j];
+    } else {
+      LightSet::TriangleLight t{D::get(L.l_p0, j),
+                                D::get(L.l_p1, j),
+                                D::get(L.l_p2, j),
+                                D::get(L.l_n, j),
+                                L.l_area[j],
+                                L.l_pmf[j],
+                                {D::get(L.l_radiance, j), L.l_two_sided[j] != 0}};
+      ok = LightSet::sample_triangle(t, p, {L.u_point[0][j], L.u_point[1][j]}, ls);
+    }
     // Bsdf::eval_pdf.
     Vec3 lo, li;
     bool pair = Bsdf::to_lobe(frame, ng, DiffuseBxdf::kTwoSided, wo, ls.wi, lo, li);
@@ -106,13 +126,17 @@ RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
     // that GCC 12 vectorises it (it does not vectorise the select of flags is_black(f) becomes).
     bool f_nonzero = !(lo.z <= 0) & !(li.z <= 0) & !is_black(lobe.reflectance * kInvPi);
     ok = ok & (L.light_ok[j] != 0) & pair & f_nonzero;
-    Ray shadow = Accel::shadow_segment(p, p_error, ng, ls.p, ls.p_error, ls.n);
     float w = power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
+    if constexpr (kGivenLight) w = L.l_delta[j] != 0 ? 1.0f : w;
     float cos_i = std::fabs(dot(ls.wi, frame.n));
     RGB c = f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
     L.nee_ok[j] = ok;
-    D::put(L.shadow_o, j, shadow.o);
-    D::put(L.shadow_d, j, shadow.d);
+    if constexpr (!kGivenLight) {
+      Ray shadow = Accel::shadow_segment(p, p_error, ng, ls.p, ls.p_error, ls.n);
+      D::put(L.shadow_o, j, shadow.o);
+      D::put(L.shadow_d, j, shadow.d);
+      L.shadow_tmax[j] = shadow.tmax;
+    }
     D::put(L.nee, j, ok ? c : RGB(0.0f));
     D::put(L.receiver_n, j, dot(wo, ng) >= 0 ? ng : -ng);
     // Bsdf::sample up to the lobe's disk point.
@@ -185,8 +209,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
   int shading[K];
   Sampler::LaneDraws u[kVertexDraws];
-  // With triangle lights only, diffuse vertices are shaded together.
-  const bool diffuse_lanes = K > 1 && ctx.lights.triangles_by_power();
+  // Diffuse vertices are shaded together; their light samples too when all lights are triangles.
+  const bool diffuse_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
   thread_local DiffuseLanes dl{};
   int live = n;
@@ -262,6 +286,19 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         }
         dl.u_dir[0][j] = u_dir.x, dl.u_dir[1][j] = u_dir.y;
         dl.u_rr[j] = u_rr, dl.roulette[j] = roulette;
+        if (given_light) {  // as light_sample_mis_unshadowed() takes it (receiver_normal())
+          LightSample ls;
+          const Vec3 receiver = dot(wo, hit.ng) >= 0 ? hit.ng : -hit.ng;
+          const bool ok = ctx.lights.sample(hit.p, receiver, u_light, u_point, ls);
+          dl.light_ok[j] = ok;
+          D::put(dl.l_wi, j, ls.wi), D::put(dl.l_radiance, j, ls.radiance);
+          dl.l_pdf[j] = ls.pdf_solid_angle, dl.l_delta[j] = ls.is_delta;
+          if (ok) {
+            const Ray r = light_shadow_ray(ctx, hit, ls);
+            D::put(dl.shadow_o, j, r.o), D::put(dl.shadow_d, j, r.d), dl.shadow_tmax[j] = r.tmax;
+          }
+          continue;
+        }
         LightSet::TriangleLight t;
         dl.light_ok[j] = ctx.lights.pick_triangle(u_light, u_point.x, t);
         dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
@@ -313,7 +350,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     }
     if (dl.m > 0) {
       counters.lane_vertices += uint64_t(dl.m);
-      diffuse_lanes_nee(dl);
+      if (given_light)
+        diffuse_lanes_nee<true>(dl);
+      else
+        diffuse_lanes_nee<false>(dl);
       for (int j = 0; j < dl.m; ++j) {
         dl.disk[0][j] = dl.disk_r[j] * std::cos(dl.disk_theta[j]);
         dl.disk[1][j] = dl.disk_r[j] * std::sin(dl.disk_theta[j]);
@@ -327,7 +367,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         a.nee_beta = a.beta;
         a.nee = D::get(dl.nee, j);
         if (dl.nee_ok[j]) {
-          shadow.set(i, {D::get(dl.shadow_o, j), D::get(dl.shadow_d, j), 1.0f - 1e-4f});
+          shadow.set(i, {D::get(dl.shadow_o, j), D::get(dl.shadow_d, j), dl.shadow_tmax[j]});
           any_shadow = true;
           ++counters.rays;
         }
