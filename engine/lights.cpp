@@ -223,21 +223,32 @@ bool LightSet::sample_by_power(Vec3 p, float u_select, Vec2 u_point, LightSample
 }
 
 bool LightSet::sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls) const {
-  if (!uses_bvh()) return sample_by_power(p, u_select, u_point, ls);
+  size_t i;
+  float pmf;
+  return pick(p, n, u_select, u_point, i, pmf) && sample_selected(i, pmf, p, u_point, ls);
+}
+
+bool LightSet::pick(Vec3 p, Vec3 n, float u_select, Vec2& u_point, size_t& light,
+                    float& pmf) const {
+  if (!uses_bvh()) {
+    light = select(u_select, u_point.x);
+    pmf = light == kNoLight ? 0.0f : pmf_[light];
+    return light != kNoLight;
+  }
   if (u_select < bvh_share_) {
     uint32_t i;
-    float pmf;
     float u = std::min(u_select / bvh_share_, 0x1.fffffep-1f);
     if (!bvh_.sample(p, n, u, i, pmf)) return false;
-    return sample_selected(i, bvh_share_ * pmf, p, u_point, ls);
+    light = i, pmf *= bvh_share_;
+    return true;
   }
   if (infinite_.empty()) return false;
   double u = (double(u_select) - bvh_share_) / (1.0 - bvh_share_);
   size_t k = size_t(std::upper_bound(infinite_cdf_.begin() + 1, infinite_cdf_.end(), u) -
                     (infinite_cdf_.begin() + 1));
   k = std::min(k, infinite_.size() - 1);
-  size_t i = infinite_[k];
-  return pmf_[i] > 0 && sample_selected(i, pmf_[i], p, u_point, ls);
+  light = infinite_[k], pmf = pmf_[light];
+  return pmf > 0;
 }
 
 float LightSet::selection_pmf_at(size_t light, Vec3 p, Vec3 n) const {
@@ -302,35 +313,27 @@ bool sphere_cone(const SphereShape& s, Vec3 p, float& sin2_max, float& cos_max,
 }
 }  // namespace
 
+bool LightSet::sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const {
+  if (i >= tris_.size() || !tris_[i].sphere) return false;
+  const SphereShape& s = *tris_[i].sphere;
+  if (!sphere_cone(s, p, c.sin2_max, c.cos_max, c.one_minus_cos_max)) return false;
+  c.center = s.center, c.pole = s.axis[1], c.radius = s.radius;
+  c.emission = *scene_.meshes[tris_[i].mesh].emission;
+  return true;
+}
+
 // Spheres seen from outside: a direction uniform in the cone the sphere subtends (pbrt-v4), the
 // point where it first meets the sphere computed directly. Otherwise a uniform point of the
 // primitive, its area density converted to solid angle. pdf_solid_angle without selection.
 bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const {
   const Mesh& m = scene_.meshes[tri.mesh];
-  float sin2_max, cos_max, one_minus_cos_max;
-  if (tri.sphere && sphere_cone(*tri.sphere, p, sin2_max, cos_max, one_minus_cos_max)) {
+  SphereCone c;
+  if (tri.sphere && sphere_cone(*tri.sphere, p, c.sin2_max, c.cos_max, c.one_minus_cos_max)) {
     const SphereShape& s = *tri.sphere;
-    float cos_t = (cos_max - 1.0f) * u.x + 1.0f, sin2_t = 1.0f - cos_t * cos_t;
-    if (sin2_max < 0.00068523f) {  // small cone: sin^2 is uniform to first order
-      sin2_t = sin2_max * u.x;
-      cos_t = std::sqrt(1.0f - sin2_t);
-    }
-    // Angle alpha at the centre between the axis back to p and the point hit.
-    float sin_max = std::sqrt(sin2_max);
-    float cos_alpha = sin2_t / sin_max + cos_t * safe_sqrt(1.0f - sin2_t / sin2_max);
-    float sin_alpha = safe_sqrt(1.0f - cos_alpha * cos_alpha);
-    float phi = 2 * kPi * u.y;
-    Frame f = Frame::from_normal(normalize(s.center - p));
-    Vec3 n = f.to_world({sin_alpha * std::cos(phi), sin_alpha * std::sin(phi), -cos_alpha});
-    sphere_surface_point(s, s.center + n * s.radius, ls.p, ls.p_error, ls.n);
-    Vec3 d = ls.p - p;
-    float dist2 = length_sq(d);
-    if (!(dist2 > 0)) return false;
-    ls.distance = std::sqrt(dist2);
-    ls.wi = d / ls.distance;
-    ls.radiance = emitted(m, ls.n, -ls.wi);
-    ls.pdf_solid_angle = 1.0f / (2 * kPi * one_minus_cos_max);
-    return true;
+    c.center = s.center, c.pole = s.axis[1], c.radius = s.radius, c.emission = *m.emission;
+    float cos_alpha, sin_alpha, phi;
+    sphere_cone_angles(c.sin2_max, c.cos_max, u, cos_alpha, sin_alpha, phi);
+    return sphere_cone_point(c, p, cos_alpha, sin_alpha, std::cos(phi), std::sin(phi), ls);
   }
   if (!tri.sphere)
     return sample_triangle_area(tri.p0, tri.p1, tri.p2, tri.n, tri.area, *m.emission, p, u, ls);

@@ -46,6 +46,7 @@
 #include "engine/light_bvh.h"
 #include "engine/sampling.h"
 #include "engine/scene.h"
+#include "engine/shapes.h"
 
 namespace rf {
 
@@ -103,6 +104,60 @@ class LightSet {
   // light can arrive from at p (a surface that only reflects, turned to the side of the outgoing
   // direction), or zero; only the BVH selection uses it.
   bool sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls) const;
+  // sample() in two steps: pick() finds the light it picks for (p, n), its selection
+  // probability, and u_point as sample_selected() then takes it (rescaled by a pick by power);
+  // false when nothing can be picked. sample() is pick() followed by sample_selected().
+  bool pick(Vec3 p, Vec3 n, float u_select, Vec2& u_point, size_t& light, float& pmf) const;
+  // Point sampling of light i once it is selected with probability pmf.
+  bool sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const;
+
+  // A sphere light seen from outside, whose light samples are directions uniform in the cone it
+  // subtends (pbrt-v4 Sphere::Sample): its centre, pole (the normal sphere_point gives its
+  // centre), radius, emission, and the cone as seen from p (sin^2 and cos of the half-angle,
+  // 1 - cos in a form that does not cancel).
+  struct SphereCone {
+    Vec3 center, pole;
+    float radius = 0, sin2_max = 0, cos_max = 0, one_minus_cos_max = 0;
+    Emission emission;
+  };
+  // Whether light i is a sphere that p sees from outside, with its cone.
+  bool sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const;
+  // sample_selected() of such a light is sphere_cone_angles(), the cosine and sine of phi
+  // (library calls), sphere_cone_point() and with_selection(): three steps without branches, so
+  // that the path tracer's lanes run the first and last in loops that vectorise and get the bits
+  // sample() gets. The angles: between the axis back to p and the sampled point, at the centre,
+  // as cosine and sine, and phi about the axis.
+  [[gnu::always_inline]] static void sphere_cone_angles(float sin2_max, float cos_max, Vec2 u,
+                                                        float& cos_alpha, float& sin_alpha,
+                                                        float& phi) {
+    float cos_t = (cos_max - 1.0f) * u.x + 1.0f, sin2_t = 1.0f - cos_t * cos_t;
+    // A small cone: sin^2 is uniform to first order.
+    const bool small = sin2_max < 0.00068523f;
+    float sin2_small = sin2_max * u.x;
+    float cos_small = std::sqrt(1.0f - sin2_small);
+    sin2_t = small ? sin2_small : sin2_t;
+    cos_t = small ? cos_small : cos_t;
+    float sin_max = std::sqrt(sin2_max);
+    cos_alpha = sin2_t / sin_max + cos_t * safe_sqrt(1.0f - sin2_t / sin2_max);
+    sin_alpha = safe_sqrt(1.0f - cos_alpha * cos_alpha);
+    phi = 2 * kPi * u.y;
+  }
+  // The sampled point, its direction and distance from p, radiance and solid-angle density
+  // (without selection).
+  [[gnu::always_inline]] static bool sphere_cone_point(const SphereCone& c, Vec3 p, float cos_alpha,
+                                                       float sin_alpha, float cos_phi,
+                                                       float sin_phi, LightSample& ls) {
+    Frame f = Frame::from_normal(normalize(c.center - p));
+    Vec3 n = f.to_world({sin_alpha * cos_phi, sin_alpha * sin_phi, -cos_alpha});
+    sphere_point(c.center, c.radius, c.pole, c.center + n * c.radius, ls.p, ls.p_error, ls.n);
+    Vec3 d = ls.p - p;
+    float dist2 = length_sq(d);
+    ls.distance = std::sqrt(dist2);
+    ls.wi = d / ls.distance;
+    ls.radiance = emitted(c.emission, ls.n, -ls.wi);
+    ls.pdf_solid_angle = 1.0f / (2 * kPi * c.one_minus_cos_max);
+    return dist2 > 0;
+  }
   // The same with selection by power alone, whatever the mode (BDPT's s = 1 connections).
   bool sample_by_power(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const;
   // True when sample() picks lights with the BVH.
@@ -187,6 +242,15 @@ class LightSet {
     bool ok = sample_triangle_area(t.p0, t.p1, t.p2, t.n, t.area, t.emission, p, u, ls);
     return with_selection(ok, t.pmf, ls);
   }
+  // The end of sample_selected(): a sample that succeeded with a non-black radiance, its density
+  // times the selection probability pmf, finite and positive.
+  // (Selects, no early return: it runs in the lanes' vectorised loops.)
+  [[gnu::always_inline]] static bool with_selection(bool ok, float pmf, LightSample& ls) {
+    bool good = ok & !is_black(ls.radiance);
+    float pdf = pmf * ls.pdf_solid_angle;
+    ls.pdf_solid_angle = good ? pdf : ls.pdf_solid_angle;
+    return good & std::isfinite(pdf) & (pdf > 0);
+  }
 
  private:
   struct Tri {  // an area light's primitive: a triangle, or a whole sphere (prim 0)
@@ -230,17 +294,6 @@ class LightSet {
     ls.pdf_solid_angle = dist2 / (area * cos_light);
     return (dist2 > 0) & (area > 0) & (cos_light > 0);  // no early return: see with_selection
   }
-  // The end of sample_selected(): a sample that succeeded with a non-black radiance, its density
-  // times the selection probability pmf, finite and positive.
-  // (Selects, no early return: it runs in the lanes' vectorised loops.)
-  [[gnu::always_inline]] static bool with_selection(bool ok, float pmf, LightSample& ls) {
-    bool good = ok & !is_black(ls.radiance);
-    float pdf = pmf * ls.pdf_solid_angle;
-    ls.pdf_solid_angle = good ? pdf : ls.pdf_solid_angle;
-    return good & std::isfinite(pdf) & (pdf > 0);
-  }
-  // Point sampling of light i once it is selected with probability pmf.
-  bool sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const;
   void build_bvh(const std::string& mode);
   void sample_surface(const Tri& tri, Vec2 u, Vec3& q, Vec3& q_error, Vec3& n) const;
   struct Punctual {  // point, spot, directional

@@ -119,5 +119,9 @@ Mat4 operator*(const Mat4& a, const Mat4& b);
 
 inline float safe_sqrt(float x) { return std::sqrt(std::max(0.0f, x)); }
 inline float sqr(float x) { return x * x; }
+// c ? a : b by components: GCC 12 vectorises no select of a struct, but does these.
+inline Vec3 vselect(bool c, Vec3 a, Vec3 b) {
+  return {c ? a.x : b.x, c ? a.y : b.y, c ? a.z : b.z};
+}
 
 }  // namespace rf

@@ -98,15 +98,7 @@ MeshData tessellate_sphere(const SphereShape& s, int n_theta, int n_phi) {
 
 void sphere_surface_point(const SphereShape& s, Vec3 near, Vec3& p, Vec3& p_error, Vec3& n,
                           Vec2* uv) {
-  Vec3 d = near - s.center;
-  float len = length(d);
-  n = len > 0 ? d / len : s.axis[1];
-  p = s.center + s.radius * n;
-  // Projecting onto the sphere is a few operations on p (pbrt-v4 Sphere: gamma(5) |p|), and the
-  // centre's addition adds its own rounding.
-  constexpr float eps = std::numeric_limits<float>::epsilon() * 0.5f;
-  constexpr float g5 = 5 * eps / (1 - 5 * eps);
-  p_error = g5 * (abs(p) + abs(s.center) + Vec3(s.radius));
+  sphere_point(s.center, s.radius, s.axis[1], near, p, p_error, n);
   if (!uv) return;
   Vec3 local(dot(n, s.axis[0]), dot(n, s.axis[1]), dot(n, s.axis[2]));
   float theta = std::acos(std::clamp(local.y, -1.0f, 1.0f));

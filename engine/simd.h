@@ -6,9 +6,15 @@
 
 #include "engine/math.h"
 
+// Flattened too: a loop vectorises only with every call in it inlined, and GCC's inliner, whose
+// budget is per translation unit, stopped inlining one into a lane loop when other code was added
+// to path.cpp (the loop then ran scalar: x0.54 on the Cornell box).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define RF_SIMD_CLONES \
-  [[gnu::target_clones("arch=x86-64-v4", "arch=x86-64-v3", "arch=x86-64-v2", "default")]]
+  [[gnu::flatten,      \
+    gnu::target_clones("arch=x86-64-v4", "arch=x86-64-v3", "arch=x86-64-v2", "default")]]
+#elif defined(__GNUC__)
+#define RF_SIMD_CLONES [[gnu::flatten]]
 #else
 #define RF_SIMD_CLONES
 #endif

@@ -57,13 +57,22 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
   float u_point[2][N], l_area[N], l_pmf[N];
   V3 l_p0, l_p1, l_p2, l_n, l_radiance;
   int l_two_sided[N];
-  // A light sample taken one by one (kGivenLight): direction, radiance (l_radiance), pdf
-  // including selection, whether the light is a delta light; light_ok says it succeeded.
-  V3 l_wi;
-  float l_pdf[N];
-  int l_delta[N];
-  // Next-event estimation: whether it has a shadow ray, the ray, the term. With triangle lights
-  // the loop computes the ray (tmax 1 - 1e-4); a light sample taken one by one brings its own.
+  // With other lights (kGivenLight) a vertex's light sample is taken one by one (g_*: ok,
+  // direction, radiance, pdf including selection, shadow ray), unless its light is a sphere seen
+  // from outside (l_sphere), whose cone is sampled in the loops (LightSet::SphereCone; emission
+  // in l_radiance and l_two_sided, selection in l_pmf, the numbers in u_point): the angles, the
+  // cosine and sine of phi one by one, then the point (l_p0, its error l_p1, normal l_n). The
+  // loops then select the sphere's sample or the given one into light_ok, l_wi, l_radiance, l_pdf
+  // and the shadow ray (two arrays: GCC 12 vectorises no conditional store of an array's own
+  // element back to it).
+  int l_delta[N], l_sphere[N];
+  V3 l_wi, g_wi, g_radiance, g_shadow_o, g_shadow_d;
+  float l_pdf[N], g_pdf[N], g_shadow_tmax[N];
+  int g_ok[N];
+  V3 s_center, s_pole;
+  float s_radius[N], s_sin2_max[N], s_cos_max[N], s_omc[N];
+  float s_cos_alpha[N], s_sin_alpha[N], s_phi[N], s_cos_phi[N], s_sin_phi[N];
+  // Next-event estimation: whether it has a shadow ray, the ray, the term.
   int nee_ok[N];
   V3 shadow_o, shadow_d, nee;
   float shadow_tmax[N];
@@ -91,6 +100,53 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
             DiffuseBxdf{get(reflectance, j)}};
   }
 };
+
+// The sphere cones' angles (LightSet::sphere_cone_angles), for every slot.
+RF_SIMD_CLONES void diffuse_lanes_sphere_angles(DiffuseLanes& L) {
+  RF_IVDEP
+  for (int j = 0; j < DiffuseLanes::N; ++j)  // all N: see DiffuseLanes
+    LightSet::sphere_cone_angles(L.s_sin2_max[j], L.s_cos_max[j],
+                                 {L.u_point[0][j], L.u_point[1][j]}, L.s_cos_alpha[j],
+                                 L.s_sin_alpha[j], L.s_phi[j]);
+}
+
+// The sphere cones' points: the rest of sample_selected() (sphere_cone_point, with_selection),
+// the light sample of the slots whose light is a sphere (l_sphere), the given one (g_*) of the
+// others; then their shadow rays (a loop of its own: GCC 12 does not vectorise the two as one).
+RF_SIMD_CLONES void diffuse_lanes_sphere_points(DiffuseLanes& L) {
+  using D = DiffuseLanes;
+  RF_IVDEP
+  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
+    const Vec3 p = D::get(L.p, j);
+    LightSet::SphereCone c{D::get(L.s_center, j),
+                           D::get(L.s_pole, j),
+                           L.s_radius[j],
+                           L.s_sin2_max[j],
+                           L.s_cos_max[j],
+                           L.s_omc[j],
+                           {D::get(L.l_radiance, j), L.l_two_sided[j] != 0}};
+    LightSample ls;
+    bool ok = LightSet::sphere_cone_point(c, p, L.s_cos_alpha[j], L.s_sin_alpha[j], L.s_cos_phi[j],
+                                          L.s_sin_phi[j], ls);
+    ok = LightSet::with_selection(ok, L.l_pmf[j], ls);
+    const bool sphere = L.l_sphere[j] != 0;
+    D::put(L.l_wi, j, vselect(sphere, ls.wi, D::get(L.g_wi, j)));
+    D::put(L.l_radiance, j, vselect(sphere, ls.radiance, D::get(L.g_radiance, j)));
+    L.l_pdf[j] = sphere ? ls.pdf_solid_angle : L.g_pdf[j];
+    L.light_ok[j] = sphere ? int(ok) : L.g_ok[j];
+    D::put(L.l_p0, j, ls.p), D::put(L.l_p1, j, ls.p_error), D::put(L.l_n, j, ls.n);
+  }
+  // The shadow rays: light_shadow_ray() to the sphere's point, or the given ray.
+  RF_IVDEP
+  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
+    Ray r = Accel::shadow_segment(D::get(L.p, j), D::get(L.p_error, j), D::get(L.ng, j),
+                                  D::get(L.l_p0, j), D::get(L.l_p1, j), D::get(L.l_n, j));
+    const bool sphere = L.l_sphere[j] != 0;
+    D::put(L.shadow_o, j, vselect(sphere, r.o, D::get(L.g_shadow_o, j)));
+    D::put(L.shadow_d, j, vselect(sphere, r.d, D::get(L.g_shadow_d, j)));
+    L.shadow_tmax[j] = sphere ? r.tmax : L.g_shadow_tmax[j];
+  }
+}
 
 template <bool kGivenLight>
 RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
@@ -287,15 +343,32 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         dl.u_dir[0][j] = u_dir.x, dl.u_dir[1][j] = u_dir.y;
         dl.u_rr[j] = u_rr, dl.roulette[j] = roulette;
         if (given_light) {  // as light_sample_mis_unshadowed() takes it (receiver_normal())
-          LightSample ls;
           const Vec3 receiver = dot(wo, hit.ng) >= 0 ? hit.ng : -hit.ng;
-          const bool ok = ctx.lights.sample(hit.p, receiver, u_light, u_point, ls);
-          dl.light_ok[j] = ok;
-          D::put(dl.l_wi, j, ls.wi), D::put(dl.l_radiance, j, ls.radiance);
-          dl.l_pdf[j] = ls.pdf_solid_angle, dl.l_delta[j] = ls.is_delta;
+          size_t light;
+          float pmf;
+          LightSet::SphereCone c;
+          const bool picked = ctx.lights.pick(hit.p, receiver, u_light, u_point, light, pmf);
+          const bool sphere = picked && ctx.lights.sphere_cone_of(light, hit.p, c);
+          dl.l_sphere[j] = sphere;
+          if (sphere) {  // sampled in the loops
+            dl.light_ok[j] = true, dl.l_delta[j] = false, dl.l_pmf[j] = pmf;
+            dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
+            D::put(dl.s_center, j, c.center), D::put(dl.s_pole, j, c.pole);
+            dl.s_radius[j] = c.radius, dl.s_sin2_max[j] = c.sin2_max;
+            dl.s_cos_max[j] = c.cos_max, dl.s_omc[j] = c.one_minus_cos_max;
+            D::put(dl.l_radiance, j, c.emission.radiance);
+            dl.l_two_sided[j] = c.emission.two_sided;
+            continue;
+          }
+          LightSample ls;
+          const bool ok = picked && ctx.lights.sample_selected(light, pmf, hit.p, u_point, ls);
+          dl.g_ok[j] = ok;
+          D::put(dl.g_wi, j, ls.wi), D::put(dl.g_radiance, j, ls.radiance);
+          dl.g_pdf[j] = ls.pdf_solid_angle, dl.l_delta[j] = ls.is_delta;
           if (ok) {
             const Ray r = light_shadow_ray(ctx, hit, ls);
-            D::put(dl.shadow_o, j, r.o), D::put(dl.shadow_d, j, r.d), dl.shadow_tmax[j] = r.tmax;
+            D::put(dl.g_shadow_o, j, r.o), D::put(dl.g_shadow_d, j, r.d);
+            dl.g_shadow_tmax[j] = r.tmax;
           }
           continue;
         }
@@ -350,10 +423,16 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     }
     if (dl.m > 0) {
       counters.lane_vertices += uint64_t(dl.m);
-      if (given_light)
+      if (given_light) {
+        diffuse_lanes_sphere_angles(dl);
+        for (int j = 0; j < dl.m; ++j)
+          if (dl.l_sphere[j])
+            dl.s_cos_phi[j] = std::cos(dl.s_phi[j]), dl.s_sin_phi[j] = std::sin(dl.s_phi[j]);
+        diffuse_lanes_sphere_points(dl);
         diffuse_lanes_nee<true>(dl);
-      else
+      } else {
         diffuse_lanes_nee<false>(dl);
+      }
       for (int j = 0; j < dl.m; ++j) {
         dl.disk[0][j] = dl.disk_r[j] * std::cos(dl.disk_theta[j]);
         dl.disk[1][j] = dl.disk_r[j] * std::sin(dl.disk_theta[j]);
