@@ -34,14 +34,16 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // A packet's vertices on plain diffuse surfaces (no texture), shaded together: light sample, MIS
 // weight and shadow ray, BSDF sample, throughput, spawned ray and roulette, each a loop over the
 // vertices' arrays. When every light is a triangle picked by power
-// (LightSet::triangles_by_power) the light sample is a loop too; with other lights (spheres,
-// environment, point lights, the light BVH) each vertex's light sample is taken one by one
-// (LightSet::sample, as light_sample_mis_unshadowed takes it) and its result goes into the arrays
-// (kGivenLight). The loops call the one-vertex code (LightSet::sample_triangle, Bsdf's pieces,
-// DiffuseBxdf, offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so
-// the compiled vector loops give each vertex the bits the one-lane path gives it (the packet test
-// holds them to that); only the disk's cosine and sine, library calls, run lane by lane between
-// the loops.
+// (LightSet::triangles_by_power) the light sample is a loop too. With other lights (spheres,
+// environment, point lights, the light BVH: kGivenLight) each vertex's light is picked one by one
+// as light_sample_mis_unshadowed picks it (LightSet::pick); a sphere seen from outside is then
+// sampled in loops (its cone), any other light one by one (LightSet::sample_selected), and the
+// result goes into the arrays. The loops call the one-vertex code (LightSet::sample_triangle,
+// sphere_cone_angles and sphere_cone_point, Bsdf's pieces, DiffuseBxdf, offset_ray_origin), whose
+// operations are exact IEEE ones (no FMA contraction), so the compiled vector loops give each
+// vertex the bits the one-lane path gives it (the packet test holds them to that); only library
+// calls (the cosine and sine of the disk's angle and of the sphere cone's phi) run lane by lane
+// between the loops.
 // The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
 // vertices; their results are never read): with a trip count that is a multiple of every vector
 // width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
@@ -265,7 +267,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
   int shading[K];
   Sampler::LaneDraws u[kVertexDraws];
-  // Diffuse vertices are shaded together; their light samples too when all lights are triangles.
+  // Diffuse vertices are shaded together; their light samples too when all lights are triangles
+  // by power, else their lights are picked one by one (and spheres' cones sampled together).
   const bool diffuse_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
   thread_local DiffuseLanes dl{};
@@ -351,7 +354,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           const bool sphere = picked && ctx.lights.sphere_cone_of(light, hit.p, c);
           dl.l_sphere[j] = sphere;
           if (sphere) {  // sampled in the loops
-            dl.light_ok[j] = true, dl.l_delta[j] = false, dl.l_pmf[j] = pmf;
+            dl.l_delta[j] = false, dl.l_pmf[j] = pmf;
             dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
             D::put(dl.s_center, j, c.center), D::put(dl.s_pole, j, c.pole);
             dl.s_radius[j] = c.radius, dl.s_sin2_max[j] = c.sin2_max;
