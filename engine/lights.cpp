@@ -314,11 +314,15 @@ bool sphere_cone(const SphereShape& s, Vec3 p, float& sin2_max, float& cos_max,
 }  // namespace
 
 bool LightSet::sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const {
-  if (i >= tris_.size() || !tris_[i].sphere) return false;
-  const SphereShape& s = *tris_[i].sphere;
+  return i < tris_.size() && sphere_cone_of(tris_[i], p, c);
+}
+
+bool LightSet::sphere_cone_of(const Tri& tri, Vec3 p, SphereCone& c) const {
+  if (!tri.sphere) return false;
+  const SphereShape& s = *tri.sphere;
   if (!sphere_cone(s, p, c.sin2_max, c.cos_max, c.one_minus_cos_max)) return false;
   c.center = s.center, c.pole = s.axis[1], c.radius = s.radius;
-  c.emission = *scene_.meshes[tris_[i].mesh].emission;
+  c.emission = *scene_.meshes[tri.mesh].emission;
   return true;
 }
 
@@ -328,9 +332,7 @@ bool LightSet::sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const {
 bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const {
   const Mesh& m = scene_.meshes[tri.mesh];
   SphereCone c;
-  if (tri.sphere && sphere_cone(*tri.sphere, p, c.sin2_max, c.cos_max, c.one_minus_cos_max)) {
-    const SphereShape& s = *tri.sphere;
-    c.center = s.center, c.pole = s.axis[1], c.radius = s.radius, c.emission = *m.emission;
+  if (sphere_cone_of(tri, p, c)) {
     float cos_alpha, sin_alpha, phi;
     sphere_cone_angles(c.sin2_max, c.cos_max, u, cos_alpha, sin_alpha, phi);
     return sphere_cone_point(c, p, cos_alpha, sin_alpha, std::cos(phi), std::sin(phi), ls);

@@ -303,6 +303,7 @@ class LightSet {
     float cos_falloff_start, cos_falloff_end;
   };
   bool sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) const;
+  bool sphere_cone_of(const Tri& tri, Vec3 p, SphereCone& c) const;
   bool sample_punctual(const Punctual& l, Vec3 p, LightSample& ls) const;
   // A light path of an infinite light travelling along unit `dir`: its start on the disk
   // (sample_emission), with pdf_pos including the selection probability pmf.
