@@ -49,11 +49,12 @@ inline float fresnel_complex(float cos_theta_i, float eta, float k) {
   float a2 = t0 >= 0 ? 0.5f * (s + t0) : (s - t0 > 0 ? 2 * eta2 * k2 / (s - t0) : 0.0f);
   float two_a_c = 2 * std::sqrt(a2) * c;
   float t1 = s + c2;
-  if (!(t1 + two_a_c > 0)) return 1.0f;  // grazing light on a vacuum-like interface
   float r_perp = (t1 - two_a_c) / (t1 + two_a_c);
   float t3 = c2 * s + sin2 * sin2, t4 = two_a_c * sin2;
   float r_parl = t3 + t4 > 0 ? r_perp * (t3 - t4) / (t3 + t4) : r_perp;
-  return 0.5f * (r_parl + r_perp);
+  // 1 for grazing light on a vacuum-like interface; a select, not a return (the path tracer's
+  // lanes vectorise it).
+  return !(t1 + two_a_c > 0) ? 1.0f : 0.5f * (r_parl + r_perp);
 }
 
 inline RGB fresnel_complex(float cos_theta_i, RGB eta, RGB k) {

@@ -33,21 +33,22 @@ struct TrowbridgeReitz {
 
   static bool effectively_smooth(float alpha) { return alpha < kSmoothAlpha; }
 
+  // Selects rather than early returns in what the path tracer's lanes call (their loops then
+  // vectorise): the same values.
   // Microfacet normal density per unit solid angle; 0 for wm in the lower hemisphere.
   float D(Vec3 wm) const {
-    if (wm.z <= 0) return 0.0f;
     float e = sqr(wm.x / alpha_x) + sqr(wm.y / alpha_y) + sqr(wm.z);
-    return 1.0f / (kPi * alpha_x * alpha_y * e * e);
+    return wm.z <= 0 ? 0.0f : 1.0f / (kPi * alpha_x * alpha_y * e * e);
   }
   // Smith's auxiliary function (depends on |w.z| only through tan^2(theta)).
   float lambda(Vec3 w) const {
-    if (w.z == 0) return kInf;
     float a2tan2 = (sqr(alpha_x * w.x) + sqr(alpha_y * w.y)) / sqr(w.z);
-    return 0.5f * (std::sqrt(1 + a2tan2) - 1);
+    return w.z == 0 ? kInf : 0.5f * (std::sqrt(1 + a2tan2) - 1);
   }
   float G1(Vec3 w) const { return 1 / (1 + lambda(w)); }
   float G2(Vec3 wo, Vec3 wi) const {
-    return separable ? G1(wo) * G1(wi) : 1 / (1 + lambda(wo) + lambda(wi));
+    const float g_separable = G1(wo) * G1(wi), g_correlated = 1 / (1 + lambda(wo) + lambda(wi));
+    return separable ? g_separable : g_correlated;
   }
 
   // G1(w) / |cos w| written without the division, so it stays finite at grazing angles.
@@ -64,14 +65,21 @@ struct TrowbridgeReitz {
 
   // Samples a normal from D_visible(w, .) (Heitz 2018, listing 1).
   Vec3 sample_visible_normal(Vec3 w, Vec2 u) const {
-    if (w.z < 0) w = -w;
+    const float phi = visible_normal_phi(u);
+    return sample_visible_normal(w, u.x, std::cos(phi), std::sin(phi));
+  }
+  // The pieces of it for the path tracer's lanes, which take the cosine and sine of phi one by
+  // one (library calls) and the rest in vectorised loops (selects, no branches).
+  static float visible_normal_phi(Vec2 u) { return 2 * kPi * u.y; }
+  Vec3 sample_visible_normal(Vec3 w, float ux, float cos_phi, float sin_phi) const {
+    w = vselect(w.z < 0, -w, w);
     Vec3 vh = normalize(Vec3(alpha_x * w.x, alpha_y * w.y, w.z));  // stretch to alpha = 1
     float lensq = vh.x * vh.x + vh.y * vh.y;
-    Vec3 t1 = lensq > 0 ? Vec3(-vh.y, vh.x, 0) / std::sqrt(lensq) : Vec3(1, 0, 0);
+    Vec3 t1 = vselect(lensq > 0, Vec3(-vh.y, vh.x, 0) / std::sqrt(lensq), Vec3(1, 0, 0));
     Vec3 t2 = cross(vh, t1);
     // Uniform point on the unit disk, then warp its lower half onto the projected hemisphere.
-    float r = std::sqrt(u.x), phi = 2 * kPi * u.y;
-    float p1 = r * std::cos(phi), p2 = r * std::sin(phi);
+    float r = std::sqrt(ux);
+    float p1 = r * cos_phi, p2 = r * sin_phi;
     float s = 0.5f * (1 + vh.z);
     p2 = (1 - s) * safe_sqrt(1 - p1 * p1) + s * p2;
     Vec3 nh = p1 * t1 + p2 * t2 + safe_sqrt(1 - p1 * p1 - p2 * p2) * vh;

@@ -369,6 +369,13 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
       // seen from inside, spot and directional lights (no scene here has them).
       EXPECT_GT(packet_rays.lane_vertices, 0u);
       EXPECT_EQ(single_rays.lane_vertices, 0u);
+      // Rough conductors with constant parameters are shaded in the lanes too (conductor_lanes):
+      // veach-mis's plates (Mitsuba's separable masking) and the materials scene's gold and
+      // copper (height-correlated masking, complex IOR).
+      if (file == "veach-mis/scene.xml" || file == "materials/scene.json") {
+        EXPECT_GT(packet_rays.conductor_lane_vertices, 0u);
+      }
+      EXPECT_EQ(single_rays.conductor_lane_vertices, 0u);
     }
   }
 }

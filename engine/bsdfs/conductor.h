@@ -22,7 +22,8 @@ struct ConductorFresnel {
   bool use_tint = false;
 
   RGB operator()(float cos_theta_i) const {
-    return use_tint ? fresnel_schlick(tint, cos_theta_i) : fresnel_complex(cos_theta_i, eta, k);
+    return vselect(use_tint, fresnel_schlick(tint, cos_theta_i),
+                   fresnel_complex(cos_theta_i, eta, k));
   }
 };
 

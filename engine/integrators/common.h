@@ -69,9 +69,9 @@ struct RenderContext {
 // Per-thread counters an integrator updates; summed into the task's buffer.
 struct TraceCounters {
   uint64_t rays = 0;
-  // Path vertices shaded in the vectorised lanes (DiffuseLanes); not summed into the buffer, the
-  // packet test reads it.
-  uint64_t lane_vertices = 0;
+  // Path vertices shaded in the vectorised lanes (SurfaceLanes), and the rough-conductor ones
+  // among them; not summed into the buffer, the packet test reads them.
+  uint64_t lane_vertices = 0, conductor_lane_vertices = 0;
 };
 
 // The material's parameters at a hit, textures resolved with a ray-cone footprint of the given

@@ -31,24 +31,26 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
   blocked[0] = accel.occluded(p.r.o, p.r.d, p.r.tmax);
 }
 
-// A packet's vertices on plain diffuse surfaces (no texture), shaded together: light sample, MIS
-// weight and shadow ray, BSDF sample, throughput, spawned ray and roulette, each a loop over the
-// vertices' arrays. When every light is a triangle picked by power
+// A packet's vertices on plain diffuse surfaces and plain rough conductors (no texture), shaded
+// together: light sample, MIS weight and shadow ray, BSDF sample, throughput, spawned ray and
+// roulette, each a loop over the vertices' arrays (the diffuse_lanes_* loops for all of them, then
+// conductor_lanes for the rough conductors' BSDF, whose results replace the diffuse loops' ones
+// for those vertices). When every light is a triangle picked by power
 // (LightSet::triangles_by_power) the light sample is a loop too. With other lights (spheres,
 // environment, point lights, the light BVH: kGivenLight) each vertex's light is picked one by one
 // as light_sample_mis_unshadowed picks it (LightSet::pick); a sphere seen from outside is then
 // sampled in loops (its cone), any other light one by one (LightSet::sample_selected), and the
 // result goes into the arrays. The loops call the one-vertex code (LightSet::sample_triangle,
-// sphere_cone_angles and sphere_cone_point, Bsdf's pieces, DiffuseBxdf, offset_ray_origin), whose
-// operations are exact IEEE ones (no FMA contraction), so the compiled vector loops give each
-// vertex the bits the one-lane path gives it (the packet test holds them to that); only library
-// calls (the cosine and sine of the disk's angle and of the sphere cone's phi) run lane by lane
-// between the loops.
+// sphere_cone_angles and sphere_cone_point, Bsdf's pieces, DiffuseBxdf, RoughConductorBxdf,
+// offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so the compiled
+// vector loops give each vertex the bits the one-lane path gives it (the packet test holds them to
+// that); only library calls (the cosine and sine of the disk's angle, of the sphere cone's phi and
+// of the visible-normal sample's phi) run lane by lane between the loops.
 // The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
 // vertices; their results are never read): with a trip count that is a multiple of every vector
 // width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
 // (with 16-wide AVX-512 vectors, every m < 16).
-struct DiffuseLanes : LaneSlots<Accel::kPacket> {
+struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   // The vertex: hit point and its error, geometric and shading normals, direction to the previous
   // vertex, albedo, throughput and eta scale; the numbers of the BSDF sample and of roulette.
   V3 p, p_error, ng, ns, wo, reflectance, beta;
@@ -85,6 +87,21 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
   V3 receiver_n, ray_o, ray_d, beta_out;
   float bsdf_pdf[N];
   int continues[N], survives[N];
+  // Rough-conductor vertices (plain_rough_conductor) share the arrays above: the vertex, the
+  // light sample (the NEE loop keeps it in ls_*: direction, radiance, pdf, usable, delta) and the
+  // shadow ray. Their lobe (alpha, masking, Fresnel), the cosine and sine of the visible-normal
+  // sample's phi, and their results (c_*), taken over the diffuse loops' ones lane by lane.
+  int conductor[N];
+  V3 ls_wi, ls_radiance;
+  float ls_pdf[N];
+  int ls_ok[N], ls_delta[N];
+  float c_alpha[N];
+  int c_separable[N], c_use_tint[N];
+  V3 c_eta, c_k, c_tint;
+  float c_cos_phi[N], c_sin_phi[N];
+  V3 c_f, c_nee, c_ray_o, c_ray_d, c_beta_out;
+  float c_bsdf_pdf[N];
+  int c_continues[N], c_survives[N];
 
   // Lane j's vertex as the one-vertex code takes it.
   struct Vertex {
@@ -92,6 +109,10 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
     Frame frame;
     DiffuseBxdf lobe;
   };
+  RoughConductorBxdf rough_conductor(int j) const {
+    return {TrowbridgeReitz{c_alpha[j], c_alpha[j], c_separable[j] != 0},
+            ConductorFresnel{get(c_eta, j), get(c_k, j), get(c_tint, j), c_use_tint[j] != 0}};
+  }
   Vertex vertex(int j) const {
     const Vec3 n = get(ng, j);
     return {get(p, j),
@@ -104,9 +125,9 @@ struct DiffuseLanes : LaneSlots<Accel::kPacket> {
 };
 
 // The sphere cones' angles (LightSet::sphere_cone_angles), for every slot.
-RF_SIMD_CLONES void diffuse_lanes_sphere_angles(DiffuseLanes& L) {
+RF_SIMD_CLONES void diffuse_lanes_sphere_angles(SurfaceLanes& L) {
   RF_IVDEP
-  for (int j = 0; j < DiffuseLanes::N; ++j)  // all N: see DiffuseLanes
+  for (int j = 0; j < SurfaceLanes::N; ++j)  // all N: see SurfaceLanes
     LightSet::sphere_cone_angles(L.s_sin2_max[j], L.s_cos_max[j],
                                  {L.u_point[0][j], L.u_point[1][j]}, L.s_cos_alpha[j],
                                  L.s_sin_alpha[j], L.s_phi[j]);
@@ -115,10 +136,10 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_angles(DiffuseLanes& L) {
 // The sphere cones' points: the rest of sample_selected() (sphere_cone_point, with_selection),
 // the light sample of the slots whose light is a sphere (l_sphere), the given one (g_*) of the
 // others; then their shadow rays (a loop of its own: GCC 12 does not vectorise the two as one).
-RF_SIMD_CLONES void diffuse_lanes_sphere_points(DiffuseLanes& L) {
-  using D = DiffuseLanes;
+RF_SIMD_CLONES void diffuse_lanes_sphere_points(SurfaceLanes& L) {
+  using D = SurfaceLanes;
   RF_IVDEP
-  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
     const Vec3 p = D::get(L.p, j);
     LightSet::SphereCone c{D::get(L.s_center, j),
                            D::get(L.s_pole, j),
@@ -140,7 +161,7 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_points(DiffuseLanes& L) {
   }
   // The shadow rays: light_shadow_ray() to the sphere's point, or the given ray.
   RF_IVDEP
-  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
     Ray r = Accel::shadow_segment(D::get(L.p, j), D::get(L.p_error, j), D::get(L.ng, j),
                                   D::get(L.l_p0, j), D::get(L.l_p1, j), D::get(L.l_n, j));
     const bool sphere = L.l_sphere[j] != 0;
@@ -151,10 +172,10 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_points(DiffuseLanes& L) {
 }
 
 template <bool kGivenLight>
-RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
-  using D = DiffuseLanes;
+RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
+  using D = SurfaceLanes;
   RF_IVDEP
-  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
     const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
     // light_sample_mis_unshadowed(), with LightSet::sample() as pick + sample_triangle or taken
     // before the loop.
@@ -183,9 +204,13 @@ RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
     // !is_black(f), spelt as the lobe's own condition (f is R / pi above both lobe directions) so
     // that GCC 12 vectorises it (it does not vectorise the select of flags is_black(f) becomes).
     bool f_nonzero = !(lo.z <= 0) & !(li.z <= 0) & !is_black(lobe.reflectance * kInvPi);
-    ok = ok & (L.light_ok[j] != 0) & pair & f_nonzero;
+    const bool light = ok & (L.light_ok[j] != 0);
+    ok = light & pair & f_nonzero;
     float w = power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
     if constexpr (kGivenLight) w = L.l_delta[j] != 0 ? 1.0f : w;
+    D::put(L.ls_wi, j, ls.wi), D::put(L.ls_radiance, j, ls.radiance);
+    L.ls_pdf[j] = ls.pdf_solid_angle, L.ls_ok[j] = light;
+    L.ls_delta[j] = kGivenLight ? L.l_delta[j] : 0;
     float cos_i = std::fabs(dot(ls.wi, frame.n));
     RGB c = f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
     L.nee_ok[j] = ok;
@@ -207,10 +232,10 @@ RF_SIMD_CLONES void diffuse_lanes_nee(DiffuseLanes& L) {
   }
 }
 
-RF_SIMD_CLONES void diffuse_lanes_continue(DiffuseLanes& L) {
-  using D = DiffuseLanes;
+RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
+  using D = SurfaceLanes;
   RF_IVDEP
-  for (int j = 0; j < DiffuseLanes::N; ++j) {  // all N: see DiffuseLanes
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
     const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
     BsdfSample bs;
     bool ok = lobe.sample_from_disk({L.disk[0][j], L.disk[1][j]}, bs);
@@ -228,10 +253,82 @@ RF_SIMD_CLONES void diffuse_lanes_continue(DiffuseLanes& L) {
   }
 }
 
-// Whether a material is diffuse with constant parameters (DiffuseLanes).
+// The rough-conductor vertices among the lanes (conductor[j]; the loop runs over all N slots and
+// its results, in c_*, are read for those only): light_sample_mis_unshadowed's BSDF part for the
+// light sample the NEE loop took (Bsdf::eval_pdf, MIS weight, term), then Bsdf::sample by visible
+// normals (the cosine and sine of phi taken one by one before the loop), throughput, spawned ray
+// and roulette, as diffuse_lanes_continue.
+RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
+  using D = SurfaceLanes;
+  RF_IVDEP
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
+    const Vec3 ng = D::get(L.ng, j), wo = D::get(L.wo, j);
+    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    const RoughConductorBxdf lobe = L.rough_conductor(j);
+    // Next-event estimation.
+    const Vec3 wi = D::get(L.ls_wi, j);
+    Vec3 lo, li;
+    bool pair = Bsdf::to_lobe(frame, ng, RoughConductorBxdf::kTwoSided, wo, wi, lo, li);
+    float bsdf_pdf = pair ? lobe.pdf(lo, li, TransportMode::Radiance) : 0.0f;
+    RGB f = vselect(pair, lobe.eval(lo, li, TransportMode::Radiance), RGB(0.0f));
+    float w = power_heuristic(L.ls_pdf[j], bsdf_pdf);
+    w = L.ls_delta[j] != 0 ? 1.0f : w;
+    float cos_l = std::fabs(dot(wi, frame.n));
+    RGB c = f * D::get(L.ls_radiance, j) * (cos_l * w / L.ls_pdf[j]);
+    // The term counts where the light sample is usable and f is not black; the latter test is
+    // left to the caller (GCC 12 does not vectorise a select on is_black(f) here).
+    D::put(L.c_f, j, f);
+    D::put(L.c_nee, j, c);
+  }
+  RF_IVDEP
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
+    const Vec3 p = D::get(L.p, j), p_error = D::get(L.p_error, j), ng = D::get(L.ng, j);
+    const Vec3 wo = D::get(L.wo, j);
+    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    const RoughConductorBxdf lobe = L.rough_conductor(j);
+    // Bsdf::sample.
+    Vec3 lo_wo = frame.to_local(wo);
+    const float z = lo_wo.z;
+    // Bsdf::sample fails at z == 0, the lobe below the surface after the mirror (-z or z <= 0):
+    // both are |z| <= 0 (spelt so: GCC 12 does not vectorise the select of flags the other
+    // spelling becomes).
+    bool sampled = !(std::fabs(z) <= 0);
+    const bool mirror = z < 0;
+    lo_wo.z = mirror ? -z : z;
+    const Vec3 wm =
+        lobe.distrib.sample_visible_normal(lo_wo, L.u_dir[0][j], L.c_cos_phi[j], L.c_sin_phi[j]);
+    BsdfSample bs;
+    bs.wi = reflect(lo_wo, wm);
+    sampled = sampled & !(bs.wi.z <= 0);
+    bs.f = lobe.eval(lo_wo, bs.wi, TransportMode::Radiance);
+    bs.pdf_solid_angle = lobe.pdf(lo_wo, bs.wi, TransportMode::Radiance);
+    bs.is_transmission = false;
+    // The lobe's last test, pdf > 0, is left to the caller (c_bsdf_pdf; as is_black above).
+    sampled = Bsdf::sample_to_world(frame, ng, wo, mirror, bs) & sampled;
+    float cos_i = std::fabs(dot(bs.wi, frame.n));
+    RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
+    D::put(L.c_ray_o, j, offset_ray_origin(p, p_error, ng, bs.wi));
+    D::put(L.c_ray_d, j, bs.wi);
+    L.c_bsdf_pdf[j] = bs.pdf_solid_angle;
+    float survive = std::min(1.0f, max_component(beta * L.eta_scale[j]));
+    L.c_continues[j] = sampled;
+    bool roulette = L.roulette[j] != 0;
+    L.c_survives[j] = !(roulette & (L.u_rr[j] >= survive));
+    D::put(L.c_beta_out, j, roulette ? beta / survive : beta);
+  }
+}
+
+// Whether a material is diffuse with constant parameters (SurfaceLanes).
 bool plain_diffuse(const Material& m) {
   return m.type == MaterialType::Diffuse && m.reflectance.texture < 0 && m.specular.texture < 0 &&
          m.roughness.texture < 0;
+}
+// Whether a material is a rough conductor (not smooth enough to be a mirror) with constant
+// parameters (SurfaceLanes::conductor).
+bool plain_rough_conductor(const Material& m) {
+  return m.type == MaterialType::RoughConductor && m.reflectance.texture < 0 &&
+         m.specular.texture < 0 && m.roughness.texture < 0 &&
+         !TrowbridgeReitz::effectively_smooth(m.roughness.value);
 }
 
 // The path estimator for n <= K camera samples of one pixel, traced in lockstep: at every depth
@@ -271,7 +368,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   // by power, else their lights are picked one by one (and spheres' cones sampled together).
   const bool diffuse_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
-  thread_local DiffuseLanes dl{};
+  thread_local SurfaceLanes dl{};
   int live = n;
   for (int i = 0; i < n; ++i) {
     rays.set(i, camera_rays[i]);
@@ -289,7 +386,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       const uint8_t draws[kVertexDraws] = {1, 2, 1, 2, uint8_t(roulette ? 1 : 0)};
       Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
     }
-    bool any_shadow = false;
+    bool any_shadow = false, conductors = false;
     dl.m = 0;
     for (int i = 0; i < n; ++i) {
       nee_done[i] = false;
@@ -321,13 +418,23 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         end();
         continue;
       }
-      if (diffuse_lanes && plain_diffuse(ctx.scene.materials[mesh.material])) {
+      const Material& material = ctx.scene.materials[mesh.material];
+      const bool rough_conductor = diffuse_lanes && plain_rough_conductor(material);
+      if (diffuse_lanes && (plain_diffuse(material) || rough_conductor)) {
         const int j = dl.m++;
-        using D = DiffuseLanes;
+        using D = SurfaceLanes;
         dl.lane[j] = i;
         D::put(dl.p, j, hit.p), D::put(dl.p_error, j, hit.p_error);
         D::put(dl.ng, j, hit.ng), D::put(dl.ns, j, hit.ns), D::put(dl.wo, j, wo);
-        D::put(dl.reflectance, j, ctx.scene.materials[mesh.material].reflectance.value);
+        D::put(dl.reflectance, j, material.reflectance.value);
+        dl.conductor[j] = rough_conductor;
+        if (rough_conductor) {  // Bsdf::make's lobe of constant_params(material)
+          conductors = true;
+          ++counters.conductor_lane_vertices;
+          dl.c_alpha[j] = material.roughness.value, dl.c_separable[j] = material.separable_masking;
+          D::put(dl.c_eta, j, material.eta), D::put(dl.c_k, j, material.k);
+          D::put(dl.c_tint, j, material.specular.value), dl.c_use_tint[j] = material.conductor_tint;
+        }
         D::put(dl.beta, j, a.beta);
         dl.eta_scale[j] = a.eta_scale;
         float u_light, u_rr = 0;
@@ -437,32 +544,43 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         diffuse_lanes_nee<false>(dl);
       }
       for (int j = 0; j < dl.m; ++j) {
+        if (dl.conductor[j]) {
+          const float phi = TrowbridgeReitz::visible_normal_phi({dl.u_dir[0][j], dl.u_dir[1][j]});
+          dl.c_cos_phi[j] = std::cos(phi), dl.c_sin_phi[j] = std::sin(phi);
+          continue;
+        }
         dl.disk[0][j] = dl.disk_r[j] * std::cos(dl.disk_theta[j]);
         dl.disk[1][j] = dl.disk_r[j] * std::sin(dl.disk_theta[j]);
       }
       diffuse_lanes_continue(dl);
-      using D = DiffuseLanes;
+      if (conductors) conductor_lanes(dl);
+      using D = SurfaceLanes;
       for (int j = 0; j < dl.m; ++j) {
         const int i = dl.lane[j];
         Lane& a = lanes[i];
         nee_done[i] = true;
         a.nee_beta = a.beta;
-        a.nee = D::get(dl.nee, j);
-        if (dl.nee_ok[j]) {
+        const bool c = dl.conductor[j] != 0;  // the conductor loop's results, else the diffuse
+        const bool nee_ok = c ? dl.ls_ok[j] && !is_black(D::get(dl.c_f, j)) : dl.nee_ok[j] != 0;
+        a.nee = c ? (nee_ok ? D::get(dl.c_nee, j) : RGB(0.0f)) : D::get(dl.nee, j);
+        if (nee_ok) {
           shadow.set(i, {D::get(dl.shadow_o, j), D::get(dl.shadow_d, j), dl.shadow_tmax[j]});
           any_shadow = true;
           ++counters.rays;
         }
-        if (!dl.continues[j] || !dl.survives[j]) {
+        const bool lives = c ? dl.c_continues[j] && dl.c_bsdf_pdf[j] > 0 && dl.c_survives[j]
+                             : dl.continues[j] && dl.survives[j];
+        if (!lives) {
           rays.clear(i), --live;
           continue;
         }
-        a.beta = D::get(dl.beta_out, j);
-        a.prev_bsdf_pdf = dl.bsdf_pdf[j];
+        a.beta = D::get(c ? dl.c_beta_out : dl.beta_out, j);
+        a.prev_bsdf_pdf = c ? dl.c_bsdf_pdf[j] : dl.bsdf_pdf[j];
         a.prev_delta = false;
         a.prev_p = D::get(dl.p, j);
         a.prev_n = D::get(dl.receiver_n, j);
-        rays.set(i, {D::get(dl.ray_o, j), D::get(dl.ray_d, j), kInf});
+        rays.set(
+            i, {D::get(c ? dl.c_ray_o : dl.ray_o, j), D::get(c ? dl.c_ray_d : dl.ray_d, j), kInf});
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
