@@ -59,8 +59,7 @@ struct TrowbridgeReitz {
   // Density of normals visible from w, per unit solid angle of wm: integrates to 1 over wm.
   float D_visible(Vec3 w, Vec3 wm) const {
     float c = w.z < 0 ? -dot(w, wm) : dot(w, wm);
-    if (c <= 0) return 0.0f;
-    return G1_over_cos(w) * D(wm) * c;
+    return c <= 0 ? 0.0f : G1_over_cos(w) * D(wm) * c;
   }
 
   // Samples a normal from D_visible(w, .) (Heitz 2018, listing 1).

@@ -319,7 +319,8 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
   // "+point": the scene with a point light added (a delta light among area lights).
   for (std::string file :
        {"cornell-box/scene.json", "cornell-box/scene_v3.xml", "veach-mis/scene.xml",
-        "materials/scene.json", "many-lights/scene.json", "cornell-box/scene.json+point"}) {
+        "materials/scene.json", "many-lights/scene.json", "cornell-box/scene.json+point",
+        "veach-mis/scene.xml+point"}) {
     SCOPED_TRACE(file);
     const bool add_point = file.size() > 6 && file.substr(file.size() - 6) == "+point";
     if (add_point) file.resize(file.size() - 6);
@@ -370,9 +371,11 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
       EXPECT_GT(packet_rays.lane_vertices, 0u);
       EXPECT_EQ(single_rays.lane_vertices, 0u);
       // Rough conductors with constant parameters are shaded in the lanes too (conductor_lanes):
-      // veach-mis's plates (Mitsuba's separable masking) and the materials scene's gold and
-      // copper (height-correlated masking, complex IOR).
-      if (file == "veach-mis/scene.xml" || file == "materials/scene.json") {
+      // veach-mis's plates (Mitsuba's separable masking; with a point light added, the delta
+      // light's weight), the materials scene's gold and copper (height-correlated masking,
+      // complex IOR) and the many-lights scene's metal (Schlick's Fresnel with a tint).
+      if (file == "veach-mis/scene.xml" || file == "materials/scene.json" ||
+          file == "many-lights/scene.json") {
         EXPECT_GT(packet_rays.conductor_lane_vertices, 0u);
       }
       EXPECT_EQ(single_rays.conductor_lane_vertices, 0u);

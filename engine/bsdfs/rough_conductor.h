@@ -51,17 +51,25 @@ struct RoughConductorBxdf {
     return ok & !(c <= 0) ? distrib.D_visible(wo, wm) / (4 * c) : 0.0f;
   }
   bool sample(Vec3 wo, float /*uc*/, Vec2 u, TransportMode mode, BsdfSample& s) const {
-    if (wo.z <= 0) return false;
-    Vec3 wm = distrib.sample_visible_normal(wo, u);
+    const float phi = TrowbridgeReitz::visible_normal_phi(u);
+    return sample_from_phi(wo, u.x, std::cos(phi), std::sin(phi), mode, s) &&
+           s.pdf_solid_angle > 0;
+  }
+  // sample() given u.x and the cosine and sine of phi (the path tracer's lanes take those one by
+  // one and the rest in a loop), with selects: whether wo and the sampled wi are above the
+  // surface. sample() also requires pdf > 0; the lanes test that after their loop (GCC 12 does
+  // not vectorise the select of flags it becomes here).
+  bool sample_from_phi(Vec3 wo, float ux, float cos_phi, float sin_phi, TransportMode mode,
+                       BsdfSample& s) const {
+    Vec3 wm = distrib.sample_visible_normal(wo, ux, cos_phi, sin_phi);
     s.wi = reflect(wo, wm);
-    if (s.wi.z <= 0) return false;
     // f and pdf from the returned direction, so they agree with eval() and pdf() exactly.
     s.f = eval(wo, s.wi, mode);
     s.pdf_solid_angle = pdf(wo, s.wi, mode);
     s.is_delta = false;
     s.is_transmission = false;
     s.eta = 1;
-    return s.pdf_solid_angle > 0;
+    return !(wo.z <= 0) & !(s.wi.z <= 0);
   }
 };
 

@@ -47,7 +47,8 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // that); only library calls (the cosine and sine of the disk's angle, of the sphere cone's phi and
 // of the visible-normal sample's phi) run lane by lane between the loops.
 // The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
-// vertices; their results are never read): with a trip count that is a multiple of every vector
+// vertices; their results are never read; likewise a diffuse loop's results on a conductor's
+// slot and the conductor loops' on a diffuse one): with a trip count that is a multiple of every vector
 // width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
 // (with 16-wide AVX-512 vectors, every m < 16).
 struct SurfaceLanes : LaneSlots<Accel::kPacket> {
@@ -286,24 +287,17 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
     const Vec3 wo = D::get(L.wo, j);
     const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
     const RoughConductorBxdf lobe = L.rough_conductor(j);
-    // Bsdf::sample.
+    // Bsdf::sample: wo in the lobe's frame, mirrored where the NEE loop found it below the
+    // shading frame (mirror, sample_ok: zero or below is a failed sample; there the mirrored z is
+    // |z|, written so: GCC 12 does not vectorise the select of flags -z : z becomes), then the
+    // lobe's sample (its last test, pdf > 0, left to the caller: c_bsdf_pdf).
     Vec3 lo_wo = frame.to_local(wo);
-    const float z = lo_wo.z;
-    // Bsdf::sample fails at z == 0, the lobe below the surface after the mirror (-z or z <= 0):
-    // both are |z| <= 0 (spelt so: GCC 12 does not vectorise the select of flags the other
-    // spelling becomes).
-    bool sampled = !(std::fabs(z) <= 0);
-    const bool mirror = z < 0;
-    lo_wo.z = mirror ? -z : z;
-    const Vec3 wm =
-        lobe.distrib.sample_visible_normal(lo_wo, L.u_dir[0][j], L.c_cos_phi[j], L.c_sin_phi[j]);
+    lo_wo.z = std::fabs(lo_wo.z);
+    const bool mirror = L.mirror[j] != 0;
     BsdfSample bs;
-    bs.wi = reflect(lo_wo, wm);
-    sampled = sampled & !(bs.wi.z <= 0);
-    bs.f = lobe.eval(lo_wo, bs.wi, TransportMode::Radiance);
-    bs.pdf_solid_angle = lobe.pdf(lo_wo, bs.wi, TransportMode::Radiance);
-    bs.is_transmission = false;
-    // The lobe's last test, pdf > 0, is left to the caller (c_bsdf_pdf; as is_black above).
+    bool sampled = lobe.sample_from_phi(lo_wo, L.u_dir[0][j], L.c_cos_phi[j], L.c_sin_phi[j],
+                                        TransportMode::Radiance, bs) &
+                   (L.sample_ok[j] != 0);
     sampled = Bsdf::sample_to_world(frame, ng, wo, mirror, bs) & sampled;
     float cos_i = std::fabs(dot(bs.wi, frame.n));
     RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
@@ -364,9 +358,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
   int shading[K];
   Sampler::LaneDraws u[kVertexDraws];
-  // Diffuse vertices are shaded together; their light samples too when all lights are triangles
-  // by power, else their lights are picked one by one (and spheres' cones sampled together).
-  const bool diffuse_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
+  // Plain diffuse and rough-conductor vertices are shaded together (SurfaceLanes); their light
+  // samples too when all lights are triangles by power, else their lights are picked one by one
+  // (and spheres' cones sampled together).
+  const bool surface_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
   thread_local SurfaceLanes dl{};
   int live = n;
@@ -419,8 +414,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         continue;
       }
       const Material& material = ctx.scene.materials[mesh.material];
-      const bool rough_conductor = diffuse_lanes && plain_rough_conductor(material);
-      if (diffuse_lanes && (plain_diffuse(material) || rough_conductor)) {
+      const bool rough_conductor = surface_lanes && plain_rough_conductor(material);
+      if (surface_lanes && (plain_diffuse(material) || rough_conductor)) {
         const int j = dl.m++;
         using D = SurfaceLanes;
         dl.lane[j] = i;
