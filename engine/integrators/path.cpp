@@ -48,9 +48,9 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // of the visible-normal sample's phi) run lane by lane between the loops.
 // The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
 // vertices; their results are never read; likewise a diffuse loop's results on a conductor's
-// slot and the conductor loops' on a diffuse one): with a trip count that is a multiple of every vector
-// width the loops have no scalar remainder, where a loop to m ran mostly as its scalar epilogue
-// (with 16-wide AVX-512 vectors, every m < 16).
+// slot and the conductor loops' on a diffuse one): with a trip count that is a multiple of every
+// vector width the loops have no scalar remainder, where a loop to m ran mostly as its scalar
+// epilogue (with 16-wide AVX-512 vectors, every m < 16).
 struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   // The vertex: hit point and its error, geometric and shading normals, direction to the previous
   // vertex, albedo, throughput and eta scale; the numbers of the BSDF sample and of roulette.
