@@ -85,9 +85,12 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   float disk_r[N], disk_theta[N], disk[2][N];
   int mirror[N], sample_ok[N];
   // The continuation: receiver normal, spawned ray, new throughput, BSDF pdf, whether it lives on.
-  V3 receiver_n, ray_o, ray_d, beta_out;
-  float bsdf_pdf[N];
-  int continues[N], survives[N];
+  V3 receiver_n;
+  struct Continuation {
+    V3 ray_o, ray_d, beta_out;
+    float bsdf_pdf[N];
+    int continues[N], survives[N];
+  } cont;
   // Rough-conductor vertices (plain_rough_conductor) share the arrays above: the vertex, the
   // light sample (the NEE loop keeps it in ls_*: direction, radiance, pdf, usable, delta) and the
   // shadow ray. Their lobe (alpha, masking, Fresnel), the cosine and sine of the visible-normal
@@ -100,9 +103,8 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   int c_separable[N], c_use_tint[N];
   V3 c_eta, c_k, c_tint;
   float c_cos_phi[N], c_sin_phi[N];
-  V3 c_f, c_nee, c_ray_o, c_ray_d, c_beta_out;
-  float c_bsdf_pdf[N];
-  int c_continues[N], c_survives[N];
+  V3 c_f, c_nee;
+  Continuation c_cont;
 
   // Lane j's vertex as the one-vertex code takes it.
   struct Vertex {
@@ -233,6 +235,25 @@ RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
   }
 }
 
+// The end of slot j's vertex once its BSDF sample bs is known (ok: not failed), as trace_paths
+// ends a vertex one by one: throughput, spawned ray, BSDF pdf, roulette; into `out`.
+[[gnu::always_inline]] inline void continue_slot(const SurfaceLanes& L, int j, Vec3 p,
+                                                 Vec3 p_error, Vec3 ng, const Frame& frame,
+                                                 const BsdfSample& bs, bool ok,
+                                                 SurfaceLanes::Continuation& out) {
+  using D = SurfaceLanes;
+  float cos_i = std::fabs(dot(bs.wi, frame.n));
+  RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
+  D::put(out.ray_o, j, offset_ray_origin(p, p_error, ng, bs.wi));
+  D::put(out.ray_d, j, bs.wi);
+  out.bsdf_pdf[j] = bs.pdf_solid_angle;
+  float survive = std::min(1.0f, max_component(beta * L.eta_scale[j]));
+  out.continues[j] = ok;
+  bool roulette = L.roulette[j] != 0;
+  out.survives[j] = !(roulette & (L.u_rr[j] >= survive));
+  D::put(out.beta_out, j, roulette ? beta / survive : beta);
+}
+
 RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
   using D = SurfaceLanes;
   RF_IVDEP
@@ -241,16 +262,7 @@ RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
     BsdfSample bs;
     bool ok = lobe.sample_from_disk({L.disk[0][j], L.disk[1][j]}, bs);
     ok = Bsdf::sample_to_world(frame, ng, wo, L.mirror[j] != 0, bs) & ok & (L.sample_ok[j] != 0);
-    float cos_i = std::fabs(dot(bs.wi, frame.n));
-    RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
-    D::put(L.ray_o, j, offset_ray_origin(p, p_error, ng, bs.wi));
-    D::put(L.ray_d, j, bs.wi);
-    L.bsdf_pdf[j] = bs.pdf_solid_angle;
-    float survive = std::min(1.0f, max_component(beta * L.eta_scale[j]));
-    L.continues[j] = ok;
-    bool roulette = L.roulette[j] != 0;
-    L.survives[j] = !(roulette & (L.u_rr[j] >= survive));
-    D::put(L.beta_out, j, roulette ? beta / survive : beta);
+    continue_slot(L, j, p, p_error, ng, frame, bs, ok, L.cont);
   }
 }
 
@@ -290,7 +302,7 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
     // Bsdf::sample: wo in the lobe's frame, mirrored where the NEE loop found it below the
     // shading frame (mirror, sample_ok: zero or below is a failed sample; there the mirrored z is
     // |z|, written so: GCC 12 does not vectorise the select of flags -z : z becomes), then the
-    // lobe's sample (its last test, pdf > 0, left to the caller: c_bsdf_pdf).
+    // lobe's sample (its last test, pdf > 0, left to the caller: c_cont.bsdf_pdf).
     Vec3 lo_wo = frame.to_local(wo);
     lo_wo.z = std::fabs(lo_wo.z);
     const bool mirror = L.mirror[j] != 0;
@@ -299,16 +311,7 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
                                         TransportMode::Radiance, bs) &
                    (L.sample_ok[j] != 0);
     sampled = Bsdf::sample_to_world(frame, ng, wo, mirror, bs) & sampled;
-    float cos_i = std::fabs(dot(bs.wi, frame.n));
-    RGB beta = D::get(L.beta, j) * (bs.f * (cos_i / bs.pdf_solid_angle));
-    D::put(L.c_ray_o, j, offset_ray_origin(p, p_error, ng, bs.wi));
-    D::put(L.c_ray_d, j, bs.wi);
-    L.c_bsdf_pdf[j] = bs.pdf_solid_angle;
-    float survive = std::min(1.0f, max_component(beta * L.eta_scale[j]));
-    L.c_continues[j] = sampled;
-    bool roulette = L.roulette[j] != 0;
-    L.c_survives[j] = !(roulette & (L.u_rr[j] >= survive));
-    D::put(L.c_beta_out, j, roulette ? beta / survive : beta);
+    continue_slot(L, j, p, p_error, ng, frame, bs, sampled, L.c_cont);
   }
 }
 
@@ -563,19 +566,19 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           any_shadow = true;
           ++counters.rays;
         }
-        const bool lives = c ? dl.c_continues[j] && dl.c_bsdf_pdf[j] > 0 && dl.c_survives[j]
-                             : dl.continues[j] && dl.survives[j];
+        const SurfaceLanes::Continuation& next = c ? dl.c_cont : dl.cont;
+        const bool lives = next.continues[j] && next.survives[j] && (!c || next.bsdf_pdf[j] > 0);
         if (!lives) {
           rays.clear(i), --live;
           continue;
         }
-        a.beta = D::get(c ? dl.c_beta_out : dl.beta_out, j);
-        a.prev_bsdf_pdf = c ? dl.c_bsdf_pdf[j] : dl.bsdf_pdf[j];
+        a.beta = D::get(next.beta_out, j);
+        a.prev_bsdf_pdf = next.bsdf_pdf[j];
         a.prev_delta = false;
         a.prev_p = D::get(dl.p, j);
         a.prev_n = D::get(dl.receiver_n, j);
         rays.set(
-            i, {D::get(c ? dl.c_ray_o : dl.ray_o, j), D::get(c ? dl.c_ray_d : dl.ray_d, j), kInf});
+            i, {D::get(next.ray_o, j), D::get(next.ray_d, j), kInf});
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
