@@ -91,28 +91,21 @@ inline constexpr std::array<uint32_t, 32> kSobolDimension1 = [] {
   return c;
 }();
 
-// The same matrix applied a byte of the index at a time, with its columns bit-reversed (as the
-// scrambles below want them): entry [b][v] is the XOR of reversed columns 8b + k for the bits k
-// set in v. 4 KB computed at compile time; a loop over bits costs ~40 ns of mispredicted branches.
-inline constexpr std::array<std::array<uint32_t, 256>, 4> kSobolDimension1ReversedBytes = [] {
-  std::array<std::array<uint32_t, 256>, 4> t{};
-  for (int b = 0; b < 4; ++b)
-    for (int v = 0; v < 256; ++v)
-      for (int k = 0; k < 8; ++k)
-        if (v & (1 << k)) {
-          uint32_t c = kSobolDimension1[8 * b + k], r = 0;
-          for (int i = 0; i < 32; ++i) r |= ((c >> i) & 1u) << (31 - i);
-          t[b][v] ^= r;
-        }
-  return t;
-}();
-
-// Sample `index` of Sobol dimension 0 or 1, bit-reversed.
+// Sample `index` of Sobol dimension 0 or 1, bit-reversed. Column j of dimension 1's matrix has
+// bit 31 - m set iff binomial(j, m) is odd, which by Lucas' theorem is iff the bits of m are a
+// subset of those of j. So bit m of the reversed sample is the XOR of the index bits k whose
+// positions are supersets of m: a superset (zeta) transform over the 5-bit positions, one
+// shift-mask-XOR per position bit, with no table (a table lookup per byte was four scalar loads
+// per lane in the SIMD draws, sampler.cpp).
 inline uint32_t sobol_sample_reversed(uint32_t index, int dimension) {
   if (dimension == 0) return index;
-  const auto& t = kSobolDimension1ReversedBytes;
-  return t[0][index & 0xff] ^ t[1][(index >> 8) & 0xff] ^ t[2][(index >> 16) & 0xff] ^
-         t[3][index >> 24];
+  uint32_t y = index;
+  y ^= (y >> 1) & 0x55555555u;
+  y ^= (y >> 2) & 0x33333333u;
+  y ^= (y >> 4) & 0x0f0f0f0fu;
+  y ^= (y >> 8) & 0x00ff00ffu;
+  y ^= y >> 16;
+  return y;
 }
 
 // Sample `index` of Sobol dimension 0 or 1, as a 32-bit fixed-point fraction.

@@ -56,8 +56,8 @@ TEST(SamplerTest, SobolSecondDimensionMatrix) {
   EXPECT_EQ(sobol_sample(3, 1), 0x40000000u);
   EXPECT_EQ(reverse_bits32(0x00000001u), 0x80000000u);
   EXPECT_EQ(reverse_bits32(0x12345678u), 0x1e6a2c48u);
-  // The byte tables agree with the matrix applied bit by bit, and the fused scramble with its
-  // definition.
+  // The superset transform agrees with the matrix applied bit by bit, and the fused scramble
+  // with its definition.
   IndependentSampler r;
   for (uint64_t i = 0; i < 1000; ++i) {
     r.start_light_path(0, 0, 0, i);
