@@ -4,6 +4,7 @@
 
 #include "engine/sampling.h"
 #include "engine/shapes.h"
+#include "engine/simd.h"
 
 namespace rf {
 
@@ -116,6 +117,11 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
   triangles_by_power_ =
       !tris_.empty() && punctual_.empty() && !env_ && !uses_bvh() &&
       std::none_of(tris_.begin(), tris_.end(), [](const Tri& t) { return t.sphere; });
+  pick_in_lanes_ = groups_.size() == 1 && groups_[0].count >= 2 &&
+                   groups_[0].count <= uint32_t(kPickLanes) &&
+                   std::all_of(pmf_.begin() + groups_[0].first,
+                               pmf_.begin() + groups_[0].first + groups_[0].count,
+                               [](float p) { return p > 0; });
 }
 
 void LightSet::build_bvh(const std::string& mode) {
@@ -280,9 +286,59 @@ bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightS
 bool LightSet::pick_triangle(float u_select, float& ux, TriangleLight& light) const {
   size_t i = select(u_select, ux);
   if (i == kNoLight) return false;
-  const Tri& t = tris_[i];
-  light = {t.p0, t.p1, t.p2, t.n, t.area, pmf_[i], *scene_.meshes[t.mesh].emission};
+  light = triangle_light(uint32_t(i));
   return true;
+}
+
+namespace {
+// select()'s second step for kPickLanes lanes in one group of 2 <= count <= kPickLanes entries
+// of cumulative probability cdf[0..count) (last 1), none of zero width: k[j] the entry (upper
+// bound of x = ux[j], clamped to the last) and ux[j] rescaled to it. The same operations as
+// select() in the same order, so the same bits: the upper bound as the entries x does not pass
+// among the first count - 1, the interval's ends by selects over them.
+RF_SIMD_CLONES
+void pick_in_group_lanes(const double* __restrict cdf, int count, float* __restrict ux,
+                         uint32_t* __restrict k) {
+  constexpr int N = LightSet::kPickLanes;
+  double x[N], lo[N], hi[N], passed[N];
+  for (int j = 0; j < N; ++j) x[j] = double(ux[j]), lo[j] = 0.0, hi[j] = cdf[count - 1];
+  for (int j = 0; j < N; ++j) passed[j] = 0.0;
+  for (int c = 0; c + 1 < count; ++c) {
+    const double e = cdf[c];
+#pragma GCC unroll 1  // unrolled completely, the loop would not vectorise
+    for (int j = 0; j < N; ++j) {
+      const bool past = !(x[j] < e);
+      passed[j] += past ? 1.0 : 0.0;  // counted in double: the vectoriser wants one width
+      lo[j] = past ? e : lo[j];
+    }
+  }
+  for (int j = 0; j < N; ++j) k[j] = uint32_t(passed[j]);
+  for (int c = count - 2; c >= 0; --c) {
+    const double e = cdf[c];
+    for (int j = 0; j < N; ++j) hi[j] = x[j] < e ? e : hi[j];
+  }
+  for (int j = 0; j < N; ++j) {
+    const bool wide = hi[j] > lo[j];
+    const double t = (x[j] - lo[j]) / (wide ? hi[j] - lo[j] : 1.0);
+    const float f = wide ? float(std::clamp(t, 0.0, 1.0)) : 0.5f;
+    ux[j] = std::min(f, 0x1.fffffep-1f);
+  }
+}
+}  // namespace
+
+void LightSet::pick_triangles(const float* u_select, float* ux, int n, uint32_t* light) const {
+  if (!pick_in_lanes_) {
+    for (int j = 0; j < n; ++j) {
+      light[j] = uint32_t(select(u_select[j], ux[j]));  // kNoLight is kNoPick
+    }
+    return;
+  }
+  // All kPickLanes lanes (no remainder loop); those past n compute from copies of lane 0.
+  float x[kPickLanes];
+  uint32_t k[kPickLanes];
+  for (int j = 0; j < kPickLanes; ++j) x[j] = ux[j < n ? j : 0];
+  pick_in_group_lanes(within_cdf_.data() + groups_[0].first, int(groups_[0].count), x, k);
+  for (int j = 0; j < n; ++j) ux[j] = x[j], light[j] = groups_[0].first + k[j];
 }
 
 // A uniformly distributed point of an area light's primitive (density 1 / area), its error bound

@@ -237,6 +237,17 @@ class LightSet {
   // The light that u_select and u_point.x pick, with u_point.x rescaled (select()); false when
   // nothing can be picked. Only when triangles_by_power().
   bool pick_triangle(float u_select, float& ux, TriangleLight& light) const;
+  // pick_triangle() for lanes j < n <= kPickLanes at once: light[j] the picked light's index
+  // (kNoPick when nothing can be picked) and ux[j] rescaled, the numbers of pick_triangle bit for
+  // bit; triangle_light(light[j]) is then its light. The lights of one emissive mesh of up to 16
+  // triangles (the Cornell box's) are picked in a vectorised loop, others one lane at a time.
+  static constexpr int kPickLanes = 16;
+  static constexpr uint32_t kNoPick = ~0u;
+  void pick_triangles(const float* u_select, float* ux, int n, uint32_t* light) const;
+  TriangleLight triangle_light(uint32_t i) const {
+    const Tri& t = tris_[i];
+    return {t.p0, t.p1, t.p2, t.n, t.area, pmf_[i], *scene_.meshes[t.mesh].emission};
+  }
   [[gnu::always_inline]] static bool sample_triangle(const TriangleLight& t, Vec3 p, Vec2 u,
                                                      LightSample& ls) {
     bool ok = sample_triangle_area(t.p0, t.p1, t.p2, t.n, t.area, t.emission, p, u, ls);
@@ -327,6 +338,8 @@ class LightSet {
   LightBvh bvh_;
   float bvh_share_ = 0;
   bool triangles_by_power_ = false;
+  // pick_triangles' vectorised case: one group of 2 to 16 lights, none of zero probability.
+  bool pick_in_lanes_ = false;
   std::vector<uint32_t> infinite_;
   std::vector<double> infinite_cdf_;  // infinite_.size() + 1 entries, within the infinite lights
 };

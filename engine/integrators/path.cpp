@@ -59,7 +59,7 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   int roulette[N];  // whether roulette runs at this depth (per lane: the vectoriser wants arrays)
   // The light pick (light_ok), the point numbers (x rescaled by the pick) and the picked triangle.
   int light_ok[N];  // flags as int: the vectoriser handles no bool arrays
-  float u_point[2][N], l_area[N], l_pmf[N];
+  float u_light[N], u_point[2][N], l_area[N], l_pmf[N];
   V3 l_p0, l_p1, l_p2, l_n, l_radiance;
   int l_two_sided[N];
   // With other lights (kGivenLight) a vertex's light sample is taken one by one (g_*: ok,
@@ -356,6 +356,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   // lane draws them (Sampler::get_lanes): all of them, read or not, where one lane alone skips
   // the unread ones; a skip and a draw consume the same dimension, so the values are the same.
   static_assert(K <= Sampler::kMaxLanes);
+  static_assert(SurfaceLanes::N <= LightSet::kPickLanes);
   const bool lockstep_draws = K > 1 && samplers[0].kind() != Sampler::Kind::Independent;
   // A vertex's draws: light choice, light point, lobe choice, direction, roulette (or its skip).
   enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
@@ -480,12 +481,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           }
           continue;
         }
-        LightSet::TriangleLight t;
-        dl.light_ok[j] = ctx.lights.pick_triangle(u_light, u_point.x, t);
+        dl.u_light[j] = u_light;  // picked for all slots at once below
         dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
-        D::put(dl.l_p0, j, t.p0), D::put(dl.l_p1, j, t.p1), D::put(dl.l_p2, j, t.p2);
-        D::put(dl.l_n, j, t.n), D::put(dl.l_radiance, j, t.emission.radiance);
-        dl.l_area[j] = t.area, dl.l_pmf[j] = t.pmf, dl.l_two_sided[j] = t.emission.two_sided;
         continue;
       }
       Bsdf bsdf = bsdf_at(ctx, hit, a.cone_width);
@@ -539,6 +536,17 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         diffuse_lanes_sphere_points(dl);
         diffuse_lanes_nee<true>(dl);
       } else {
+        uint32_t picked[SurfaceLanes::N];
+        ctx.lights.pick_triangles(dl.u_light, dl.u_point[0], dl.m, picked);
+        for (int j = 0; j < dl.m; ++j) {
+          dl.light_ok[j] = picked[j] != LightSet::kNoPick;
+          const LightSet::TriangleLight t =
+              dl.light_ok[j] ? ctx.lights.triangle_light(picked[j]) : LightSet::TriangleLight{};
+          using D = SurfaceLanes;
+          D::put(dl.l_p0, j, t.p0), D::put(dl.l_p1, j, t.p1), D::put(dl.l_p2, j, t.p2);
+          D::put(dl.l_n, j, t.n), D::put(dl.l_radiance, j, t.emission.radiance);
+          dl.l_area[j] = t.area, dl.l_pmf[j] = t.pmf, dl.l_two_sided[j] = t.emission.two_sided;
+        }
         diffuse_lanes_nee<false>(dl);
       }
       for (int j = 0; j < dl.m; ++j) {
