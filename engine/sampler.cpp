@@ -1,6 +1,8 @@
 // Sampler's lockstep draws (see sampler.h).
 #include "engine/sampler.h"
 
+#include <cassert>
+
 #include "engine/simd.h"
 
 namespace rf {
@@ -28,6 +30,35 @@ void sobol_2d_lanes(const uint32_t* __restrict r, uint64_t h, float* __restrict 
 }
 
 }  // namespace
+
+void Sampler::start_camera_samples(Sampler* s, int n, uint64_t seed, uint32_t frame, uint32_t pass,
+                                   int px, int py, uint64_t first_index) {
+  if (n <= 0) return;
+  const Kind kind = s[0].kind_;
+  if (kind == Kind::Independent) {
+    const uint64_t pixel = IndependentSampler::pixel_key(seed, frame, pass, px, py);
+    for (int i = 0; i < n; ++i) {
+      assert(s[i].kind_ == kind);
+      s[i].sobol_active_ = false;
+      s[i].independent_.start_camera_sample(pixel, first_index + uint64_t(i));
+    }
+    return;
+  }
+  // As start_camera_sample: SobolSequence keys without the pass and numbers on from the pass's
+  // first sample.
+  const bool sequence = kind == Kind::SobolSequence;
+  const uint64_t base = sequence ? uint64_t(pass) * s[0].spp_per_pass_ + first_index : first_index;
+  const uint64_t pixel =
+      SobolSampler::pixel_key(seed, frame, sequence ? kSequencePass : pass, px, py);
+  SobolSampler key = SobolSampler::keyed(pixel, base >> 32);
+  for (int i = 0; i < n; ++i) {
+    assert(s[i].kind_ == kind && s[i].spp_per_pass_ == s[0].spp_per_pass_);
+    const uint64_t index = base + uint64_t(i);
+    if ((index >> 32) != key.index_high()) key = SobolSampler::keyed(pixel, index >> 32);
+    s[i].sobol_active_ = true;
+    s[i].sobol_.start_camera_sample(key, index);
+  }
+}
 
 bool Sampler::sobol_lockstep(const Sampler* s, const int* lane, int n) {
   const Sampler& first = s[lane[0]];

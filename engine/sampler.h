@@ -47,10 +47,16 @@ class IndependentSampler {
 
   void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
+    start_camera_sample(pixel_key(seed, frame, pass, px, py), sample_index);
+  }
+  // The hashes the samples of one pixel and pass share, and the start from them.
+  static uint64_t pixel_key(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py) {
     uint64_t h = hash_combine(mix64(seed), kCameraDomain);
     h = hash_combine(h, (uint64_t(frame) << 32) | pass);
-    h = hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-    base_ = hash_combine(h, sample_index);
+    return hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
+  }
+  void start_camera_sample(uint64_t pixel, uint64_t sample_index) {
+    base_ = hash_combine(pixel, sample_index);
     dimension_ = 0;
   }
   void start_light_path(uint64_t seed, uint32_t frame, uint32_t pass, uint64_t light_path_index) {
@@ -176,14 +182,29 @@ class SobolSampler {
 
   void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
+    const SobolSampler key = keyed(pixel_key(seed, frame, pass, px, py), sample_index >> 32);
+    start_camera_sample(key, sample_index);
+  }
+  // The hashes the samples of one pixel and pass share (pixel_key, then keyed by the sample
+  // index's high bits), and the start from a sampler so keyed.
+  static uint64_t pixel_key(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py) {
     uint64_t h = hash_combine(mix64(seed), kDomain);
     h = hash_combine(h, (uint64_t(frame) << 32) | pass);
-    h = hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-    key_ = hash_combine(h, sample_index >> 32);
-    key_term_ = 0x9e3779b97f4a7c15ULL + (key_ << 6) + (key_ >> 2);
+    return hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
+  }
+  static SobolSampler keyed(uint64_t pixel, uint64_t index_high) {
+    SobolSampler k;
+    k.key_ = hash_combine(pixel, index_high);
+    k.key_term_ = 0x9e3779b97f4a7c15ULL + (k.key_ << 6) + (k.key_ >> 2);
+    k.index_high_ = index_high;
+    return k;
+  }
+  void start_camera_sample(const SobolSampler& keyed, uint64_t sample_index) {
+    key_ = keyed.key_, key_term_ = keyed.key_term_, index_high_ = keyed.index_high_;
     index_reversed_ = reverse_bits32(uint32_t(sample_index));
     dimension_ = 0;
   }
+  uint64_t index_high() const { return index_high_; }
   float get_1d() { return sobol_draw_1d(index_reversed_, dimension_hash()); }
   Vec2 get_2d() { return sobol_draw_2d(index_reversed_, dimension_hash()); }
   void skip_1d() { ++dimension_; }
@@ -194,7 +215,7 @@ class SobolSampler {
   friend class Sampler;  // its lockstep draws (get_lanes) share dimension_hash() across lanes
   // hash_combine(key_, dimension_++), its key-only terms summed once per sample (the same value).
   uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(dimension_++) + key_term_)); }
-  uint64_t key_ = 0, key_term_ = 0;
+  uint64_t key_ = 0, key_term_ = 0, index_high_ = 0;
   uint32_t index_reversed_ = 0;
   uint32_t dimension_ = 0;
 };
@@ -220,6 +241,11 @@ class Sampler {
     else
       independent_.start_camera_sample(seed, frame, pass, px, py, sample_index);
   }
+  // start_camera_sample(seed, frame, pass, px, py, first_index + i) of s[i] for i < n (samplers
+  // of one kind and spp_per_pass), with the hashes the samples share computed once: each s[i] is
+  // started as it would be alone.
+  static void start_camera_samples(Sampler* s, int n, uint64_t seed, uint32_t frame, uint32_t pass,
+                                   int px, int py, uint64_t first_index);
   void start_light_path(uint64_t seed, uint32_t frame, uint32_t pass, uint64_t light_path_index) {
     sobol_active_ = false;
     independent_.start_light_path(seed, frame, pass, light_path_index);

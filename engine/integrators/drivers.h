@@ -48,6 +48,40 @@ inline Ray start_camera_sample(const RenderContext& ctx, Sampler& sampler, const
                                  u_lens);
 }
 
+// start_camera_sample() for samples first_index + i of pixel (x, y), i < n <= Sampler::kMaxLanes,
+// each with its own sampler s[i]: the same rays, weights and sampler states, the samplers started
+// together (Sampler::start_camera_samples) and, for the Sobol kinds, the filter and lens numbers
+// drawn in lockstep (Sampler::get_lanes).
+inline void start_camera_samples(const RenderContext& ctx, Sampler* s, int n, const TaskKey& task,
+                                 int x, int y, uint64_t first_index, Ray* rays,
+                                 float* filter_weight) {
+  Sampler::start_camera_samples(s, n, ctx.scene.render.seed, task.frame, task.pass, x, y,
+                                first_index);
+  const bool lens = ctx.camera.lens_radius() > 0;
+  if (n <= 1 || s[0].kind() == Sampler::Kind::Independent) {
+    for (int i = 0; i < n; ++i) {
+      FilterSample fs = sample_filter(ctx.scene.film.filter, s[i].get_2d());
+      Vec2 u_lens = s[i].get_2d_if(lens);
+      filter_weight[i] = fs.weight;
+      rays[i] = ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x,
+                                        float(y) + 0.5f + fs.offset.y, u_lens);
+    }
+    return;
+  }
+  int lane[Sampler::kMaxLanes];
+  for (int i = 0; i < n; ++i) lane[i] = i;
+  const uint8_t draws[2] = {2, uint8_t(lens ? 2 : 0)};  // a Sobol skip is one dimension either way
+  Sampler::LaneDraws u[2];
+  Sampler::get_lanes(s, lane, n, draws, 2, u);
+  for (int i = 0; i < n; ++i) {
+    FilterSample fs = sample_filter(ctx.scene.film.filter, {u[0][0][i], u[0][1][i]});
+    Vec2 u_lens = lens ? Vec2{u[1][0][i], u[1][1][i]} : Vec2{0.0f, 0.0f};
+    filter_weight[i] = fs.weight;
+    rays[i] = ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
+                                      u_lens);
+  }
+}
+
 // Runs produce(chunk, out) for every chunk in [0, chunks), in parallel waves when `parallel`,
 // and consume(out) on each chunk's output in chunk order: whatever the thread count, consume sees
 // the same sequence. A wave holds a few chunks per thread, so memory stays bounded (splat lists);
@@ -187,6 +221,7 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
     uint64_t nonfinite = 0;
     if constexpr (!kSplats && kPacketEstimator<Estimate>) {
       constexpr int K = Accel::kPacket;
+      static_assert(K <= Sampler::kMaxLanes);
       std::array<Sampler, K> samplers;
       samplers.fill(Sampler(kind, spp));
       Ray rays[K];
@@ -196,11 +231,10 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
         for (int x = rect.x0; x < rect.x1(); ++x)
           for (uint64_t s0 = 0; s0 < spp; s0 += K) {
             const int n = int(std::min<uint64_t>(K, spp - s0));
-            for (int i = 0; i < n; ++i) {
-              rays[i] = start_camera_sample(ctx, samplers[size_t(i)], task, x, y, s0 + uint64_t(i),
-                                            filter_weight[i]);
-              if (aovs) buf.add_aov_sample(x, y, aov_sample(ctx, rays[i], counters));
-            }
+            start_camera_samples(ctx, samplers.data(), n, task, x, y, s0, rays, filter_weight);
+            if (aovs)
+              for (int i = 0; i < n; ++i)
+                buf.add_aov_sample(x, y, aov_sample(ctx, rays[i], counters));
             estimate(static_cast<const Ray*>(rays), samplers.data(), n, l, counters);
             for (int i = 0; i < n; ++i) buf.add_sample(x, y, l[i] * filter_weight[i], nonfinite);
           }
