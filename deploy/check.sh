@@ -91,9 +91,13 @@ fi
 [ -x "$old/usr/bin/kubectl" ] && kubectls+=("$old/usr/bin/kubectl")
 rendered=$(mktemp -d)
 for k in "${kubectls[@]}"; do
-  version=$("$k" version --client --short 2>/dev/null || "$k" version --client 2>/dev/null | head -1)
+  # sed -n 1p, not head -1: head exits after a line, and a kubectl still writing its second
+  # (kubectl 1.32 prints its kustomize version too) then dies of SIGPIPE, which pipefail and
+  # set -e turned into exit 141 of the whole check (seen once in CI).
+  version=$("$k" version --client --short 2>/dev/null ||
+    "$k" version --client 2>/dev/null | sed -n 1p)
   for overlay in example batch; do
-    out="$rendered/$overlay-$(echo "$version" | tr -c 'a-zA-Z0-9.\n' '_' | head -1).yaml"
+    out="$rendered/$overlay-$(echo "$version" | tr -c 'a-zA-Z0-9.\n' '_' | sed -n 1p).yaml"
     if "$k" kustomize "$ROOT/deploy/k8s/overlays/$overlay" >"$out" 2>"$out.err"; then
       log "overlays/$overlay renders with $k ($version)"
     else
