@@ -3,9 +3,11 @@
 // in every dimension slot), independence of passes and slots, unbiasedness over scrambles, and
 // its integration error against the independent sampler.
 #include "engine/sampler.h"
+#include "engine/sampling.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <set>
@@ -70,6 +72,47 @@ TEST(SamplerTest, SobolSecondDimensionMatrix) {
     for (int d = 0; d < 2; ++d)
       ASSERT_EQ(scrambled_sobol(index, d, seed), owen_scramble(sobol_sample(index, d), seed));
   }
+}
+
+// The concentric disk's cosine and sine by polynomials (sin_cos_quarter_pi): within 2 float ulps
+// of the exact values on all of [-pi/4, pi/4] (200,001 points against double libm; measured 1.08),
+// and the disk points within 3e-7 of the polar form in double (measured 1.2e-7; the mapping
+// itself is unchanged). Broken once by dropping the sine's x^9 term: 5.8 ulps, and disk points
+// 3.9e-7 off.
+TEST(Sampling, DiskCosineAndSineArePolynomialsWithinUlps) {
+  double worst_ulps = 0;
+  for (int i = -100000; i <= 100000; ++i) {
+    const float x = float(kPi / 4 * (i / 100000.0));
+    float s, c;
+    sin_cos_quarter_pi(x, s, c);
+    const double es = std::sin(double(x)), ec = std::cos(double(x));
+    auto ulps = [](double got, double exact) {
+      const float e = float(exact);
+      const double ulp = std::nextafter(std::fabs(e), 2.0f) - std::fabs(e);
+      return std::fabs(got - exact) / ulp;
+    };
+    if (x != 0) worst_ulps = std::max(worst_ulps, ulps(s, es));
+    worst_ulps = std::max(worst_ulps, ulps(c, ec));
+  }
+  EXPECT_LE(worst_ulps, 2.0);
+  IndependentSampler r;
+  r.start_light_path(7, 0, 0, 0);
+  double worst = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const Vec2 u = r.get_2d(), d = sample_concentric_disk(u);
+    const double ox = 2.0 * u.x - 1.0, oy = 2.0 * u.y - 1.0;
+    const bool x_major = std::fabs(ox) > std::fabs(oy);
+    const double rr = x_major ? ox : oy;
+    const double theta = x_major ? kPi / 4 * (oy / ox) : kPi / 2 - kPi / 4 * (ox / oy);
+    worst = std::max(
+        {worst, std::fabs(d.x - rr * std::cos(theta)), std::fabs(d.y - rr * std::sin(theta))});
+    ASSERT_LE(double(d.x) * d.x + double(d.y) * d.y, 1.0 + 1e-6);
+  }
+  EXPECT_LT(worst, 3e-7);
+  const Vec2 centre = sample_concentric_disk({0.5f, 0.5f});
+  EXPECT_EQ(centre.x, 0.0f);
+  EXPECT_EQ(centre.y, 0.0f);
+  EXPECT_FALSE(std::signbit(centre.x) || std::signbit(centre.y));
 }
 
 // Owen scrambling as a map of integers: bijective, and it maps every aligned block of 2^j onto

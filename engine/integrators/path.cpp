@@ -81,8 +81,8 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   int nee_ok[N];
   V3 shadow_o, shadow_d, nee;
   float shadow_tmax[N];
-  // The BSDF sample's disk point (polar form first); wo mirrored; the sample not failed yet.
-  float disk_r[N], disk_theta[N], disk[2][N];
+  // The BSDF sample's disk point; wo mirrored; the sample not failed yet.
+  float disk[2][N];
   int mirror[N], sample_ok[N];
   // The continuation: receiver normal, spawned ray, new throughput, BSDF pdf, whether it lives on.
   V3 receiver_n;
@@ -231,7 +231,8 @@ RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
     float z = mirror ? -lo_wo.z : lo_wo.z;
     L.mirror[j] = mirror;
     L.sample_ok[j] = !(lo_wo.z == 0) && !(z <= 0);
-    concentric_disk_polar({L.u_dir[0][j], L.u_dir[1][j]}, L.disk_r[j], L.disk_theta[j]);
+    const Vec2 disk = sample_concentric_disk({L.u_dir[0][j], L.u_dir[1][j]});
+    L.disk[0][j] = disk.x, L.disk[1][j] = disk.y;
   }
 }
 
@@ -553,10 +554,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         if (dl.conductor[j]) {
           const float phi = TrowbridgeReitz::visible_normal_phi({dl.u_dir[0][j], dl.u_dir[1][j]});
           dl.c_cos_phi[j] = std::cos(phi), dl.c_sin_phi[j] = std::sin(phi);
-          continue;
         }
-        dl.disk[0][j] = dl.disk_r[j] * std::cos(dl.disk_theta[j]);
-        dl.disk[1][j] = dl.disk_r[j] * std::sin(dl.disk_theta[j]);
       }
       diffuse_lanes_continue(dl);
       if (conductors) conductor_lanes(dl);
