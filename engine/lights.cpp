@@ -292,7 +292,8 @@ bool LightSet::pick_triangle(float u_select, float& ux, TriangleLight& light) co
 
 namespace {
 // select()'s second step for kPickLanes lanes in one group of 2 <= count <= kPickLanes entries
-// of cumulative probability cdf[0..count) (last 1), none of zero width: k[j] the entry (upper
+// of cumulative probability cdf[0..count) (last 1), none of zero probability (equal entries, from
+// probabilities that vanish in the sum, are met as select() meets them): k[j] the entry (upper
 // bound of x = ux[j], clamped to the last) and ux[j] rescaled to it. The same operations as
 // select() in the same order, so the same bits: the upper bound as the entries x does not pass
 // among the first count - 1, the interval's ends by selects over them.

@@ -33,8 +33,8 @@ struct DiffuseBxdf {
     if (wo.z <= 0) return false;
     return sample_from_disk(sample_concentric_disk(u), s);
   }
-  // sample()'s direction from its point d on the concentric disk (the path tracer's lanes take
-  // the disk's cosine and sine apart), for wo above the surface.
+  // sample()'s direction from its point d on the concentric disk (the path tracer's lanes compute
+  // d in one loop and the direction in another), for wo above the surface.
   bool sample_from_disk(Vec2 d, BsdfSample& s) const {
     s.wi = cosine_hemisphere_from_disk(d);
     s.pdf_solid_angle = cosine_hemisphere_pdf(s.wi.z);

@@ -35,17 +35,25 @@
 
 namespace rf {
 
+// The ray of pixel (x, y) through the filter offset u_filter picks and the lens point u_lens
+// picks, and the sample's filter weight.
+inline Ray camera_ray(const RenderContext& ctx, int x, int y, Vec2 u_filter, Vec2 u_lens,
+                      float& filter_weight) {
+  const FilterSample fs = sample_filter(ctx.scene.film.filter, u_filter);
+  filter_weight = fs.weight;
+  return ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
+                                 u_lens);
+}
+
 // Camera sample `index` of pixel (x, y): starts the sampler for it, draws the filter offset
 // (filter importance sampling: the sample stays in its pixel) and the lens point, and returns
 // the camera ray; `filter_weight` is the sample's weight.
 inline Ray start_camera_sample(const RenderContext& ctx, Sampler& sampler, const TaskKey& task,
                                int x, int y, uint64_t index, float& filter_weight) {
   sampler.start_camera_sample(ctx.scene.render.seed, task.frame, task.pass, x, y, index);
-  FilterSample fs = sample_filter(ctx.scene.film.filter, sampler.get_2d());
-  Vec2 u_lens = sampler.get_2d_if(ctx.camera.lens_radius() > 0);  // a pinhole reads none
-  filter_weight = fs.weight;
-  return ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
-                                 u_lens);
+  const Vec2 u_filter = sampler.get_2d();
+  const Vec2 u_lens = sampler.get_2d_if(ctx.camera.lens_radius() > 0);  // a pinhole reads none
+  return camera_ray(ctx, x, y, u_filter, u_lens, filter_weight);
 }
 
 // start_camera_sample() for samples first_index + i of pixel (x, y), i < n <= Sampler::kMaxLanes,
@@ -60,11 +68,8 @@ inline void start_camera_samples(const RenderContext& ctx, Sampler* s, int n, co
   const bool lens = ctx.camera.lens_radius() > 0;
   if (n <= 1 || s[0].kind() == Sampler::Kind::Independent) {
     for (int i = 0; i < n; ++i) {
-      FilterSample fs = sample_filter(ctx.scene.film.filter, s[i].get_2d());
-      Vec2 u_lens = s[i].get_2d_if(lens);
-      filter_weight[i] = fs.weight;
-      rays[i] = ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x,
-                                        float(y) + 0.5f + fs.offset.y, u_lens);
+      const Vec2 u_filter = s[i].get_2d(), u_lens = s[i].get_2d_if(lens);
+      rays[i] = camera_ray(ctx, x, y, u_filter, u_lens, filter_weight[i]);
     }
     return;
   }
@@ -74,11 +79,8 @@ inline void start_camera_samples(const RenderContext& ctx, Sampler* s, int n, co
   Sampler::LaneDraws u[2];
   Sampler::get_lanes(s, lane, n, draws, 2, u);
   for (int i = 0; i < n; ++i) {
-    FilterSample fs = sample_filter(ctx.scene.film.filter, {u[0][0][i], u[0][1][i]});
-    Vec2 u_lens = lens ? Vec2{u[1][0][i], u[1][1][i]} : Vec2{0.0f, 0.0f};
-    filter_weight[i] = fs.weight;
-    rays[i] = ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
-                                      u_lens);
+    const Vec2 u_lens = lens ? Vec2{u[1][0][i], u[1][1][i]} : Vec2{0.0f, 0.0f};
+    rays[i] = camera_ray(ctx, x, y, {u[0][0][i], u[0][1][i]}, u_lens, filter_weight[i]);
   }
 }
 

@@ -44,8 +44,9 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // sphere_cone_angles and sphere_cone_point, Bsdf's pieces, DiffuseBxdf, RoughConductorBxdf,
 // offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so the compiled
 // vector loops give each vertex the bits the one-lane path gives it (the packet test holds them to
-// that); only library calls (the cosine and sine of the disk's angle, of the sphere cone's phi and
-// of the visible-normal sample's phi) run lane by lane between the loops.
+// that); only library calls (the cosine and sine of the sphere cone's phi and of the
+// visible-normal sample's phi) run lane by lane between the loops. (The disk's cosine and sine are
+// polynomials, sin_cos_quarter_pi, computed in the loops.)
 // The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
 // vertices; their results are never read; likewise a diffuse loop's results on a conductor's
 // slot and the conductor loops' on a diffuse one): with a trip count that is a multiple of every
