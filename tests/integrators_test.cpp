@@ -409,8 +409,8 @@ TEST(PathIntegrator, PacketCameraSamplesStartAsSingleOnes) {
           for (int x = 0; x < 16; x += 5)
             // (Pass 1 of 16 samples: sobol-sequence numbers from 16 + first, so the last value
             // crosses 2^32 for it, the one before for sobol.)
-            for (uint64_t first : {uint64_t(0), uint64_t(16), (uint64_t(1) << 32) - 5,
-                                   (uint64_t(1) << 32) - 21})
+            for (uint64_t first :
+                 {uint64_t(0), uint64_t(16), (uint64_t(1) << 32) - 5, (uint64_t(1) << 32) - 21})
               for (int n : {16, 7, 1}) {
                 std::vector<Sampler> a(16, Sampler(kind_from_name(sampler), 16)), b = a;
                 Ray packed[16];
