@@ -50,11 +50,12 @@ void Sampler::start_camera_samples(Sampler* s, int n, uint64_t seed, uint32_t fr
   const uint64_t base = sequence ? uint64_t(pass) * s[0].spp_per_pass_ + first_index : first_index;
   const uint64_t pixel =
       SobolSampler::pixel_key(seed, frame, sequence ? kSequencePass : pass, px, py);
-  SobolSampler key = SobolSampler::keyed(pixel, base >> 32);
+  uint64_t high = base >> 32;  // the sample index's high bits the key holds
+  SobolSampler key = SobolSampler::keyed(pixel, high);
   for (int i = 0; i < n; ++i) {
     assert(s[i].kind_ == kind && s[i].spp_per_pass_ == s[0].spp_per_pass_);
     const uint64_t index = base + uint64_t(i);
-    if ((index >> 32) != key.index_high()) key = SobolSampler::keyed(pixel, index >> 32);
+    if ((index >> 32) != high) high = index >> 32, key = SobolSampler::keyed(pixel, high);
     s[i].sobol_active_ = true;
     s[i].sobol_.start_camera_sample(key, index);
   }

@@ -196,15 +196,13 @@ class SobolSampler {
     SobolSampler k;
     k.key_ = hash_combine(pixel, index_high);
     k.key_term_ = 0x9e3779b97f4a7c15ULL + (k.key_ << 6) + (k.key_ >> 2);
-    k.index_high_ = index_high;
     return k;
   }
   void start_camera_sample(const SobolSampler& keyed, uint64_t sample_index) {
-    key_ = keyed.key_, key_term_ = keyed.key_term_, index_high_ = keyed.index_high_;
+    key_ = keyed.key_, key_term_ = keyed.key_term_;
     index_reversed_ = reverse_bits32(uint32_t(sample_index));
     dimension_ = 0;
   }
-  uint64_t index_high() const { return index_high_; }
   float get_1d() { return sobol_draw_1d(index_reversed_, dimension_hash()); }
   Vec2 get_2d() { return sobol_draw_2d(index_reversed_, dimension_hash()); }
   void skip_1d() { ++dimension_; }
@@ -215,7 +213,7 @@ class SobolSampler {
   friend class Sampler;  // its lockstep draws (get_lanes) share dimension_hash() across lanes
   // hash_combine(key_, dimension_++), its key-only terms summed once per sample (the same value).
   uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(dimension_++) + key_term_)); }
-  uint64_t key_ = 0, key_term_ = 0, index_high_ = 0;
+  uint64_t key_ = 0, key_term_ = 0;
   uint32_t index_reversed_ = 0;
   uint32_t dimension_ = 0;
 };
