@@ -44,25 +44,25 @@ inline void triangle_hit(Vec3 p0, Vec3 p1, Vec3 p2, Vec3 n0, Vec3 n1, Vec3 n2, f
   ns = {flip ? -s.x : s.x, flip ? -s.y : s.y, flip ? -s.z : s.z};
 }
 
-// The triangle lanes of a packet (Accel::intersect_packet): each lane's triangle and barycentrics
-// gathered lane by lane, then the hits computed by one loop over the lanes (triangle_hits). The
-// loop runs over all N slots (the m gathered and zeros, whose results nobody reads), so that it has
-// no scalar remainder at any vector width.
+// The triangle lanes of a packet (Accel::intersect_packet), in lane space: each lane's triangle
+// and barycentrics gathered into its slot, then the hits computed by one loop over all N slots
+// into the packet's hits (the slots of lanes that are not plain triangle hits hold zeros or
+// earlier lanes' data: their results are overwritten or never read), so that the loop has no
+// scalar remainder at any vector width.
 struct TriangleLanes : LaneSlots<Accel::kPacket> {
   float b1[N], b2[N];
   V3 p0, p1, p2, n0, n1, n2;  // the normals zero for a mesh without them
-  V3 p, p_error, ng, ns;
 };
 
-RF_SIMD_CLONES void triangle_hits(TriangleLanes& T) {
+RF_SIMD_CLONES void triangle_hits(const TriangleLanes& T, Accel::PacketHits& out) {
   using T3 = TriangleLanes;
   RF_IVDEP
   for (int j = 0; j < TriangleLanes::N; ++j) {  // all N: see TriangleLanes
     Vec3 p, p_error, ng, ns;
     triangle_hit(T3::get(T.p0, j), T3::get(T.p1, j), T3::get(T.p2, j), T3::get(T.n0, j),
                  T3::get(T.n1, j), T3::get(T.n2, j), T.b1[j], T.b2[j], p, p_error, ng, ns);
-    T3::put(T.p, j, p), T3::put(T.p_error, j, p_error);
-    T3::put(T.ng, j, ng), T3::put(T.ns, j, ns);
+    T3::put(out.p, j, p), T3::put(out.p_error, j, p_error);
+    T3::put(out.ng, j, ng), T3::put(out.ns, j, ns);
   }
 }
 
@@ -217,7 +217,7 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   return true;
 }
 
-void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* found) const {
+void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
@@ -231,7 +231,8 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
   const Mesh* batched[kPacket];  // those placed without an instance (triangle_hits)
   for (int i = 0; i < n; ++i) {
     meshes[i] = batched[i] = nullptr;
-    if (!packet.active(i) || h.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    out.found[i] = packet.active(i) && h.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+    if (!out.found[i]) continue;
     const Mesh& m = *surfaces_[surface_of(h.geomID[i], h.instID[0][i])];
     if (m.sphere) continue;
     meshes[i] = &m;
@@ -250,43 +251,39 @@ void Accel::intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* f
     }
   }
   using T3 = TriangleLanes;
-  // Per thread, zeroed once: the slots past m hold zeros or earlier lanes' data, never garbage.
+  // Per thread, zeroed once: the slots of other lanes hold zeros or earlier lanes' data.
   thread_local TriangleLanes T{};
-  T.m = 0;
+  bool any_batched = false;
   for (int i = 0; i < n; ++i) {
     const Mesh* m = batched[i];
     if (!m) continue;
-    const int j = T.m++;
-    T.lane[j] = i;
+    any_batched = true;
     const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
-    T3::put(T.p0, j, m->positions[idx[0]]);
-    T3::put(T.p1, j, m->positions[idx[1]]);
-    T3::put(T.p2, j, m->positions[idx[2]]);
+    T3::put(T.p0, i, m->positions[idx[0]]);
+    T3::put(T.p1, i, m->positions[idx[1]]);
+    T3::put(T.p2, i, m->positions[idx[2]]);
     const bool normals = !m->normals.empty();
-    T3::put(T.n0, j, normals ? m->normals[idx[0]] : Vec3(0.0f));
-    T3::put(T.n1, j, normals ? m->normals[idx[1]] : Vec3(0.0f));
-    T3::put(T.n2, j, normals ? m->normals[idx[2]] : Vec3(0.0f));
-    T.b1[j] = h.u[i], T.b2[j] = h.v[i];
+    T3::put(T.n0, i, normals ? m->normals[idx[0]] : Vec3(0.0f));
+    T3::put(T.n1, i, normals ? m->normals[idx[1]] : Vec3(0.0f));
+    T3::put(T.n2, i, normals ? m->normals[idx[2]] : Vec3(0.0f));
+    T.b1[i] = h.u[i], T.b2[i] = h.v[i];
   }
-  triangle_hits(T);
-  for (int j = 0; j < T.m; ++j) {
-    const int i = T.lane[j];
-    const Mesh& m = *batched[i];
-    SurfaceHit& hit = hits[i];
-    hit.p = T3::get(T.p, j), hit.p_error = T3::get(T.p_error, j);
-    hit.ng = T3::get(T.ng, j), hit.ns = T3::get(T.ns, j);
-    const uint32_t* idx = &m.indices[3 * size_t(h.primID[i])];
-    hit.uv = triangle_uv(m, idx[0], idx[1], idx[2], h.u[i], h.v[i]);
-    hit.t = packet.rh.ray.tfar[i];
-    hit.mesh = h.geomID[i];
-    hit.prim = h.primID[i];
-  }
+  if (any_batched) triangle_hits(T, out);
   for (int i = 0; i < n; ++i) {
-    if (!packet.active(i)) continue;
-    found[i] = h.geomID[i] != RTC_INVALID_GEOMETRY_ID;
-    if (found[i] && !batched[i])
+    if (!out.found[i]) continue;
+    if (const Mesh* m = batched[i]) {
+      const uint32_t* idx = &m->indices[3 * size_t(h.primID[i])];
+      const Vec2 uv = triangle_uv(*m, idx[0], idx[1], idx[2], h.u[i], h.v[i]);
+      out.uv[0][i] = uv.x, out.uv[1][i] = uv.y;
+      out.t[i] = packet.rh.ray.tfar[i];
+      out.mesh[i] = h.geomID[i];
+      out.prim[i] = h.primID[i];
+    } else {
+      SurfaceHit hit;
       hit_from_embree(packet.ray(i), h.geomID[i], h.primID[i], h.instID[0][i], h.u[i], h.v[i],
-                      packet.rh.ray.tfar[i], hits[i]);
+                      packet.rh.ray.tfar[i], hit);
+      out.set(i, hit);
+    }
   }
 }
 

@@ -114,6 +114,8 @@ class Accel {
       valid[i] = -1;
     }
     void clear(int i) { valid[i] = 0; }
+    // Lane i active again with the ray its arrays already hold (written in place, set_slots).
+    void activate(int i) { valid[i] = -1; }
     bool active(int i) const { return valid[i] != 0; }
     Ray ray(int i) const {
       return {{rh.ray.org_x[i], rh.ray.org_y[i], rh.ray.org_z[i]},
@@ -123,8 +125,31 @@ class Accel {
     alignas(64) RTCRayHit16 rh;
     alignas(64) int valid[kPacket];
   };
-  // Closest hits of the active lanes i < n: found[i], and hits[i] when found.
-  void intersect_packet(RayPacket& packet, int n, SurfaceHit* hits, bool* found) const;
+  // A packet's closest hits in lane space: lane i's SurfaceHit in slot i of the arrays, so that
+  // loops over lanes read them where the queries wrote them. found[i]: whether lane i hit
+  // anything; a slot whose lane found nothing (or was not traced) holds values nobody reads.
+  struct PacketHits {
+    static constexpr int N = kPacket;
+    using V3 = float[3][N];
+    V3 p, p_error, ng, ns;
+    float uv[2][N], t[N];
+    uint32_t mesh[N], prim[N];
+    int found[N];
+    static Vec3 get(const V3& a, int i) { return {a[0][i], a[1][i], a[2][i]}; }
+    SurfaceHit hit(int i) const {
+      SurfaceHit h;
+      h.p = get(p, i), h.p_error = get(p_error, i), h.ng = get(ng, i), h.ns = get(ns, i);
+      h.uv = {uv[0][i], uv[1][i]}, h.t = t[i], h.mesh = mesh[i], h.prim = prim[i];
+      return h;
+    }
+    void set(int i, const SurfaceHit& h) {
+      for (int a = 0; a < 3; ++a)
+        p[a][i] = h.p[a], p_error[a][i] = h.p_error[a], ng[a][i] = h.ng[a], ns[a][i] = h.ns[a];
+      uv[0][i] = h.uv.x, uv[1][i] = h.uv.y, t[i] = h.t, mesh[i] = h.mesh, prim[i] = h.prim;
+    }
+  };
+  // Closest hits of the active lanes i < n: hits.found[i], and lane i's hit in slot i when found.
+  void intersect_packet(RayPacket& packet, int n, PacketHits& hits) const;
   // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i], i < n.
   void occluded_packet(RayPacket& packet, int n, bool* blocked) const;
 

@@ -29,8 +29,9 @@
 
 namespace rf {
 
-// What a loop over lanes works on: 3-vectors as lane arrays (a[axis][slot]), and which packet lane
-// each of the first m slots holds (the loops themselves run over all N slots: no scalar remainder).
+// What a loop over lanes works on: 3-vectors as lane arrays (a[axis][slot]), and a list of m
+// slots (lane[0..m)) that hold work (the loops themselves run over all N slots: no scalar
+// remainder).
 template <int N_>
 struct LaneSlots {
   static constexpr int N = N_;

@@ -18,11 +18,13 @@ struct SingleRay {
   bool active(int) const { return on; }
   Ray ray(int) const { return r; }
 };
-void intersect(const Accel& accel, Accel::RayPacket& p, int n, SurfaceHit* hits, bool* found) {
-  accel.intersect_packet(p, n, hits, found);
+void intersect(const Accel& accel, Accel::RayPacket& p, int n, Accel::PacketHits& hits) {
+  accel.intersect_packet(p, n, hits);
 }
-void intersect(const Accel& accel, SingleRay& p, int, SurfaceHit* hits, bool* found) {
-  found[0] = accel.intersect(p.r, hits[0]);
+void intersect(const Accel& accel, SingleRay& p, int, Accel::PacketHits& hits) {
+  SurfaceHit hit;
+  hits.found[0] = accel.intersect(p.r, hit);
+  if (hits.found[0]) hits.set(0, hit);
 }
 void occluded(const Accel& accel, Accel::RayPacket& p, int n, bool* blocked) {
   accel.occluded_packet(p, n, blocked);
@@ -47,20 +49,30 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // that); only library calls (the cosine and sine of the sphere cone's phi and of the
 // visible-normal sample's phi) run lane by lane between the loops. (The disk's cosine and sine are
 // polynomials, sin_cos_quarter_pi, computed in the loops.)
-// The loops run over all N slots, the m vertices and whatever the others hold (zeros or earlier
-// vertices; their results are never read; likewise a diffuse loop's results on a conductor's
-// slot and the conductor loops' on a diffuse one): with a trip count that is a multiple of every
-// vector width the loops have no scalar remainder, where a loop to m ran mostly as its scalar
-// epilogue (with 16-wide AVX-512 vectors, every m < 16).
+// The arrays are in lane space: slot i is packet lane i, so the packet query writes the hits
+// (Accel::PacketHits), Sampler::get_lanes the numbers and lanes_to_packets the next rays where
+// the next step reads them, with no copies between (a compacted layout cost 5% of a Cornell box
+// render in those copies); lane[0..m) lists the plain vertices' lanes for the one-by-one parts.
+// The loops run over all N slots, the plain vertices and whatever the others hold (zeros or
+// earlier vertices; their results are never read; likewise a diffuse loop's results on a
+// conductor's slot and the conductor loops' on a diffuse one): with a trip count that is a
+// multiple of every vector width the loops have no scalar remainder.
+// A vertex's draws: light choice, light point, lobe choice, direction, roulette (or its skip).
+enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
+
 struct SurfaceLanes : LaneSlots<Accel::kPacket> {
-  // The vertex: hit point and its error, geometric and shading normals, direction to the previous
-  // vertex, albedo, throughput and eta scale; the numbers of the BSDF sample and of roulette.
-  V3 p, p_error, ng, ns, wo, reflectance, beta;
-  float eta_scale[N], u_dir[2][N], u_rr[N];
+  // The vertex: the hit (hit point and its error, geometric and shading normals, as the packet
+  // query wrote them), direction to the previous vertex, albedo, throughput and eta scale.
+  Accel::PacketHits hit;
+  V3 wo, reflectance, beta;
+  float eta_scale[N];
+  // The vertex's numbers (u[kUDir]: the BSDF sample's, u[kURoulette]: roulette's; u[kUPoint]'s x
+  // rescaled by the light pick), as Sampler::get_lanes draws them.
+  Sampler::LaneDraws u[kVertexDraws];
   int roulette[N];  // whether roulette runs at this depth (per lane: the vectoriser wants arrays)
-  // The light pick (light_ok), the point numbers (x rescaled by the pick) and the picked triangle.
+  // The light pick (light_ok) and the picked triangle.
   int light_ok[N];  // flags as int: the vectoriser handles no bool arrays
-  float u_light[N], u_point[2][N], l_area[N], l_pmf[N];
+  float l_area[N], l_pmf[N];
   V3 l_p0, l_p1, l_p2, l_n, l_radiance;
   int l_two_sided[N];
   // With other lights (kGivenLight) a vertex's light sample is taken one by one (g_*: ok,
@@ -118,12 +130,12 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
             ConductorFresnel{get(c_eta, j), get(c_k, j), get(c_tint, j), c_use_tint[j] != 0}};
   }
   Vertex vertex(int j) const {
-    const Vec3 n = get(ng, j);
-    return {get(p, j),
-            get(p_error, j),
+    const Vec3 n = get(hit.ng, j);
+    return {get(hit.p, j),
+            get(hit.p_error, j),
             n,
             get(wo, j),
-            Bsdf::shading_frame(get(ns, j), n),
+            Bsdf::shading_frame(get(hit.ns, j), n),
             DiffuseBxdf{get(reflectance, j)}};
   }
 };
@@ -133,7 +145,7 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_angles(SurfaceLanes& L) {
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j)  // all N: see SurfaceLanes
     LightSet::sphere_cone_angles(L.s_sin2_max[j], L.s_cos_max[j],
-                                 {L.u_point[0][j], L.u_point[1][j]}, L.s_cos_alpha[j],
+                                 {L.u[kUPoint][0][j], L.u[kUPoint][1][j]}, L.s_cos_alpha[j],
                                  L.s_sin_alpha[j], L.s_phi[j]);
 }
 
@@ -144,7 +156,7 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_points(SurfaceLanes& L) {
   using D = SurfaceLanes;
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
-    const Vec3 p = D::get(L.p, j);
+    const Vec3 p = D::get(L.hit.p, j);
     LightSet::SphereCone c{D::get(L.s_center, j),
                            D::get(L.s_pole, j),
                            L.s_radius[j],
@@ -166,7 +178,7 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_points(SurfaceLanes& L) {
   // The shadow rays: light_shadow_ray() to the sphere's point, or the given ray.
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
-    Ray r = Accel::shadow_segment(D::get(L.p, j), D::get(L.p_error, j), D::get(L.ng, j),
+    Ray r = Accel::shadow_segment(D::get(L.hit.p, j), D::get(L.hit.p_error, j), D::get(L.hit.ng, j),
                                   D::get(L.l_p0, j), D::get(L.l_p1, j), D::get(L.l_n, j));
     const bool sphere = L.l_sphere[j] != 0;
     D::put(L.shadow_o, j, vselect(sphere, r.o, D::get(L.g_shadow_o, j)));
@@ -197,7 +209,7 @@ RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
                                 L.l_area[j],
                                 L.l_pmf[j],
                                 {D::get(L.l_radiance, j), L.l_two_sided[j] != 0}};
-      ok = LightSet::sample_triangle(t, p, {L.u_point[0][j], L.u_point[1][j]}, ls);
+      ok = LightSet::sample_triangle(t, p, {L.u[kUPoint][0][j], L.u[kUPoint][1][j]}, ls);
     }
     // Bsdf::eval_pdf.
     Vec3 lo, li;
@@ -232,7 +244,7 @@ RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
     float z = mirror ? -lo_wo.z : lo_wo.z;
     L.mirror[j] = mirror;
     L.sample_ok[j] = !(lo_wo.z == 0) && !(z <= 0);
-    const Vec2 disk = sample_concentric_disk({L.u_dir[0][j], L.u_dir[1][j]});
+    const Vec2 disk = sample_concentric_disk({L.u[kUDir][0][j], L.u[kUDir][1][j]});
     L.disk[0][j] = disk.x, L.disk[1][j] = disk.y;
   }
 }
@@ -252,12 +264,11 @@ RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
   float survive = std::min(1.0f, max_component(beta * L.eta_scale[j]));
   out.continues[j] = ok;
   bool roulette = L.roulette[j] != 0;
-  out.survives[j] = !(roulette & (L.u_rr[j] >= survive));
+  out.survives[j] = !(roulette & (L.u[kURoulette][0][j] >= survive));
   D::put(out.beta_out, j, roulette ? beta / survive : beta);
 }
 
 RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
-  using D = SurfaceLanes;
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
     const auto [p, p_error, ng, wo, frame, lobe] = L.vertex(j);
@@ -277,8 +288,8 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
   using D = SurfaceLanes;
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
-    const Vec3 ng = D::get(L.ng, j), wo = D::get(L.wo, j);
-    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    const Vec3 ng = D::get(L.hit.ng, j), wo = D::get(L.wo, j);
+    const Frame frame = Bsdf::shading_frame(D::get(L.hit.ns, j), ng);
     const RoughConductorBxdf lobe = L.rough_conductor(j);
     // Next-event estimation.
     const Vec3 wi = D::get(L.ls_wi, j);
@@ -297,9 +308,9 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
   }
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
-    const Vec3 p = D::get(L.p, j), p_error = D::get(L.p_error, j), ng = D::get(L.ng, j);
+    const Vec3 p = D::get(L.hit.p, j), p_error = D::get(L.hit.p_error, j), ng = D::get(L.hit.ng, j);
     const Vec3 wo = D::get(L.wo, j);
-    const Frame frame = Bsdf::shading_frame(D::get(L.ns, j), ng);
+    const Frame frame = Bsdf::shading_frame(D::get(L.hit.ns, j), ng);
     const RoughConductorBxdf lobe = L.rough_conductor(j);
     // Bsdf::sample: wo in the lobe's frame, mirrored where the NEE loop found it below the
     // shading frame (mirror, sample_ok: zero or below is a failed sample; there the mirrored z is
@@ -309,11 +320,38 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
     lo_wo.z = std::fabs(lo_wo.z);
     const bool mirror = L.mirror[j] != 0;
     BsdfSample bs;
-    bool sampled = lobe.sample_from_phi(lo_wo, L.u_dir[0][j], L.c_cos_phi[j], L.c_sin_phi[j],
+    bool sampled = lobe.sample_from_phi(lo_wo, L.u[kUDir][0][j], L.c_cos_phi[j], L.c_sin_phi[j],
                                         TransportMode::Radiance, bs) &
                    (L.sample_ok[j] != 0);
     sampled = Bsdf::sample_to_world(frame, ng, wo, mirror, bs) & sampled;
     continue_slot(L, j, p, p_error, ng, frame, bs, sampled, L.c_cont);
+  }
+}
+
+// Every slot's spawned ray (the conductor loop's where the slot is a rough conductor, else the
+// diffuse loops') and shadow ray into the packets' arrays, as RayPacket::set writes them but for
+// the lanes' flags (the caller activates the lanes that go on). A slot that is not a plain
+// vertex gets values nobody reads: its lane is inactive, or a generic vertex's, which sets its
+// rays afterwards.
+RF_SIMD_CLONES void lanes_to_packets(const SurfaceLanes& L, RTCRayHit16& next, RTCRay16& shadow) {
+  RF_IVDEP
+  for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
+    const bool c = L.conductor[j] != 0;
+    next.ray.org_x[j] = c ? L.c_cont.ray_o[0][j] : L.cont.ray_o[0][j];
+    next.ray.org_y[j] = c ? L.c_cont.ray_o[1][j] : L.cont.ray_o[1][j];
+    next.ray.org_z[j] = c ? L.c_cont.ray_o[2][j] : L.cont.ray_o[2][j];
+    next.ray.dir_x[j] = c ? L.c_cont.ray_d[0][j] : L.cont.ray_d[0][j];
+    next.ray.dir_y[j] = c ? L.c_cont.ray_d[1][j] : L.cont.ray_d[1][j];
+    next.ray.dir_z[j] = c ? L.c_cont.ray_d[2][j] : L.cont.ray_d[2][j];
+    next.ray.tfar[j] = kInf;
+    next.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
+    next.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
+    shadow.org_x[j] = L.shadow_o[0][j], shadow.org_y[j] = L.shadow_o[1][j];
+    shadow.org_z[j] = L.shadow_o[2][j];
+    shadow.dir_x[j] = L.shadow_d[0][j], shadow.dir_y[j] = L.shadow_d[1][j];
+    shadow.dir_z[j] = L.shadow_d[2][j];
+    shadow.tfar[j] = L.shadow_tmax[j];
+    shadow.mask[j] = 0xFFFFFFFFu;
   }
 }
 
@@ -352,24 +390,24 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   };
   Lane lanes[K];
   Packet rays, shadow;
-  SurfaceHit hits[K];
-  bool found[K], nee_done[K], blocked[K] = {};
+  bool nee_done[K], blocked[K] = {};
   // With a Sobol sampler the lanes that shade a vertex draw its numbers together, in the order one
   // lane draws them (Sampler::get_lanes): all of them, read or not, where one lane alone skips
   // the unread ones; a skip and a draw consume the same dimension, so the values are the same.
   static_assert(K <= Sampler::kMaxLanes);
   static_assert(SurfaceLanes::N <= LightSet::kPickLanes);
   const bool lockstep_draws = K > 1 && samplers[0].kind() != Sampler::Kind::Independent;
-  // A vertex's draws: light choice, light point, lobe choice, direction, roulette (or its skip).
-  enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
-  int shading[K];
-  Sampler::LaneDraws u[kVertexDraws];
+  int shading[K], generic[K];
   // Plain diffuse and rough-conductor vertices are shaded together (SurfaceLanes); their light
   // samples too when all lights are triangles by power, else their lights are picked one by one
-  // (and spheres' cones sampled together).
+  // (and spheres' cones sampled together). Everything is in lane space: lane i's hit, numbers and
+  // results in slot i of dl's arrays, where the packet query and the draws wrote them.
   const bool surface_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
   thread_local SurfaceLanes dl{};
+  Accel::PacketHits& hits = dl.hit;
+  Sampler::LaneDraws* u = dl.u;
+  using D = SurfaceLanes;
   int live = n;
   for (int i = 0; i < n; ++i) {
     rays.set(i, camera_rays[i]);
@@ -378,115 +416,188 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   }
   for (int depth = 0; live > 0; ++depth) {
     counters.rays += uint64_t(live);
-    intersect(ctx.accel, rays, n, hits, found);
+    intersect(ctx.accel, rays, n, hits);
     const bool roulette = depth + 1 >= settings.rr_min_depth;
     if (lockstep_draws && depth < settings.max_depth) {
       int m = 0;
       for (int i = 0; i < n; ++i)
-        if (rays.active(i) && found[i]) shading[m++] = i;
+        if (rays.active(i) && hits.found[i]) shading[m++] = i;
       const uint8_t draws[kVertexDraws] = {1, 2, 1, 2, uint8_t(roulette ? 1 : 0)};
       Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
     }
     bool any_shadow = false, conductors = false;
+    int generics = 0;
     dl.m = 0;
+    // The lanes' hits: escaped rays and emission, then plain vertices to the loops (dl.lane) and
+    // the others to the one-by-one shading below (generic).
     for (int i = 0; i < n; ++i) {
       nee_done[i] = false;
       shadow.clear(i);
       if (!rays.active(i)) continue;
       Lane& a = lanes[i];
-      const SurfaceHit& hit = hits[i];
       Sampler& sampler = samplers[i];
       const Vec3 wo = -rays.ray(i).d;
-      auto end = [&] { rays.clear(i), --live; };
-      if (!found[i]) {
+      if (!hits.found[i]) {
         add_escaped(ctx, -wo, a.prev_delta, a.prev_bsdf_pdf, a.beta, radiance[i]);
-        end();
+        rays.clear(i), --live;
         continue;
       }
-      const Mesh& mesh = ctx.accel.mesh(hit.mesh);
-      a.cone_width += ctx.pixel_spread * hit.t;
-      RGB le = LightSet::emitted(mesh, hit.ng, wo);
+      const Mesh& mesh = ctx.accel.mesh(hits.mesh[i]);
+      a.cone_width += ctx.pixel_spread * hits.t[i];
+      const Vec3 ng = D::get(hits.ng, i);
+      RGB le = LightSet::emitted(mesh, ng, wo);
       if (!is_black(le)) {
         if (a.prev_delta) {
           radiance[i] += a.beta * le;
         } else {
-          float light_pdf =
-              ctx.lights.pdf_solid_angle(a.prev_p, a.prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
+          float light_pdf = ctx.lights.pdf_solid_angle(a.prev_p, a.prev_n, hits.mesh[i],
+                                                       hits.prim[i], D::get(hits.p, i), ng);
           radiance[i] += a.beta * le * power_heuristic(a.prev_bsdf_pdf, light_pdf);
         }
       }
       if (depth == settings.max_depth) {
-        end();
+        rays.clear(i), --live;
         continue;
       }
       const Material& material = ctx.scene.materials[mesh.material];
       const bool rough_conductor = surface_lanes && plain_rough_conductor(material);
-      if (surface_lanes && (plain_diffuse(material) || rough_conductor)) {
-        const int j = dl.m++;
-        using D = SurfaceLanes;
-        dl.lane[j] = i;
-        D::put(dl.p, j, hit.p), D::put(dl.p_error, j, hit.p_error);
-        D::put(dl.ng, j, hit.ng), D::put(dl.ns, j, hit.ns), D::put(dl.wo, j, wo);
-        D::put(dl.reflectance, j, material.reflectance.value);
-        dl.conductor[j] = rough_conductor;
-        if (rough_conductor) {  // Bsdf::make's lobe of constant_params(material)
-          conductors = true;
-          ++counters.conductor_lane_vertices;
-          dl.c_alpha[j] = material.roughness.value, dl.c_separable[j] = material.separable_masking;
-          D::put(dl.c_eta, j, material.eta), D::put(dl.c_k, j, material.k);
-          D::put(dl.c_tint, j, material.specular.value), dl.c_use_tint[j] = material.conductor_tint;
-        }
-        D::put(dl.beta, j, a.beta);
-        dl.eta_scale[j] = a.eta_scale;
-        float u_light, u_rr = 0;
-        Vec2 u_point, u_dir;
-        if (lockstep_draws) {
-          u_light = u[kULight][0][i], u_point = {u[kUPoint][0][i], u[kUPoint][1][i]};
-          u_dir = {u[kUDir][0][i], u[kUDir][1][i]};
-          if (roulette) u_rr = u[kURoulette][0][i];
-        } else {  // in the one-lane order below; the lobe choice is not read
-          u_light = sampler.get_1d(), u_point = sampler.get_2d(), sampler.skip_1d();
-          u_dir = sampler.get_2d();
-          // Drawn before the sample is known to succeed: a lane whose sample fails ends, and
-          // nothing reads its sampler after that, so the extra draw changes no value.
-          u_rr = sampler.get_1d_if(roulette);
-        }
-        dl.u_dir[0][j] = u_dir.x, dl.u_dir[1][j] = u_dir.y;
-        dl.u_rr[j] = u_rr, dl.roulette[j] = roulette;
-        if (given_light) {  // as light_sample_mis_unshadowed() takes it (receiver_normal())
-          const Vec3 receiver = dot(wo, hit.ng) >= 0 ? hit.ng : -hit.ng;
-          size_t light;
-          float pmf;
-          LightSet::SphereCone c;
-          const bool picked = ctx.lights.pick(hit.p, receiver, u_light, u_point, light, pmf);
-          const bool sphere = picked && ctx.lights.sphere_cone_of(light, hit.p, c);
-          dl.l_sphere[j] = sphere;
-          if (sphere) {  // sampled in the loops
-            dl.l_delta[j] = false, dl.l_pmf[j] = pmf;
-            dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
-            D::put(dl.s_center, j, c.center), D::put(dl.s_pole, j, c.pole);
-            dl.s_radius[j] = c.radius, dl.s_sin2_max[j] = c.sin2_max;
-            dl.s_cos_max[j] = c.cos_max, dl.s_omc[j] = c.one_minus_cos_max;
-            D::put(dl.l_radiance, j, c.emission.radiance);
-            dl.l_two_sided[j] = c.emission.two_sided;
-            continue;
-          }
-          LightSample ls;
-          const bool ok = picked && ctx.lights.sample_selected(light, pmf, hit.p, u_point, ls);
-          dl.g_ok[j] = ok;
-          D::put(dl.g_wi, j, ls.wi), D::put(dl.g_radiance, j, ls.radiance);
-          dl.g_pdf[j] = ls.pdf_solid_angle, dl.l_delta[j] = ls.is_delta;
-          if (ok) {
-            const Ray r = light_shadow_ray(ctx, hit, ls);
-            D::put(dl.g_shadow_o, j, r.o), D::put(dl.g_shadow_d, j, r.d);
-            dl.g_shadow_tmax[j] = r.tmax;
-          }
-          continue;
-        }
-        dl.u_light[j] = u_light;  // picked for all slots at once below
-        dl.u_point[0][j] = u_point.x, dl.u_point[1][j] = u_point.y;
+      D::put(dl.wo, i, wo);  // (lanes_to_packets overwrites the ray packet below)
+      if (!(surface_lanes && (plain_diffuse(material) || rough_conductor))) {
+        generic[generics++] = i;
         continue;
       }
+      dl.lane[dl.m++] = i;
+      D::put(dl.reflectance, i, material.reflectance.value);
+      dl.conductor[i] = rough_conductor;
+      if (rough_conductor) {  // Bsdf::make's lobe of constant_params(material)
+        conductors = true;
+        ++counters.conductor_lane_vertices;
+        dl.c_alpha[i] = material.roughness.value, dl.c_separable[i] = material.separable_masking;
+        D::put(dl.c_eta, i, material.eta), D::put(dl.c_k, i, material.k);
+        D::put(dl.c_tint, i, material.specular.value), dl.c_use_tint[i] = material.conductor_tint;
+      }
+      D::put(dl.beta, i, a.beta);
+      dl.eta_scale[i] = a.eta_scale;
+      dl.roulette[i] = roulette;
+      if (!lockstep_draws) {  // in the one-lane order; the lobe choice is not read
+        u[kULight][0][i] = sampler.get_1d();
+        const Vec2 u_point = sampler.get_2d();
+        sampler.skip_1d();
+        const Vec2 u_dir = sampler.get_2d();
+        u[kUPoint][0][i] = u_point.x, u[kUPoint][1][i] = u_point.y;
+        u[kUDir][0][i] = u_dir.x, u[kUDir][1][i] = u_dir.y;
+        // Drawn before the sample is known to succeed: a lane whose sample fails ends, and
+        // nothing reads its sampler after that, so the extra draw changes no value.
+        u[kURoulette][0][i] = sampler.get_1d_if(roulette);
+      }                   // (with lockstep draws, u[kURoulette] is read only where roulette runs)
+      if (given_light) {  // as light_sample_mis_unshadowed() takes it (receiver_normal())
+        const Vec3 p = D::get(hits.p, i);
+        const Vec3 receiver = dot(wo, ng) >= 0 ? ng : -ng;
+        size_t light;
+        float pmf;
+        LightSet::SphereCone c;
+        Vec2 u_point{u[kUPoint][0][i], u[kUPoint][1][i]};
+        const bool picked = ctx.lights.pick(p, receiver, u[kULight][0][i], u_point, light, pmf);
+        u[kUPoint][0][i] = u_point.x, u[kUPoint][1][i] = u_point.y;
+        const bool sphere = picked && ctx.lights.sphere_cone_of(light, p, c);
+        dl.l_sphere[i] = sphere;
+        if (sphere) {  // sampled in the loops
+          dl.l_delta[i] = false, dl.l_pmf[i] = pmf;
+          D::put(dl.s_center, i, c.center), D::put(dl.s_pole, i, c.pole);
+          dl.s_radius[i] = c.radius, dl.s_sin2_max[i] = c.sin2_max;
+          dl.s_cos_max[i] = c.cos_max, dl.s_omc[i] = c.one_minus_cos_max;
+          D::put(dl.l_radiance, i, c.emission.radiance);
+          dl.l_two_sided[i] = c.emission.two_sided;
+          continue;
+        }
+        LightSample ls;
+        const bool ok = picked && ctx.lights.sample_selected(light, pmf, p, u_point, ls);
+        dl.g_ok[i] = ok;
+        D::put(dl.g_wi, i, ls.wi), D::put(dl.g_radiance, i, ls.radiance);
+        dl.g_pdf[i] = ls.pdf_solid_angle, dl.l_delta[i] = ls.is_delta;
+        if (ok) {
+          const Ray r = light_shadow_ray(ctx, hits.hit(i), ls);
+          D::put(dl.g_shadow_o, i, r.o), D::put(dl.g_shadow_d, i, r.d);
+          dl.g_shadow_tmax[i] = r.tmax;
+        }
+      }
+    }
+    if constexpr (K > 1)
+      if (dl.m > 0) {
+        counters.lane_vertices += uint64_t(dl.m);
+        if (given_light) {
+          diffuse_lanes_sphere_angles(dl);
+          for (int j = 0; j < dl.m; ++j) {
+            const int i = dl.lane[j];
+            if (dl.l_sphere[i])
+              dl.s_cos_phi[i] = std::cos(dl.s_phi[i]), dl.s_sin_phi[i] = std::sin(dl.s_phi[i]);
+          }
+          diffuse_lanes_sphere_points(dl);
+          diffuse_lanes_nee<true>(dl);
+        } else {
+          // The pick in the plain lanes' order (LightSet::pick_triangles), back into their slots.
+          float u_select[SurfaceLanes::N], ux[SurfaceLanes::N];
+          uint32_t picked[SurfaceLanes::N];
+          for (int j = 0; j < dl.m; ++j)
+            u_select[j] = u[kULight][0][dl.lane[j]], ux[j] = u[kUPoint][0][dl.lane[j]];
+          ctx.lights.pick_triangles(u_select, ux, dl.m, picked);
+          for (int j = 0; j < dl.m; ++j) {
+            const int i = dl.lane[j];
+            u[kUPoint][0][i] = ux[j];
+            dl.light_ok[i] = picked[j] != LightSet::kNoPick;
+            const LightSet::TriangleLight t =
+                dl.light_ok[i] ? ctx.lights.triangle_light(picked[j]) : LightSet::TriangleLight{};
+            D::put(dl.l_p0, i, t.p0), D::put(dl.l_p1, i, t.p1), D::put(dl.l_p2, i, t.p2);
+            D::put(dl.l_n, i, t.n), D::put(dl.l_radiance, i, t.emission.radiance);
+            dl.l_area[i] = t.area, dl.l_pmf[i] = t.pmf, dl.l_two_sided[i] = t.emission.two_sided;
+          }
+          diffuse_lanes_nee<false>(dl);
+        }
+        for (int j = 0; j < dl.m; ++j) {
+          const int i = dl.lane[j];
+          if (dl.conductor[i]) {
+            const float phi = TrowbridgeReitz::visible_normal_phi({u[kUDir][0][i], u[kUDir][1][i]});
+            dl.c_cos_phi[i] = std::cos(phi), dl.c_sin_phi[i] = std::sin(phi);
+          }
+        }
+        diffuse_lanes_continue(dl);
+        if (conductors) conductor_lanes(dl);
+        // Every slot's spawned and shadow rays into the packets; only the plain lanes' are read
+        // (the others are inactive, or a generic lane's, set again below).
+        lanes_to_packets(dl, rays.rh, shadow.rh.ray);
+        for (int j = 0; j < dl.m; ++j) {
+          const int i = dl.lane[j];
+          Lane& a = lanes[i];
+          nee_done[i] = true;
+          a.nee_beta = a.beta;
+          const bool c = dl.conductor[i] != 0;  // the conductor loop's results, else the diffuse
+          const bool nee_ok = c ? dl.ls_ok[i] && !is_black(D::get(dl.c_f, i)) : dl.nee_ok[i] != 0;
+          a.nee = c ? (nee_ok ? D::get(dl.c_nee, i) : RGB(0.0f)) : D::get(dl.nee, i);
+          if (nee_ok) {
+            shadow.activate(i);
+            any_shadow = true;
+            ++counters.rays;
+          }
+          const SurfaceLanes::Continuation& next = c ? dl.c_cont : dl.cont;
+          const bool lives = next.continues[i] && next.survives[i] && (!c || next.bsdf_pdf[i] > 0);
+          if (!lives) {
+            rays.clear(i), --live;
+            continue;
+          }
+          a.beta = D::get(next.beta_out, i);
+          a.prev_bsdf_pdf = next.bsdf_pdf[i];
+          a.prev_delta = false;
+          a.prev_p = D::get(hits.p, i);
+          a.prev_n = D::get(dl.receiver_n, i);
+        }
+      }
+    // The other vertices, one by one.
+    for (int g = 0; g < generics; ++g) {
+      const int i = generic[g];
+      Lane& a = lanes[i];
+      Sampler& sampler = samplers[i];
+      const SurfaceHit hit = hits.hit(i);
+      const Vec3 wo = D::get(dl.wo, i);
       Bsdf bsdf = bsdf_at(ctx, hit, a.cone_width);
       const bool nee = !bsdf.is_delta();
       float u_light = lockstep_draws ? u[kULight][0][i] : sampler.get_1d_if(nee);
@@ -507,7 +618,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       Vec2 u_dir = lockstep_draws ? Vec2{u[kUDir][0][i], u[kUDir][1][i]}
                                   : sampler.get_2d_if(bsdf.sample_uses_direction());
       if (!bsdf.sample(wo, uc, u_dir, TransportMode::Radiance, bs)) {
-        end();
+        rays.clear(i), --live;
         continue;
       }
       float cos_i = std::fabs(dot(bs.wi, bsdf.shading_normal()));
@@ -522,70 +633,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       if (roulette) {
         float survive = std::min(1.0f, max_component(a.beta * a.eta_scale));
         if (u_rr >= survive) {
-          end();
-          continue;
-        }
-        a.beta = a.beta / survive;
-      }
-    }
-    if (dl.m > 0) {
-      counters.lane_vertices += uint64_t(dl.m);
-      if (given_light) {
-        diffuse_lanes_sphere_angles(dl);
-        for (int j = 0; j < dl.m; ++j)
-          if (dl.l_sphere[j])
-            dl.s_cos_phi[j] = std::cos(dl.s_phi[j]), dl.s_sin_phi[j] = std::sin(dl.s_phi[j]);
-        diffuse_lanes_sphere_points(dl);
-        diffuse_lanes_nee<true>(dl);
-      } else {
-        uint32_t picked[SurfaceLanes::N];
-        ctx.lights.pick_triangles(dl.u_light, dl.u_point[0], dl.m, picked);
-        for (int j = 0; j < dl.m; ++j) {
-          dl.light_ok[j] = picked[j] != LightSet::kNoPick;
-          const LightSet::TriangleLight t =
-              dl.light_ok[j] ? ctx.lights.triangle_light(picked[j]) : LightSet::TriangleLight{};
-          using D = SurfaceLanes;
-          D::put(dl.l_p0, j, t.p0), D::put(dl.l_p1, j, t.p1), D::put(dl.l_p2, j, t.p2);
-          D::put(dl.l_n, j, t.n), D::put(dl.l_radiance, j, t.emission.radiance);
-          dl.l_area[j] = t.area, dl.l_pmf[j] = t.pmf, dl.l_two_sided[j] = t.emission.two_sided;
-        }
-        diffuse_lanes_nee<false>(dl);
-      }
-      for (int j = 0; j < dl.m; ++j) {
-        if (dl.conductor[j]) {
-          const float phi = TrowbridgeReitz::visible_normal_phi({dl.u_dir[0][j], dl.u_dir[1][j]});
-          dl.c_cos_phi[j] = std::cos(phi), dl.c_sin_phi[j] = std::sin(phi);
-        }
-      }
-      diffuse_lanes_continue(dl);
-      if (conductors) conductor_lanes(dl);
-      using D = SurfaceLanes;
-      for (int j = 0; j < dl.m; ++j) {
-        const int i = dl.lane[j];
-        Lane& a = lanes[i];
-        nee_done[i] = true;
-        a.nee_beta = a.beta;
-        const bool c = dl.conductor[j] != 0;  // the conductor loop's results, else the diffuse
-        const bool nee_ok = c ? dl.ls_ok[j] && !is_black(D::get(dl.c_f, j)) : dl.nee_ok[j] != 0;
-        a.nee = c ? (nee_ok ? D::get(dl.c_nee, j) : RGB(0.0f)) : D::get(dl.nee, j);
-        if (nee_ok) {
-          shadow.set(i, {D::get(dl.shadow_o, j), D::get(dl.shadow_d, j), dl.shadow_tmax[j]});
-          any_shadow = true;
-          ++counters.rays;
-        }
-        const SurfaceLanes::Continuation& next = c ? dl.c_cont : dl.cont;
-        const bool lives = next.continues[j] && next.survives[j] && (!c || next.bsdf_pdf[j] > 0);
-        if (!lives) {
           rays.clear(i), --live;
           continue;
         }
-        a.beta = D::get(next.beta_out, j);
-        a.prev_bsdf_pdf = next.bsdf_pdf[j];
-        a.prev_delta = false;
-        a.prev_p = D::get(dl.p, j);
-        a.prev_n = D::get(dl.receiver_n, j);
-        rays.set(
-            i, {D::get(next.ray_o, j), D::get(next.ray_d, j), kInf});
+        a.beta = a.beta / survive;
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
