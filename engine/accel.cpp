@@ -291,8 +291,8 @@ void Accel::occluded_packet(RayPacket& packet, int n, bool* blocked) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   rtcOccluded16(packet.valid, rtc_scene_, &ctx, &packet.rh.ray);
-  for (int i = 0; i < n; ++i)
-    if (packet.active(i)) blocked[i] = packet.rh.ray.tfar[i] < 0;  // Embree: -inf on a hit
+  for (int i = 0; i < n; ++i)  // Embree: -inf on a hit; without a branch (false when inactive)
+    blocked[i] = packet.active(i) & (packet.rh.ray.tfar[i] < 0);
 }
 
 void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsigned inst_id, float u,

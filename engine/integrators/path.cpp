@@ -420,8 +420,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     const bool roulette = depth + 1 >= settings.rr_min_depth;
     if (lockstep_draws && depth < settings.max_depth) {
       int m = 0;
-      for (int i = 0; i < n; ++i)
-        if (rays.active(i) && hits.found[i]) shading[m++] = i;
+      for (int i = 0; i < n; ++i)  // without a branch (found: traced and hit)
+        shading[m] = i, m += hits.found[i] != 0;
       const uint8_t draws[kVertexDraws] = {1, 2, 1, 2, uint8_t(roulette ? 1 : 0)};
       Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
     }
@@ -640,10 +640,13 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
-    for (int i = 0; i < n; ++i)
-      if (nee_done[i])  // beta * (term or 0) at every NEE vertex, occluded or not, as K = 1 adds
-        radiance[i] +=
-            lanes[i].nee_beta * (shadow.active(i) && !blocked[i] ? lanes[i].nee : RGB(0.0f));
+    // beta * (term or 0) at every NEE vertex, occluded or not, as K = 1 adds; written as selects
+    // (the lanes' patterns mispredict branches).
+    for (int i = 0; i < n; ++i) {
+      const bool visible = shadow.active(i) & !blocked[i];
+      const RGB term = lanes[i].nee_beta * vselect(visible, lanes[i].nee, RGB(0.0f));
+      radiance[i] = vselect(nee_done[i], radiance[i] + term, radiance[i]);
+    }
   }
 }
 
