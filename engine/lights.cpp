@@ -390,9 +390,9 @@ bool LightSet::sample_area(const Tri& tri, Vec3 p, Vec2 u, LightSample& ls) cons
   const Mesh& m = scene_.meshes[tri.mesh];
   SphereCone c;
   if (sphere_cone_of(tri, p, c)) {
-    float cos_alpha, sin_alpha, phi;
-    sphere_cone_angles(c.sin2_max, c.cos_max, u, cos_alpha, sin_alpha, phi);
-    return sphere_cone_point(c, p, cos_alpha, sin_alpha, std::cos(phi), std::sin(phi), ls);
+    float cos_alpha, sin_alpha, cos_phi, sin_phi;
+    sphere_cone_angles(c.sin2_max, c.cos_max, u, cos_alpha, sin_alpha, cos_phi, sin_phi);
+    return sphere_cone_point(c, p, cos_alpha, sin_alpha, cos_phi, sin_phi, ls);
   }
   if (!tri.sphere)
     return sample_triangle_area(tri.p0, tri.p1, tri.p2, tri.n, tri.area, *m.emission, p, u, ls);

@@ -122,14 +122,14 @@ class LightSet {
   };
   // Whether light i is a sphere that p sees from outside, with its cone.
   bool sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const;
-  // sample_selected() of such a light is sphere_cone_angles(), the cosine and sine of phi
-  // (library calls), sphere_cone_point() and with_selection(): three steps without branches, so
-  // that the path tracer's lanes run the first and last in loops that vectorise and get the bits
-  // sample() gets. The angles: between the axis back to p and the sampled point, at the centre,
-  // as cosine and sine, and phi about the axis.
+  // sample_selected() of such a light is sphere_cone_angles(), sphere_cone_point() and
+  // with_selection(): steps without branches or library calls, so that the path tracer's lanes
+  // run them in loops that vectorise and get the bits sample() gets. The angles: between the axis
+  // back to p and the sampled point, at the centre, as cosine and sine, and phi about the axis,
+  // as its cosine and sine.
   [[gnu::always_inline]] static void sphere_cone_angles(float sin2_max, float cos_max, Vec2 u,
                                                         float& cos_alpha, float& sin_alpha,
-                                                        float& phi) {
+                                                        float& cos_phi, float& sin_phi) {
     float cos_t = (cos_max - 1.0f) * u.x + 1.0f, sin2_t = 1.0f - cos_t * cos_t;
     // A small cone: sin^2 is uniform to first order.
     const bool small = sin2_max < 0.00068523f;
@@ -140,7 +140,7 @@ class LightSet {
     float sin_max = std::sqrt(sin2_max);
     cos_alpha = sin2_t / sin_max + cos_t * safe_sqrt(1.0f - sin2_t / sin2_max);
     sin_alpha = safe_sqrt(1.0f - cos_alpha * cos_alpha);
-    phi = 2 * kPi * u.y;
+    cos_sin_turn(u.y, cos_phi, sin_phi);  // phi = 2 pi u.y
   }
   // The sampled point, its direction and distance from p, radiance and solid-angle density
   // (without selection).

@@ -22,6 +22,7 @@
 #include <cmath>
 
 #include "engine/math.h"
+#include "engine/sampling.h"
 
 namespace rf {
 
@@ -64,12 +65,15 @@ struct TrowbridgeReitz {
 
   // Samples a normal from D_visible(w, .) (Heitz 2018, listing 1).
   Vec3 sample_visible_normal(Vec3 w, Vec2 u) const {
-    const float phi = visible_normal_phi(u);
-    return sample_visible_normal(w, u.x, std::cos(phi), std::sin(phi));
+    float cos_phi, sin_phi;
+    visible_normal_phi(u, cos_phi, sin_phi);
+    return sample_visible_normal(w, u.x, cos_phi, sin_phi);
   }
-  // The pieces of it for the path tracer's lanes, which take the cosine and sine of phi one by
-  // one (library calls) and the rest in vectorised loops (selects, no branches).
-  static float visible_normal_phi(Vec2 u) { return 2 * kPi * u.y; }
+  // The pieces of it for the path tracer's lanes, which run them in vectorised loops (selects, no
+  // branches, no library calls): the cosine and sine of the sample's phi = 2 pi u.y, then the rest.
+  static void visible_normal_phi(Vec2 u, float& cos_phi, float& sin_phi) {
+    cos_sin_turn(u.y, cos_phi, sin_phi);
+  }
   Vec3 sample_visible_normal(Vec3 w, float ux, float cos_phi, float sin_phi) const {
     w = vselect(w.z < 0, -w, w);
     Vec3 vh = normalize(Vec3(alpha_x * w.x, alpha_y * w.y, w.z));  // stretch to alpha = 1

@@ -115,6 +115,30 @@ TEST(Sampling, DiskCosineAndSineArePolynomialsWithinUlps) {
   EXPECT_FALSE(std::signbit(centre.x) || std::signbit(centre.y));
 }
 
+// The cosine and sine of a turn's fraction by polynomials (cos_sin_turn, the sphere cone's and the
+// visible-normal sample's phi = 2 pi u): within 1.2e-7 of cos and sin of 2 pi u in double on
+// 4,000,001 points of [0, 1) (measured 9.7e-8; the libm calls on the float phi = 2 pi u they
+// replace were 4.1e-7 off, the rounding of phi), and on the unit circle within 2e-7 (measured
+// 1.5e-7). Broken once by flipping the third quarter's cosine: 2.0 off; by dropping the
+// sine's x^9 term: 3.5e-7 off.
+TEST(Sampling, TurnCosineAndSineArePolynomialsWithinBound) {
+  double worst = 0, worst_norm = 0;
+  for (int i = 0; i <= 4000000; ++i) {
+    const float u = std::min(float(i / 4000000.0), 0x1.fffffep-1f);
+    float c, s;
+    cos_sin_turn(u, c, s);
+    const double phi = 2 * 3.14159265358979323846 * double(u);
+    worst = std::max({worst, std::fabs(c - std::cos(phi)), std::fabs(s - std::sin(phi))});
+    worst_norm = std::max(worst_norm, std::fabs(double(c) * c + double(s) * s - 1.0));
+  }
+  EXPECT_LE(worst, 1.2e-7);
+  EXPECT_LE(worst_norm, 2e-7);
+  float c, s;
+  cos_sin_turn(0.0f, c, s);
+  EXPECT_EQ(c, 1.0f);
+  EXPECT_EQ(s, 0.0f);
+}
+
 // Owen scrambling as a map of integers: bijective, and it maps every aligned block of 2^j onto
 // an aligned block of 2^j.
 TEST(SamplerTest, OwenScrambleMapsAlignedBlocksToAlignedBlocks) {

@@ -51,9 +51,9 @@ struct RoughConductorBxdf {
     return ok & !(c <= 0) ? distrib.D_visible(wo, wm) / (4 * c) : 0.0f;
   }
   bool sample(Vec3 wo, float /*uc*/, Vec2 u, TransportMode mode, BsdfSample& s) const {
-    const float phi = TrowbridgeReitz::visible_normal_phi(u);
-    return sample_from_phi(wo, u.x, std::cos(phi), std::sin(phi), mode, s) &&
-           s.pdf_solid_angle > 0;
+    float cos_phi, sin_phi;
+    TrowbridgeReitz::visible_normal_phi(u, cos_phi, sin_phi);
+    return sample_from_phi(wo, u.x, cos_phi, sin_phi, mode, s) && s.pdf_solid_angle > 0;
   }
   // sample() given u.x and the cosine and sine of phi (the path tracer's lanes take those one by
   // one and the rest in a loop), with selects: whether wo and the sampled wi are above the

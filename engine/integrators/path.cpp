@@ -46,9 +46,9 @@ void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
 // sphere_cone_angles and sphere_cone_point, Bsdf's pieces, DiffuseBxdf, RoughConductorBxdf,
 // offset_ray_origin), whose operations are exact IEEE ones (no FMA contraction), so the compiled
 // vector loops give each vertex the bits the one-lane path gives it (the packet test holds them to
-// that); only library calls (the cosine and sine of the sphere cone's phi and of the
-// visible-normal sample's phi) run lane by lane between the loops. (The disk's cosine and sine are
-// polynomials, sin_cos_quarter_pi, computed in the loops.)
+// that). The loops call no library function: the cosines and sines (the disk's, the sphere
+// cone's phi, the visible-normal sample's phi) are polynomials (sin_cos_quarter_pi,
+// cos_sin_turn).
 // The arrays are in lane space: slot i is packet lane i, so the packet query writes the hits
 // (Accel::PacketHits), Sampler::get_lanes the numbers and lanes_to_packets the next rays where
 // the next step reads them, with no copies between (a compacted layout cost 5% of a Cornell box
@@ -89,7 +89,7 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   int g_ok[N];
   V3 s_center, s_pole;
   float s_radius[N], s_sin2_max[N], s_cos_max[N], s_omc[N];
-  float s_cos_alpha[N], s_sin_alpha[N], s_phi[N], s_cos_phi[N], s_sin_phi[N];
+  float s_cos_alpha[N], s_sin_alpha[N], s_cos_phi[N], s_sin_phi[N];
   // Next-event estimation: whether it has a shadow ray, the ray, the term.
   int nee_ok[N];
   V3 shadow_o, shadow_d, nee;
@@ -106,8 +106,8 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   } cont;
   // Rough-conductor vertices (plain_rough_conductor) share the arrays above: the vertex, the
   // light sample (the NEE loop keeps it in ls_*: direction, radiance, pdf, usable, delta) and the
-  // shadow ray. Their lobe (alpha, masking, Fresnel), the cosine and sine of the visible-normal
-  // sample's phi, and their results (c_*), taken over the diffuse loops' ones lane by lane.
+  // shadow ray. Their lobe (alpha, masking, Fresnel) and their results (c_*), taken over the
+  // diffuse loops' ones lane by lane.
   int conductor[N];
   V3 ls_wi, ls_radiance;
   float ls_pdf[N];
@@ -115,7 +115,6 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   float c_alpha[N];
   int c_separable[N], c_use_tint[N];
   V3 c_eta, c_k, c_tint;
-  float c_cos_phi[N], c_sin_phi[N];
   V3 c_f, c_nee;
   Continuation c_cont;
 
@@ -146,7 +145,7 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_angles(SurfaceLanes& L) {
   for (int j = 0; j < SurfaceLanes::N; ++j)  // all N: see SurfaceLanes
     LightSet::sphere_cone_angles(L.s_sin2_max[j], L.s_cos_max[j],
                                  {L.u[kUPoint][0][j], L.u[kUPoint][1][j]}, L.s_cos_alpha[j],
-                                 L.s_sin_alpha[j], L.s_phi[j]);
+                                 L.s_sin_alpha[j], L.s_cos_phi[j], L.s_sin_phi[j]);
 }
 
 // The sphere cones' points: the rest of sample_selected() (sphere_cone_point, with_selection),
@@ -320,7 +319,9 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
     lo_wo.z = std::fabs(lo_wo.z);
     const bool mirror = L.mirror[j] != 0;
     BsdfSample bs;
-    bool sampled = lobe.sample_from_phi(lo_wo, L.u[kUDir][0][j], L.c_cos_phi[j], L.c_sin_phi[j],
+    float cos_phi, sin_phi;
+    TrowbridgeReitz::visible_normal_phi({L.u[kUDir][0][j], L.u[kUDir][1][j]}, cos_phi, sin_phi);
+    bool sampled = lobe.sample_from_phi(lo_wo, L.u[kUDir][0][j], cos_phi, sin_phi,
                                         TransportMode::Radiance, bs) &
                    (L.sample_ok[j] != 0);
     sampled = Bsdf::sample_to_world(frame, ng, wo, mirror, bs) & sampled;
@@ -527,11 +528,6 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         counters.lane_vertices += uint64_t(dl.m);
         if (given_light) {
           diffuse_lanes_sphere_angles(dl);
-          for (int j = 0; j < dl.m; ++j) {
-            const int i = dl.lane[j];
-            if (dl.l_sphere[i])
-              dl.s_cos_phi[i] = std::cos(dl.s_phi[i]), dl.s_sin_phi[i] = std::sin(dl.s_phi[i]);
-          }
           diffuse_lanes_sphere_points(dl);
           diffuse_lanes_nee<true>(dl);
         } else {
@@ -552,13 +548,6 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
             dl.l_area[i] = t.area, dl.l_pmf[i] = t.pmf, dl.l_two_sided[i] = t.emission.two_sided;
           }
           diffuse_lanes_nee<false>(dl);
-        }
-        for (int j = 0; j < dl.m; ++j) {
-          const int i = dl.lane[j];
-          if (dl.conductor[i]) {
-            const float phi = TrowbridgeReitz::visible_normal_phi({u[kUDir][0][i], u[kUDir][1][i]});
-            dl.c_cos_phi[i] = std::cos(phi), dl.c_sin_phi[i] = std::sin(phi);
-          }
         }
         diffuse_lanes_continue(dl);
         if (conductors) conductor_lanes(dl);

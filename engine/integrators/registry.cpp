@@ -111,7 +111,8 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // 5: a hit on an exact sphere at rayfarm's own distance (Accel::hit_from_embree), not Embree's.
 // 6: Embree's medium-quality BVH (a ray through a shared edge may take the other triangle).
 // 7: the concentric disk's cosine and sine by polynomials (sin_cos_quarter_pi), not libm.
-constexpr int kEstimatorVersion = 7;
+// 8: the sphere cone's and the visible-normal sample's phi by polynomials (cos_sin_turn).
+constexpr int kEstimatorVersion = 8;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
