@@ -114,7 +114,8 @@ class Accel {
       valid[i] = -1;
     }
     void clear(int i) { valid[i] = 0; }
-    // Lane i active again with the ray its arrays already hold (written in place, set_slots).
+    // Lane i active with the ray its arrays already hold (written in place: the path tracer's
+    // lanes_to_packets).
     void activate(int i) { valid[i] = -1; }
     bool active(int i) const { return valid[i] != 0; }
     Ray ray(int i) const {

@@ -55,8 +55,8 @@ struct RoughConductorBxdf {
     TrowbridgeReitz::visible_normal_phi(u, cos_phi, sin_phi);
     return sample_from_phi(wo, u.x, cos_phi, sin_phi, mode, s) && s.pdf_solid_angle > 0;
   }
-  // sample() given u.x and the cosine and sine of phi (the path tracer's lanes take those one by
-  // one and the rest in a loop), with selects: whether wo and the sampled wi are above the
+  // sample() given u.x and the cosine and sine of phi (TrowbridgeReitz::visible_normal_phi), with
+  // selects (the path tracer's lanes run it in a loop): whether wo and the sampled wi are above the
   // surface. sample() also requires pdf > 0; the lanes test that after their loop (GCC 12 does
   // not vectorise the select of flags it becomes here).
   bool sample_from_phi(Vec3 wo, float ux, float cos_phi, float sin_phi, TransportMode mode,

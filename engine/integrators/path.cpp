@@ -78,8 +78,8 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
   // With other lights (kGivenLight) a vertex's light sample is taken one by one (g_*: ok,
   // direction, radiance, pdf including selection, shadow ray), unless its light is a sphere seen
   // from outside (l_sphere), whose cone is sampled in the loops (LightSet::SphereCone; emission
-  // in l_radiance and l_two_sided, selection in l_pmf, the numbers in u_point): the angles, the
-  // cosine and sine of phi one by one, then the point (l_p0, its error l_p1, normal l_n). The
+  // in l_radiance and l_two_sided, selection in l_pmf, the numbers in u[kUPoint]): the angles
+  // (with phi's cosine and sine), then the point (l_p0, its error l_p1, normal l_n). The
   // loops then select the sphere's sample or the given one into light_ok, l_wi, l_radiance, l_pdf
   // and the shadow ray (two arrays: GCC 12 vectorises no conditional store of an array's own
   // element back to it).
@@ -281,8 +281,8 @@ RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
 // The rough-conductor vertices among the lanes (conductor[j]; the loop runs over all N slots and
 // its results, in c_*, are read for those only): light_sample_mis_unshadowed's BSDF part for the
 // light sample the NEE loop took (Bsdf::eval_pdf, MIS weight, term), then Bsdf::sample by visible
-// normals (the cosine and sine of phi taken one by one before the loop), throughput, spawned ray
-// and roulette, as diffuse_lanes_continue.
+// normals (phi's cosine and sine by cos_sin_turn, in the loop), throughput, spawned ray and
+// roulette, as diffuse_lanes_continue.
 RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
   using D = SurfaceLanes;
   RF_IVDEP
@@ -331,7 +331,8 @@ RF_SIMD_CLONES void conductor_lanes(SurfaceLanes& L) {
 
 // Every slot's spawned ray (the conductor loop's where the slot is a rough conductor, else the
 // diffuse loops') and shadow ray into the packets' arrays, as RayPacket::set writes them but for
-// the lanes' flags (the caller activates the lanes that go on). A slot that is not a plain
+// the lanes' flags (the caller activates the shadow rays of the lanes that have one, and clears
+// the lanes whose paths end; the others stay active). A slot that is not a plain
 // vertex gets values nobody reads: its lane is inactive, or a generic vertex's, which sets its
 // rays afterwards.
 RF_SIMD_CLONES void lanes_to_packets(const SurfaceLanes& L, RTCRayHit16& next, RTCRay16& shadow) {
