@@ -481,7 +481,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       D::put(dl.beta, i, a.beta);
       dl.eta_scale[i] = a.eta_scale;
       dl.roulette[i] = roulette;
-      if (!lockstep_draws) {  // in the one-lane order; the lobe choice is not read
+      // Without lockstep draws, this lane's numbers in the one-lane order (the lobe choice is not
+      // read); with them, u[kURoulette] is read only where roulette runs.
+      if (!lockstep_draws) {
         u[kULight][0][i] = sampler.get_1d();
         const Vec2 u_point = sampler.get_2d();
         sampler.skip_1d();
@@ -491,7 +493,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         // Drawn before the sample is known to succeed: a lane whose sample fails ends, and
         // nothing reads its sampler after that, so the extra draw changes no value.
         u[kURoulette][0][i] = sampler.get_1d_if(roulette);
-      }                   // (with lockstep draws, u[kURoulette] is read only where roulette runs)
+      }
       if (given_light) {  // as light_sample_mis_unshadowed() takes it (receiver_normal())
         const Vec3 p = D::get(hits.p, i);
         const Vec3 receiver = dot(wo, ng) >= 0 ? ng : -ng;
