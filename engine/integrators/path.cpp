@@ -632,12 +632,12 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
-    // beta * (term or 0) at every NEE vertex, occluded or not, as K = 1 adds; written as selects
-    // (the lanes' patterns mispredict branches).
+    // The NEE terms whose shadow rays got through, written as selects (the lanes' patterns
+    // mispredict branches).
     for (int i = 0; i < n; ++i) {
-      const bool visible = shadow.active(i) & !blocked[i];
-      const RGB term = lanes[i].nee_beta * vselect(visible, lanes[i].nee, RGB(0.0f));
-      radiance[i] = vselect(nee_done[i], radiance[i] + term, radiance[i]);
+      const bool add = nee_done[i] & shadow.active(i) & !blocked[i];
+      const RGB term = lanes[i].nee_beta * lanes[i].nee;
+      radiance[i] = vselect(add, radiance[i] + term, radiance[i]);
     }
   }
 }
