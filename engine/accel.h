@@ -117,6 +117,7 @@ class Accel {
     // Lane i active with the ray its arrays already hold (written in place: the path tracer's
     // lanes_to_packets).
     void activate(int i) { valid[i] = -1; }
+    void activate_if(int i, bool on) { valid[i] = on ? -1 : 0; }  // activate or clear
     bool active(int i) const { return valid[i] != 0; }
     Ray ray(int i) const {
       return {{rh.ray.org_x[i], rh.ray.org_y[i], rh.ray.org_z[i]},

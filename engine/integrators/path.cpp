@@ -557,31 +557,34 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         // Every slot's spawned and shadow rays into the packets; only the plain lanes' are read
         // (the others are inactive, or a generic lane's, set again below).
         lanes_to_packets(dl, rays.rh, shadow.rh.ray);
+        // Without branches (the lanes' patterns mispredict them): a lane that ends keeps the
+        // state it is given here unread.
+        int shadows = 0, ends = 0;
         for (int j = 0; j < dl.m; ++j) {
           const int i = dl.lane[j];
           Lane& a = lanes[i];
           nee_done[i] = true;
           a.nee_beta = a.beta;
           const bool c = dl.conductor[i] != 0;  // the conductor loop's results, else the diffuse
-          const bool nee_ok = c ? dl.ls_ok[i] && !is_black(D::get(dl.c_f, i)) : dl.nee_ok[i] != 0;
-          a.nee = c ? (nee_ok ? D::get(dl.c_nee, i) : RGB(0.0f)) : D::get(dl.nee, i);
-          if (nee_ok) {
-            shadow.activate(i);
-            any_shadow = true;
-            ++counters.rays;
-          }
+          const bool nee_ok =
+              c ? (dl.ls_ok[i] != 0) & !is_black(D::get(dl.c_f, i)) : dl.nee_ok[i] != 0;
+          a.nee = c ? vselect(nee_ok, D::get(dl.c_nee, i), RGB(0.0f)) : D::get(dl.nee, i);
+          shadow.activate_if(i, nee_ok);
+          shadows += nee_ok;
           const SurfaceLanes::Continuation& next = c ? dl.c_cont : dl.cont;
-          const bool lives = next.continues[i] && next.survives[i] && (!c || next.bsdf_pdf[i] > 0);
-          if (!lives) {
-            rays.clear(i), --live;
-            continue;
-          }
+          const bool lives =
+              (next.continues[i] != 0) & (next.survives[i] != 0) & (!c | (next.bsdf_pdf[i] > 0));
+          rays.activate_if(i, lives);
+          ends += !lives;
           a.beta = D::get(next.beta_out, i);
           a.prev_bsdf_pdf = next.bsdf_pdf[i];
           a.prev_delta = false;
           a.prev_p = D::get(hits.p, i);
           a.prev_n = D::get(dl.receiver_n, i);
         }
+        any_shadow |= shadows > 0;
+        counters.rays += uint64_t(shadows);
+        live -= ends;
       }
     // The other vertices, one by one.
     for (int g = 0; g < generics; ++g) {
