@@ -222,9 +222,10 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   return true;
 }
 
-void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out) const {
+void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coherent) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
+  if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
   const RTCHit16& h = packet.rh.hit;
   // The lanes' hits are scattered over the meshes: on a scene larger than the caches, fetch every

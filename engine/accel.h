@@ -151,7 +151,10 @@ class Accel {
     }
   };
   // Closest hits of the active lanes i < n: hits.found[i], and lane i's hit in slot i when found.
-  void intersect_packet(RayPacket& packet, int n, PacketHits& hits) const;
+  // coherent: the rays are near one another (a pixel's camera rays), so Embree keeps them in
+  // packet traversal down to two active rays where it would trace them one by one below its
+  // incoherent threshold (RTC_INTERSECT_CONTEXT_FLAG_COHERENT; docs/performance.md).
+  void intersect_packet(RayPacket& packet, int n, PacketHits& hits, bool coherent = false) const;
   // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i], i < n.
   void occluded_packet(RayPacket& packet, int n, bool* blocked) const;
 
