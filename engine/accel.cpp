@@ -296,7 +296,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
   }
 }
 
-void Accel::occluded_packet(RayPacket& packet, int n, bool* blocked) const {
+void Accel::occluded_packet(RayPacket& packet, int n, int* blocked) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   rtcOccluded16(packet.valid, rtc_scene_, &ctx, &packet.rh.ray);

@@ -155,8 +155,8 @@ class Accel {
   // packet traversal down to two active rays where it would trace them one by one below its
   // incoherent threshold (RTC_INTERSECT_CONTEXT_FLAG_COHERENT; docs/performance.md).
   void intersect_packet(RayPacket& packet, int n, PacketHits& hits, bool coherent = false) const;
-  // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i], i < n.
-  void occluded_packet(RayPacket& packet, int n, bool* blocked) const;
+  // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i] 1 or 0, i < n.
+  void occluded_packet(RayPacket& packet, int n, int* blocked) const;
 
   // Spawns a ray from a hit towards w.
   Ray spawn(const SurfaceHit& from, Vec3 w) const {

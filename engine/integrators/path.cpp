@@ -27,10 +27,10 @@ void intersect(const Accel& accel, SingleRay& p, int, Accel::PacketHits& hits, b
   hits.found[0] = accel.intersect(p.r, hit);
   if (hits.found[0]) hits.set(0, hit);
 }
-void occluded(const Accel& accel, Accel::RayPacket& p, int n, bool* blocked) {
+void occluded(const Accel& accel, Accel::RayPacket& p, int n, int* blocked) {
   accel.occluded_packet(p, n, blocked);
 }
-void occluded(const Accel& accel, SingleRay& p, int, bool* blocked) {
+void occluded(const Accel& accel, SingleRay& p, int, int* blocked) {
   blocked[0] = accel.occluded(p.r.o, p.r.d, p.r.tmax);
 }
 
@@ -389,11 +389,13 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     float cone_width = 0;       // ray-cone width at the current hit, for texture filtering
     bool prev_delta = true;     // the camera ray counts as "specular": emission taken unweighted
     Vec3 prev_p, prev_n{0.0f};  // the last vertex and its receiver normal (light selection)
-    RGB nee_beta{0.0f}, nee{0.0f};  // the pending NEE term: beta at the vertex, f Le cos w / pdf
   };
   Lane lanes[K];
   Packet rays, shadow;
-  bool nee_done[K], blocked[K] = {};
+  // In lane space, for the loop that adds the NEE terms: each lane's radiance, its pending NEE
+  // term (beta at the vertex times f Le cos w / pdf) and whether its shadow ray was blocked.
+  alignas(64) float sum[3][K], nee_term[3][K] = {};
+  alignas(64) int blocked[K] = {};
   // With a Sobol sampler the lanes that shade a vertex draw its numbers together, in the order one
   // lane draws them (Sampler::get_lanes): all of them, read or not, where one lane alone skips
   // the unread ones; a skip and a draw consume the same dimension, so the values are the same.
@@ -412,10 +414,11 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   Sampler::LaneDraws* u = dl.u;
   using D = SurfaceLanes;
   int live = n;
+  using S = LaneSlots<K>;
+  for (int i = 0; i < K; ++i) S::put(sum, i, RGB(0.0f));
   for (int i = 0; i < n; ++i) {
     rays.set(i, camera_rays[i]);
     lanes[i].prev_p = camera_rays[i].o;
-    radiance[i] = RGB(0.0f);
   }
   for (int depth = 0; live > 0; ++depth) {
     counters.rays += uint64_t(live);
@@ -437,14 +440,15 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     // The lanes' hits: escaped rays and emission, then plain vertices to the loops (dl.lane) and
     // the others to the one-by-one shading below (generic).
     for (int i = 0; i < n; ++i) {
-      nee_done[i] = false;
       shadow.clear(i);
       if (!rays.active(i)) continue;
       Lane& a = lanes[i];
       Sampler& sampler = samplers[i];
       const Vec3 wo = -rays.ray(i).d;
       if (!hits.found[i]) {
-        add_escaped(ctx, -wo, a.prev_delta, a.prev_bsdf_pdf, a.beta, radiance[i]);
+        RGB r = S::get(sum, i);
+        add_escaped(ctx, -wo, a.prev_delta, a.prev_bsdf_pdf, a.beta, r);
+        S::put(sum, i, r);
         rays.clear(i), --live;
         continue;
       }
@@ -454,11 +458,12 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       RGB le = LightSet::emitted(mesh, ng, wo);
       if (!is_black(le)) {
         if (a.prev_delta) {
-          radiance[i] += a.beta * le;
+          S::put(sum, i, S::get(sum, i) + a.beta * le);
         } else {
           float light_pdf = ctx.lights.pdf_solid_angle(a.prev_p, a.prev_n, hits.mesh[i],
                                                        hits.prim[i], D::get(hits.p, i), ng);
-          radiance[i] += a.beta * le * power_heuristic(a.prev_bsdf_pdf, light_pdf);
+          S::put(sum, i,
+                 S::get(sum, i) + a.beta * le * power_heuristic(a.prev_bsdf_pdf, light_pdf));
         }
       }
       if (depth == settings.max_depth) {
@@ -567,12 +572,12 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         for (int j = 0; j < dl.m; ++j) {
           const int i = dl.lane[j];
           Lane& a = lanes[i];
-          nee_done[i] = true;
-          a.nee_beta = a.beta;
           const bool c = dl.conductor[i] != 0;  // the conductor loop's results, else the diffuse
           const bool nee_ok =
               c ? (dl.ls_ok[i] != 0) & !is_black(D::get(dl.c_f, i)) : dl.nee_ok[i] != 0;
-          a.nee = c ? vselect(nee_ok, D::get(dl.c_nee, i), RGB(0.0f)) : D::get(dl.nee, i);
+          S::put(
+              nee_term, i,
+              a.beta * (c ? vselect(nee_ok, D::get(dl.c_nee, i), RGB(0.0f)) : D::get(dl.nee, i)));
           shadow.activate_if(i, nee_ok);
           shadows += nee_ok;
           const SurfaceLanes::Continuation& next = c ? dl.c_cont : dl.cont;
@@ -603,10 +608,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       Vec2 u_point =
           lockstep_draws ? Vec2{u[kUPoint][0][i], u[kUPoint][1][i]} : sampler.get_2d_if(nee);
       if (nee) {
-        nee_done[i] = true;
-        a.nee_beta = a.beta;
         Ray r;
-        if (light_sample_mis_unshadowed(ctx, hit, bsdf, wo, u_light, u_point, a.nee, r)) {
+        RGB l;
+        if (light_sample_mis_unshadowed(ctx, hit, bsdf, wo, u_light, u_point, l, r)) {
+          S::put(nee_term, i, a.beta * l);
           shadow.set(i, r);
           any_shadow = true;
           ++counters.rays;
@@ -639,14 +644,16 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       }
     }
     if (any_shadow) occluded(ctx.accel, shadow, n, blocked);
-    // The NEE terms whose shadow rays got through, written as selects (the lanes' patterns
-    // mispredict branches).
-    for (int i = 0; i < n; ++i) {
-      const bool add = nee_done[i] & shadow.active(i) & !blocked[i];
-      const RGB term = lanes[i].nee_beta * lanes[i].nee;
-      radiance[i] = vselect(add, radiance[i] + term, radiance[i]);
+    // The NEE terms whose shadow rays got through, as selects in lane space (a lane's shadow ray
+    // is active only after its term is written; branches on the lanes' patterns mispredict).
+    for (int i = 0; i < K; ++i) {
+      const bool add = shadow.active(i) & (blocked[i] == 0);
+      sum[0][i] = add ? sum[0][i] + nee_term[0][i] : sum[0][i];
+      sum[1][i] = add ? sum[1][i] + nee_term[1][i] : sum[1][i];
+      sum[2][i] = add ? sum[2][i] + nee_term[2][i] : sum[2][i];
     }
   }
+  for (int i = 0; i < n; ++i) radiance[i] = S::get(sum, i);
 }
 
 }  // namespace
