@@ -122,6 +122,16 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
                    std::all_of(pmf_.begin() + groups_[0].first,
                                pmf_.begin() + groups_[0].first + groups_[0].count,
                                [](float p) { return p > 0; });
+  if (pick_in_lanes_) {
+    PickTable& pt = pick_table_;
+    pt.count = int(groups_[0].count);
+    for (int k = 0; k < pt.count; ++k) {
+      const TriangleLight t = triangle_light(groups_[0].first + uint32_t(k));
+      pt.put(pt.p0, k, t.p0), pt.put(pt.p1, k, t.p1), pt.put(pt.p2, k, t.p2), pt.put(pt.n, k, t.n);
+      pt.put(pt.radiance, k, t.emission.radiance);
+      pt.area[k] = t.area, pt.pmf[k] = t.pmf, pt.two_sided[k] = t.emission.two_sided;
+    }
+  }
 }
 
 void LightSet::build_bvh(const std::string& mode) {
@@ -340,6 +350,10 @@ void LightSet::pick_triangles(const float* u_select, float* ux, int n, uint32_t*
   for (int j = 0; j < kPickLanes; ++j) x[j] = ux[j < n ? j : 0];
   pick_in_group_lanes(within_cdf_.data() + groups_[0].first, int(groups_[0].count), x, k);
   for (int j = 0; j < n; ++j) ux[j] = x[j], light[j] = groups_[0].first + k[j];
+}
+
+void LightSet::pick_entries(float* ux, uint32_t* entry) const {
+  pick_in_group_lanes(within_cdf_.data() + groups_[0].first, int(groups_[0].count), ux, entry);
 }
 
 // A uniformly distributed point of an area light's primitive (density 1 / area), its error bound

@@ -47,6 +47,7 @@
 #include "engine/sampling.h"
 #include "engine/scene.h"
 #include "engine/shapes.h"
+#include "engine/simd.h"
 
 namespace rf {
 
@@ -244,6 +245,20 @@ class LightSet {
   static constexpr int kPickLanes = 16;
   static constexpr uint32_t kNoPick = ~0u;
   void pick_triangles(const float* u_select, float* ux, int n, uint32_t* light) const;
+  // pick_triangles' vectorised case (one emissive mesh of 2 to kPickLanes triangles, none of zero
+  // probability) for kPickLanes lanes in place: ux[j] rescaled and entry[j] the picked light's
+  // entry in pick_table(), light first + entry[j]. Only when pick_in_lanes().
+  bool pick_in_lanes() const { return pick_in_lanes_; }
+  void pick_entries(float* ux, uint32_t* entry) const;
+  // Those lights as lane arrays, entry k < count holding triangle_light(first + k)'s numbers, so
+  // loops over lanes read a picked light by its entry (LaneSlots' m and lane are unused).
+  struct PickTable : LaneSlots<kPickLanes> {
+    V3 p0, p1, p2, n, radiance;
+    float area[kPickLanes], pmf[kPickLanes];
+    int two_sided[kPickLanes];
+    int count = 0;  // entries: the mesh's triangles
+  };
+  const PickTable& pick_table() const { return pick_table_; }
   TriangleLight triangle_light(uint32_t i) const {
     const Tri& t = tris_[i];
     return {t.p0, t.p1, t.p2, t.n, t.area, pmf_[i], *scene_.meshes[t.mesh].emission};
@@ -340,6 +355,7 @@ class LightSet {
   bool triangles_by_power_ = false;
   // pick_triangles' vectorised case: one group of 2 to 16 lights, none of zero probability.
   bool pick_in_lanes_ = false;
+  PickTable pick_table_{};
   std::vector<uint32_t> infinite_;
   std::vector<double> infinite_cdf_;  // infinite_.size() + 1 entries, within the infinite lights
 };

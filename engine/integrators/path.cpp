@@ -268,6 +268,38 @@ RF_SIMD_CLONES void diffuse_lanes_nee(SurfaceLanes& L) {
   D::put(out.beta_out, j, roulette ? beta / survive : beta);
 }
 
+// The lights LightSet::pick_entries picked (entry[j] of the pick table) into every slot's light
+// arrays, and its rescaled numbers ux into u[kUPoint] of the slots where plain[j] (the others
+// keep their own for their one-by-one shading). Selects over the table's few entries, which
+// vectorise where indexed loads would not (GCC's generic tuning emits no gathers).
+RF_SIMD_CLONES void lanes_picked_lights(SurfaceLanes& L, const LightSet::PickTable& T,
+                                        const uint32_t* entry, const float* ux, const int* plain) {
+  using D = SurfaceLanes;
+  for (int e = 0; e < T.count; ++e) {
+    const Vec3 p0 = T.get(T.p0, e), p1 = T.get(T.p1, e), p2 = T.get(T.p2, e);
+    const Vec3 n = T.get(T.n, e), le = T.get(T.radiance, e);
+    const float area = T.area[e], pmf = T.pmf[e];
+    const int two_sided = T.two_sided[e];
+    RF_IVDEP
+    for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
+      const bool s = e == 0 || entry[j] == uint32_t(e);
+      D::put(L.l_p0, j, vselect(s, p0, D::get(L.l_p0, j)));
+      D::put(L.l_p1, j, vselect(s, p1, D::get(L.l_p1, j)));
+      D::put(L.l_p2, j, vselect(s, p2, D::get(L.l_p2, j)));
+      D::put(L.l_n, j, vselect(s, n, D::get(L.l_n, j)));
+      D::put(L.l_radiance, j, vselect(s, le, D::get(L.l_radiance, j)));
+      L.l_area[j] = s ? area : L.l_area[j];
+      L.l_pmf[j] = s ? pmf : L.l_pmf[j];
+      L.l_two_sided[j] = s ? two_sided : L.l_two_sided[j];
+    }
+  }
+  RF_IVDEP
+  for (int j = 0; j < SurfaceLanes::N; ++j) {
+    L.light_ok[j] = 1;
+    L.u[kUPoint][0][j] = plain[j] != 0 ? ux[j] : L.u[kUPoint][0][j];
+  }
+}
+
 RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
@@ -542,6 +574,15 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           diffuse_lanes_sphere_angles(dl);
           diffuse_lanes_sphere_points(dl);
           diffuse_lanes_nee<true>(dl);
+        } else if (ctx.lights.pick_in_lanes()) {  // picked in lane space, all slots together
+          alignas(64) float ux[SurfaceLanes::N];
+          alignas(64) uint32_t entry[SurfaceLanes::N];
+          alignas(64) int plain[SurfaceLanes::N] = {};
+          for (int i = 0; i < SurfaceLanes::N; ++i) ux[i] = u[kUPoint][0][i];
+          ctx.lights.pick_entries(ux, entry);
+          for (int j = 0; j < dl.m; ++j) plain[dl.lane[j]] = 1;
+          lanes_picked_lights(dl, ctx.lights.pick_table(), entry, ux, plain);
+          diffuse_lanes_nee<false>(dl);
         } else {
           // The pick in the plain lanes' order (LightSet::pick_triangles), back into their slots.
           float u_select[SurfaceLanes::N], ux[SurfaceLanes::N];
