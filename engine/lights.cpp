@@ -338,18 +338,7 @@ void pick_in_group_lanes(const double* __restrict cdf, int count, float* __restr
 }  // namespace
 
 void LightSet::pick_triangles(const float* u_select, float* ux, int n, uint32_t* light) const {
-  if (!pick_in_lanes_) {
-    for (int j = 0; j < n; ++j) {
-      light[j] = uint32_t(select(u_select[j], ux[j]));  // kNoLight is kNoPick
-    }
-    return;
-  }
-  // All kPickLanes lanes (no remainder loop); those past n compute from copies of lane 0.
-  float x[kPickLanes];
-  uint32_t k[kPickLanes];
-  for (int j = 0; j < kPickLanes; ++j) x[j] = ux[j < n ? j : 0];
-  pick_in_group_lanes(within_cdf_.data() + groups_[0].first, int(groups_[0].count), x, k);
-  for (int j = 0; j < n; ++j) ux[j] = x[j], light[j] = groups_[0].first + k[j];
+  for (int j = 0; j < n; ++j) light[j] = uint32_t(select(u_select[j], ux[j]));  // kNoLight: kNoPick
 }
 
 void LightSet::pick_entries(float* ux, uint32_t* entry) const {

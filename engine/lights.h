@@ -238,16 +238,16 @@ class LightSet {
   // The light that u_select and u_point.x pick, with u_point.x rescaled (select()); false when
   // nothing can be picked. Only when triangles_by_power().
   bool pick_triangle(float u_select, float& ux, TriangleLight& light) const;
-  // pick_triangle() for lanes j < n <= kPickLanes at once: light[j] the picked light's index
-  // (kNoPick when nothing can be picked) and ux[j] rescaled, the numbers of pick_triangle bit for
-  // bit; triangle_light(light[j]) is then its light. The lights of one emissive mesh of up to 16
-  // triangles (the Cornell box's) are picked in a vectorised loop, others one lane at a time.
+  // pick_triangle() for lanes j < n, one after another: light[j] the picked light's index
+  // (kNoPick when nothing can be picked) and ux[j] rescaled; triangle_light(light[j]) is then its
+  // light.
   static constexpr int kPickLanes = 16;
   static constexpr uint32_t kNoPick = ~0u;
   void pick_triangles(const float* u_select, float* ux, int n, uint32_t* light) const;
-  // pick_triangles' vectorised case (one emissive mesh of 2 to kPickLanes triangles, none of zero
-  // probability) for kPickLanes lanes in place: ux[j] rescaled and entry[j] the picked light's
-  // entry in pick_table(), light first + entry[j]. Only when pick_in_lanes().
+  // When the lights are one emissive mesh of 2 to kPickLanes triangles, none of zero probability
+  // (pick_in_lanes(), the Cornell box's light), pick_triangle() for kPickLanes lanes at once in a
+  // vectorised loop, in place: ux[j] rescaled and entry[j] the picked light's entry in
+  // pick_table(), the light first + entry[j], bit for bit pick_triangle's numbers.
   bool pick_in_lanes() const { return pick_in_lanes_; }
   void pick_entries(float* ux, uint32_t* entry) const;
   // Those lights as lane arrays, entry k < count holding triangle_light(first + k)'s numbers, so
@@ -353,7 +353,7 @@ class LightSet {
   LightBvh bvh_;
   float bvh_share_ = 0;
   bool triangles_by_power_ = false;
-  // pick_triangles' vectorised case: one group of 2 to 16 lights, none of zero probability.
+  // pick_entries' case: one group of 2 to 16 lights, none of zero probability.
   bool pick_in_lanes_ = false;
   PickTable pick_table_{};
   std::vector<uint32_t> infinite_;

@@ -432,7 +432,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   // lane draws them (Sampler::get_lanes): all of them, read or not, where one lane alone skips
   // the unread ones; a skip and a draw consume the same dimension, so the values are the same.
   static_assert(K <= Sampler::kMaxLanes);
-  static_assert(SurfaceLanes::N <= LightSet::kPickLanes);
+  static_assert(SurfaceLanes::N == LightSet::kPickLanes);  // pick_entries fills all its lanes
   const bool lockstep_draws = K > 1 && samplers[0].kind() != Sampler::Kind::Independent;
   int shading[K], generic[K];
   // Plain diffuse and rough-conductor vertices are shaded together (SurfaceLanes); their light
@@ -584,7 +584,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           lanes_picked_lights(dl, ctx.lights.pick_table(), entry, ux, plain);
           diffuse_lanes_nee<false>(dl);
         } else {
-          // The pick in the plain lanes' order (LightSet::pick_triangles), back into their slots.
+          // Picked lane by lane as select() picks (LightSet::pick_triangles), back into the slots.
           float u_select[SurfaceLanes::N], ux[SurfaceLanes::N];
           uint32_t picked[SurfaceLanes::N];
           for (int j = 0; j < dl.m; ++j)
