@@ -151,9 +151,10 @@ class Accel {
     }
   };
   // Closest hits of the active lanes i < n: hits.found[i], and lane i's hit in slot i when found.
-  // coherent: the rays are near one another (a pixel's camera rays), so Embree keeps them in
-  // packet traversal down to two active rays where it would trace them one by one below its
-  // incoherent threshold (RTC_INTERSECT_CONTEXT_FLAG_COHERENT; docs/performance.md).
+  // coherent: the rays are near one another (a pixel's camera rays), so Embree traverses the
+  // whole packet together (RTC_INTERSECT_CONTEXT_FLAG_COHERENT: its frustum traversal on a
+  // triangle BVH) where an incoherent packet goes ray by ray at a node with 14 or fewer active
+  // (docs/performance.md).
   void intersect_packet(RayPacket& packet, int n, PacketHits& hits, bool coherent = false) const;
   // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i] 1 or 0, i < n.
   void occluded_packet(RayPacket& packet, int n, int* blocked) const;
