@@ -122,6 +122,23 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
                    std::all_of(pmf_.begin() + groups_[0].first,
                                pmf_.begin() + groups_[0].first + groups_[0].count,
                                [](float p) { return p > 0; });
+  const bool spheres =
+      !uses_bvh() && !groups_.empty() && groups_.size() <= size_t(kPickLanes) &&
+      std::all_of(groups_.begin(), groups_.end(), [&](const Group& g) {
+        return g.count == 1 && g.first < tris_.size() && tris_[g.first].sphere && pmf_[g.first] > 0;
+      });
+  for (size_t g = 0; spheres && g < groups_.size(); ++g) {
+    SphereTable& st = sphere_table_;
+    const uint32_t i = groups_[g].first;
+    const Tri& t = tris_[i];
+    const Emission& e = *scene_.meshes[t.mesh].emission;
+    const int k = int(g);
+    st.put(st.center, k, t.sphere->center), st.put(st.pole, k, t.sphere->axis[1]);
+    st.put(st.radiance, k, e.radiance);
+    st.radius[k] = t.sphere->radius, st.pmf[k] = pmf_[i], st.two_sided[k] = e.two_sided;
+    st.light[k] = i;
+    st.count = int(g) + 1;
+  }
   if (pick_in_lanes_) {
     PickTable& pt = pick_table_;
     pt.count = int(groups_[0].count);
@@ -345,6 +362,14 @@ void LightSet::pick_entries(float* ux, uint32_t* entry) const {
   pick_in_group_lanes(within_cdf_.data() + groups_[0].first, int(groups_[0].count), ux, entry);
 }
 
+// select()'s first step over the groups (one sphere each): the entries of cdf_[1..] that x does
+// not pass; its rescaled copy of u_select is not used (select() does not rescale u_select).
+void LightSet::pick_sphere_entries(const float* u_select, uint32_t* entry) const {
+  alignas(64) float u[kPickLanes];
+  for (int j = 0; j < kPickLanes; ++j) u[j] = u_select[j];
+  pick_in_group_lanes(cdf_.data() + 1, sphere_table_.count, u, entry);
+}
+
 // A uniformly distributed point of an area light's primitive (density 1 / area), its error bound
 // and its unit normal (outward for spheres).
 // Inlined into its callers (a call per light sample, with three vectors returned through memory).
@@ -358,21 +383,6 @@ void LightSet::pick_entries(float* ux, uint32_t* entry) const {
   n = tri.n;
 }
 
-namespace {
-// The cone of directions a sphere subtends from p (pbrt-v4 Sphere::Sample): cos of its half-angle
-// and 1 - cos, with the small-angle form of 1 - cos where it would cancel. False when p is inside
-// (or on) the sphere.
-bool sphere_cone(const SphereShape& s, Vec3 p, float& sin2_max, float& cos_max,
-                 float& one_minus_cos_max) {
-  float dc2 = length_sq(s.center - p), r2 = sqr(s.radius);
-  if (!(dc2 > r2 * 1.0001f)) return false;
-  sin2_max = r2 / dc2;
-  cos_max = safe_sqrt(1.0f - sin2_max);
-  one_minus_cos_max = sin2_max < 0.00068523f ? 0.5f * sin2_max : 1.0f - cos_max;
-  return one_minus_cos_max > 0;
-}
-}  // namespace
-
 bool LightSet::sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const {
   return i < tris_.size() && sphere_cone_of(tris_[i], p, c);
 }
@@ -380,7 +390,7 @@ bool LightSet::sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const {
 bool LightSet::sphere_cone_of(const Tri& tri, Vec3 p, SphereCone& c) const {
   if (!tri.sphere) return false;
   const SphereShape& s = *tri.sphere;
-  if (!sphere_cone(s, p, c.sin2_max, c.cos_max, c.one_minus_cos_max)) return false;
+  if (!sphere_cone(s.center, s.radius, p, c.sin2_max, c.cos_max, c.one_minus_cos_max)) return false;
   c.center = s.center, c.pole = s.axis[1], c.radius = s.radius;
   c.emission = *scene_.meshes[tri.mesh].emission;
   return true;
@@ -438,7 +448,8 @@ float LightSet::pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Ve
   float pmf = selection_pmf_at(first + prim, p, n);
   if (!(pmf > 0)) return 0.0f;
   float sin2_max, cos_max, one_minus_cos_max;
-  if (tri.sphere && sphere_cone(*tri.sphere, p, sin2_max, cos_max, one_minus_cos_max))
+  if (tri.sphere &&
+      sphere_cone(tri.sphere->center, tri.sphere->radius, p, sin2_max, cos_max, one_minus_cos_max))
     return pmf / (2 * kPi * one_minus_cos_max);
   Vec3 d = on_light - p;
   float dist2 = length_sq(d);

@@ -123,6 +123,18 @@ class LightSet {
   };
   // Whether light i is a sphere that p sees from outside, with its cone.
   bool sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const;
+  // The cone a sphere (centre, radius) subtends from p: sin^2 and cos of its half-angle and 1 -
+  // cos, with the small-angle form of 1 - cos where it would cancel; true when p is outside.
+  // Without branches (the path tracer's lanes compute it in a loop); sphere_cone_of's numbers.
+  [[gnu::always_inline]] static bool sphere_cone(Vec3 center, float radius, Vec3 p, float& sin2_max,
+                                                 float& cos_max, float& one_minus_cos_max) {
+    const float dc2 = length_sq(center - p), r2 = sqr(radius);
+    const bool outside = dc2 > r2 * 1.0001f;
+    sin2_max = r2 / dc2;
+    cos_max = safe_sqrt(1.0f - sin2_max);
+    one_minus_cos_max = sin2_max < 0.00068523f ? 0.5f * sin2_max : 1.0f - cos_max;
+    return outside & (one_minus_cos_max > 0);
+  }
   // sample_selected() of such a light is sphere_cone_angles(), sphere_cone_point() and
   // with_selection(): steps without branches or library calls, so that the path tracer's lanes
   // run them in loops that vectorise and get the bits sample() gets. The angles: between the axis
@@ -259,6 +271,22 @@ class LightSet {
     int count = 0;  // entries: the mesh's triangles
   };
   const PickTable& pick_table() const { return pick_table_; }
+  // When every light is an exact sphere, picked by power among 1 to kPickLanes of them, none of
+  // zero probability (spheres_in_lanes(), veach-mis's four), pick() for kPickLanes lanes at once:
+  // entry[j] the entry of sphere_table() that u_select[j] picks, bit for bit pick()'s light
+  // (sphere_table().light[entry[j]]; u_point is not rescaled: each sphere is a group of its own).
+  bool spheres_in_lanes() const { return sphere_table_.count > 0; }
+  void pick_sphere_entries(const float* u_select, uint32_t* entry) const;
+  // Those spheres as lane arrays (LaneSlots' m and lane are unused): entry k's light, selection
+  // probability, and sphere_cone_of's centre, pole, radius and emission.
+  struct SphereTable : LaneSlots<kPickLanes> {
+    V3 center, pole, radiance;
+    float radius[kPickLanes], pmf[kPickLanes];
+    int two_sided[kPickLanes];
+    uint32_t light[kPickLanes];
+    int count = 0;  // entries: the spheres; 0 when !spheres_in_lanes()
+  };
+  const SphereTable& sphere_table() const { return sphere_table_; }
   TriangleLight triangle_light(uint32_t i) const {
     const Tri& t = tris_[i];
     return {t.p0, t.p1, t.p2, t.n, t.area, pmf_[i], *scene_.meshes[t.mesh].emission};
@@ -356,6 +384,7 @@ class LightSet {
   // pick_entries' case: one group of 2 to 16 lights, none of zero probability.
   bool pick_in_lanes_ = false;
   PickTable pick_table_{};
+  SphereTable sphere_table_{};
   std::vector<uint32_t> infinite_;
   std::vector<double> infinite_cdf_;  // infinite_.size() + 1 entries, within the infinite lights
 };

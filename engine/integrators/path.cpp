@@ -300,6 +300,37 @@ RF_SIMD_CLONES void lanes_picked_lights(SurfaceLanes& L, const LightSet::PickTab
   }
 }
 
+// The spheres LightSet::pick_sphere_entries picked (entry[j] of the sphere table) into every
+// slot's sphere arrays, with the cone each subtends from the slot's hit point (LightSet::
+// sphere_cone): l_sphere where the point is outside its sphere (sampled in the loops); a point
+// inside is sampled one by one afterwards. Selects over the table's few entries, as
+// lanes_picked_lights.
+RF_SIMD_CLONES void lanes_sphere_lights(SurfaceLanes& L, const LightSet::SphereTable& T,
+                                        const uint32_t* entry) {
+  using D = SurfaceLanes;
+  for (int e = 0; e < T.count; ++e) {
+    const Vec3 c = T.get(T.center, e), pole = T.get(T.pole, e), le = T.get(T.radiance, e);
+    const float radius = T.radius[e], pmf = T.pmf[e];
+    const int two_sided = T.two_sided[e];
+    RF_IVDEP
+    for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
+      const bool s = e == 0 || entry[j] == uint32_t(e);
+      D::put(L.s_center, j, vselect(s, c, D::get(L.s_center, j)));
+      D::put(L.s_pole, j, vselect(s, pole, D::get(L.s_pole, j)));
+      D::put(L.l_radiance, j, vselect(s, le, D::get(L.l_radiance, j)));
+      L.s_radius[j] = s ? radius : L.s_radius[j];
+      L.l_pmf[j] = s ? pmf : L.l_pmf[j];
+      L.l_two_sided[j] = s ? two_sided : L.l_two_sided[j];
+    }
+  }
+  RF_IVDEP
+  for (int j = 0; j < SurfaceLanes::N; ++j) {
+    L.l_sphere[j] = LightSet::sphere_cone(D::get(L.s_center, j), L.s_radius[j], D::get(L.hit.p, j),
+                                          L.s_sin2_max[j], L.s_cos_max[j], L.s_omc[j]);
+    L.l_delta[j] = 0;
+  }
+}
+
 RF_SIMD_CLONES void diffuse_lanes_continue(SurfaceLanes& L) {
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
@@ -440,6 +471,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   // (and spheres' cones sampled together). Everything is in lane space: lane i's hit, numbers and
   // results in slot i of dl's arrays, where the packet query and the draws wrote them.
   const bool surface_lanes = K > 1, given_light = !ctx.lights.triangles_by_power();
+  // All lights spheres by power: their pick and cones in lane space too (lanes_sphere_lights).
+  const bool spheres_in_lanes = surface_lanes && ctx.lights.spheres_in_lanes();
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
   thread_local SurfaceLanes dl{};
   Accel::PacketHits& hits = dl.hit;
@@ -535,7 +568,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         // nothing reads its sampler after that, so the extra draw changes no value.
         u[kURoulette][0][i] = sampler.get_1d_if(roulette);
       }
-      if (given_light) {  // as light_sample_mis_unshadowed() takes it (receiver_normal())
+      if (given_light && !spheres_in_lanes) {  // as light_sample_mis_unshadowed() takes it
         const Vec3 p = D::get(hits.p, i);
         const Vec3 receiver = dot(wo, ng) >= 0 ? ng : -ng;
         size_t light;
@@ -571,6 +604,29 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       if (dl.m > 0) {
         counters.lane_vertices += uint64_t(dl.m);
         if (given_light) {
+          if (spheres_in_lanes) {
+            alignas(64) uint32_t entry[SurfaceLanes::N];
+            ctx.lights.pick_sphere_entries(u[kULight][0], entry);
+            lanes_sphere_lights(dl, ctx.lights.sphere_table(), entry);
+            // A point inside its sphere: the light sampled one by one (sample_selected).
+            for (int j = 0; j < dl.m; ++j) {
+              const int i = dl.lane[j];
+              if (dl.l_sphere[i]) continue;
+              const LightSet::SphereTable& st = ctx.lights.sphere_table();
+              const Vec2 u_point{u[kUPoint][0][i], u[kUPoint][1][i]};
+              LightSample ls;
+              const bool ok = ctx.lights.sample_selected(st.light[entry[i]], st.pmf[entry[i]],
+                                                         D::get(hits.p, i), u_point, ls);
+              dl.g_ok[i] = ok;
+              D::put(dl.g_wi, i, ls.wi), D::put(dl.g_radiance, i, ls.radiance);
+              dl.g_pdf[i] = ls.pdf_solid_angle, dl.l_delta[i] = ls.is_delta;
+              if (ok) {
+                const Ray r = light_shadow_ray(ctx, hits.hit(i), ls);
+                D::put(dl.g_shadow_o, i, r.o), D::put(dl.g_shadow_d, i, r.d);
+                dl.g_shadow_tmax[i] = r.tmax;
+              }
+            }
+          }
           diffuse_lanes_sphere_angles(dl);
           diffuse_lanes_sphere_points(dl);
           diffuse_lanes_nee<true>(dl);
