@@ -318,7 +318,8 @@ bool LightSet::pick_triangle(float u_select, float& ux, TriangleLight& light) co
 }
 
 namespace {
-// select()'s second step for kPickLanes lanes in one group of 2 <= count <= kPickLanes entries
+// select()'s second step for kPickLanes lanes in one group of 1 <= count <= kPickLanes entries
+// (or its first step over groups, pick_sphere_entries)
 // of cumulative probability cdf[0..count) (last 1), none of zero probability (equal entries, from
 // probabilities that vanish in the sum, are met as select() meets them): k[j] the entry (upper
 // bound of x = ux[j], clamped to the last) and ux[j] rescaled to it. The same operations as

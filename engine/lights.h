@@ -126,6 +126,7 @@ class LightSet {
   // The cone a sphere (centre, radius) subtends from p: sin^2 and cos of its half-angle and 1 -
   // cos, with the small-angle form of 1 - cos where it would cancel; true when p is outside.
   // Without branches (the path tracer's lanes compute it in a loop); sphere_cone_of's numbers.
+  // The three numbers are written on false too, meaningless then (every caller drops them).
   [[gnu::always_inline]] static bool sphere_cone(Vec3 center, float radius, Vec3 p, float& sin2_max,
                                                  float& cos_max, float& one_minus_cos_max) {
     const float dc2 = length_sq(center - p), r2 = sqr(radius);
@@ -272,7 +273,7 @@ class LightSet {
   };
   const PickTable& pick_table() const { return pick_table_; }
   // When every light is an exact sphere, picked by power among 1 to kPickLanes of them, none of
-  // zero probability (spheres_in_lanes(), veach-mis's four), pick() for kPickLanes lanes at once:
+  // zero probability (spheres_in_lanes(), veach-mis's three), pick() for kPickLanes lanes at once:
   // entry[j] the entry of sphere_table() that u_select[j] picks, bit for bit pick()'s light
   // (sphere_table().light[entry[j]]; u_point is not rescaled: each sphere is a group of its own).
   bool spheres_in_lanes() const { return sphere_table_.count > 0; }

@@ -317,15 +317,19 @@ TEST(IntegratorDeterminism, PassesAreReproducibleAndTileIndependent) {
 TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
   const std::string root = test::source_dir() + "/scenes/";
   // "+point": the scene with a point light added (a delta light among area lights).
-  for (std::string file : {"cornell-box/scene.json", "cornell-box/scene_v3.xml",
-                           "veach-mis/scene.xml", "materials/scene.json", "many-lights/scene.json",
-                           "cornell-box/scene.json+point", "veach-mis/scene.xml+point",
-                           "cornell-box/scene.json+sphere", "veach-mis/scene.xml+sphere"}) {
+  for (std::string file :
+       {"cornell-box/scene.json", "cornell-box/scene_v3.xml", "veach-mis/scene.xml",
+        "materials/scene.json", "many-lights/scene.json", "cornell-box/scene.json+point",
+        "veach-mis/scene.xml+point", "cornell-box/scene.json+sphere", "veach-mis/scene.xml+sphere",
+        "veach-mis/scene.xml+one"}) {
     SCOPED_TRACE(file);
     const bool add_point = file.size() > 6 && file.substr(file.size() - 6) == "+point";
     const bool add_sphere = file.size() > 7 && file.substr(file.size() - 7) == "+sphere";
+    // "+one": veach-mis with only its first sphere light (one selection group).
+    const bool one_light = file.size() > 4 && file.substr(file.size() - 4) == "+one";
     if (add_point) file.resize(file.size() - 6);
     if (add_sphere) file.resize(file.size() - 7);
+    if (one_light) file.resize(file.size() - 4);
     SceneOverrides ov;
     ov.width = 24, ov.height = 16, ov.spp = 16, ov.passes = 1;
     for (const char* sampler : {"sobol-sequence", "sobol", "independent"}) {
@@ -346,10 +350,20 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
         ball.emission = Emission{RGB(0.002f), true};
         s.meshes.push_back(ball);
       }
+      if (one_light) {
+        bool first = true;
+        for (Mesh& m : s.meshes)
+          if (m.emission && m.sphere) {
+            if (!first) m.emission.reset();
+            first = false;
+          }
+      }
       Renderer r(s);
       const RenderContext& ctx = r.context();
+      if (one_light) EXPECT_EQ(ctx.lights.sphere_table().count, 1);
       // Only spheres, by power: picked and their cones computed in the lanes (veach-mis; with the
-      // dim sphere around it, the points inside that one sampled one by one after the lanes).
+      // dim sphere around it, the points inside that one sampled one by one after the lanes;
+      // with one sphere light, one selection group).
       EXPECT_EQ(ctx.lights.spheres_in_lanes(), file == "veach-mis/scene.xml" && !add_point);
       const TaskKey task{0, Rect{0, 0, 24, 16}, 0};
       TraceCounters packet_rays, single_rays;
@@ -385,9 +399,10 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
       // by scaling that sample's selection probability by 1.0001, 1,275 to 1,330 of 1,800 lanes
       // differ). veach-mis's spheres are picked in the lanes too (LightSet::spheres_in_lanes):
       // broken by scaling the sphere table's selection probability by 1.0001 (1,531 to 1,604 of
-      // 1,800 lanes differ), and, with the dim sphere around veach-mis, the one-by-one sample of a
-      // point inside its sphere by scaling its probability likewise (1,025 to 1,062 lanes
-      // differ). Not covered: spot and directional lights (no scene here has them).
+      // 1,800 lanes differ, with three, four and one sphere lights), and, with the dim sphere
+      // around veach-mis, the one-by-one sample of a point inside its sphere by scaling its
+      // probability likewise (1,025 to 1,062 lanes differ). Not covered: spot and directional
+      // lights (no scene here has them).
       EXPECT_GT(packet_rays.lane_vertices, 0u);
       EXPECT_EQ(single_rays.lane_vertices, 0u);
       // Rough conductors with constant parameters are shaded in the lanes too (conductor_lanes):

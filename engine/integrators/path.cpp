@@ -489,7 +489,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     counters.rays += uint64_t(live);
     // The camera rays of one pixel as a coherent packet (x1.03-1.04 on the Cornell box and
     // veach-mis); the shadow rays of the first vertices towards one light gained on the Cornell
-    // box and lost on veach-mis's four lights, the later rays lost (docs/performance.md).
+    // box and lost on veach-mis's three lights, the later rays lost (docs/performance.md).
     intersect(ctx.accel, rays, n, hits, depth == 0);
     const bool roulette = depth + 1 >= settings.rr_min_depth;
     if (lockstep_draws && depth < settings.max_depth) {
