@@ -50,7 +50,7 @@ bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightS
 
 bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf,
                                  Vec3 wo, float u_light, Vec2 u_point, RGB& contribution,
-                                 Ray& shadow) {
+                                 Ray& shadow, bool mis) {
   contribution = RGB(0.0f);
   LightSample ls;
   if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls)) return false;
@@ -58,7 +58,7 @@ bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit
   RGB f = bsdf.eval_pdf(wo, ls.wi, bsdf_pdf);
   if (is_black(f)) return false;
   shadow = light_shadow_ray(ctx, hit, ls);
-  float w = ls.is_delta ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
+  float w = ls.is_delta || !mis ? 1.0f : power_heuristic(ls.pdf_solid_angle, bsdf_pdf);
   float cos_i = std::fabs(dot(ls.wi, bsdf.shading_normal()));
   contribution = f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
   return true;

@@ -97,10 +97,12 @@ RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf
                      float u_light, Vec2 u_point, TraceCounters& counters);
 // light_sample_mis without its shadow test, for callers that cast shadow rays in packets: the
 // contribution if unoccluded and the shadow ray that decides it. False (contribution 0, no ray to
-// cast) when no light was sampled or the BSDF is black towards it.
+// cast) when no light was sampled or the BSDF is black towards it. With mis false the sample
+// takes the full weight (1): for a vertex whose BSDF sample is not traced on, so that light
+// sampling is its only strategy.
 bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf,
                                  Vec3 wo, float u_light, Vec2 u_point, RGB& contribution,
-                                 Ray& shadow);
+                                 Ray& shadow, bool mis = true);
 // A camera path with throughput beta left the scene in direction dir: adds the environment's
 // radiance to `radiance`, weighted by the power heuristic against light sampling when the last
 // scattering was not a delta one (prev_bsdf_pdf: that BSDF sample's solid-angle density).

@@ -112,7 +112,9 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // 6: Embree's medium-quality BVH (a ray through a shared edge may take the other triangle).
 // 7: the concentric disk's cosine and sine by polynomials (sin_cos_quarter_pi), not libm.
 // 8: the sphere cone's and the visible-normal sample's phi by polynomials (cos_sin_turn).
-constexpr int kEstimatorVersion = 8;
+// 9: the path tracer's diffuse vertices at the last depth take their light sample at full weight
+// and trace no BSDF ray (path.cpp).
+constexpr int kEstimatorVersion = 9;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
