@@ -444,17 +444,28 @@ bool plain_rough_conductor(const Material& m) {
 // the one it would get traced alone: bit-identical with K = 1 (tests/integrators_test.cpp).
 // Every vertex consumes the same dimensions whether or not it reads them (skipped ones cost
 // nothing), so a material change does not reshuffle the random numbers of later bounces.
+// A path's state between two depths.
+struct PathLane {
+  RGB beta{1.0f};
+  float eta_scale = 1, prev_bsdf_pdf = 0;
+  float cone_width = 0;       // ray-cone width at the current hit, for texture filtering
+  bool prev_delta = true;     // the camera ray counts as "specular": emission taken unweighted
+  Vec3 prev_p, prev_n{0.0f};  // the last vertex and its receiver normal (light selection)
+};
+// A lane handed from a packet to the one-lane loop (trace_paths): its state, radiance so far, the
+// ray it casts next and that ray's depth.
+struct PathResume {
+  PathLane lane;
+  RGB sum;
+  Ray ray;
+  int depth;
+};
+
 template <int K, class Packet>
 void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samplers, int n,
-                 RGB* radiance, TraceCounters& counters) {
+                 RGB* radiance, TraceCounters& counters, const PathResume* resume = nullptr) {
   const IntegratorSettings& settings = ctx.scene.render.integrator;
-  struct Lane {
-    RGB beta{1.0f};
-    float eta_scale = 1, prev_bsdf_pdf = 0;
-    float cone_width = 0;       // ray-cone width at the current hit, for texture filtering
-    bool prev_delta = true;     // the camera ray counts as "specular": emission taken unweighted
-    Vec3 prev_p, prev_n{0.0f};  // the last vertex and its receiver normal (light selection)
-  };
+  using Lane = PathLane;
   Lane lanes[K];
   Packet rays, shadow;
   // In lane space, for the loop that adds the NEE terms: each lane's radiance, its pending NEE
@@ -483,11 +494,37 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   int live = n;
   using S = LaneSlots<K>;
   for (int i = 0; i < K; ++i) S::put(sum, i, RGB(0.0f));
-  for (int i = 0; i < n; ++i) {
-    rays.set(i, camera_rays[i]);
-    lanes[i].prev_p = camera_rays[i].o;
+  int first_depth = 0;
+  if constexpr (K == 1) {
+    if (resume) {
+      lanes[0] = resume->lane;
+      S::put(sum, 0, resume->sum);
+      rays.set(0, resume->ray);
+      first_depth = resume->depth;
+    }
   }
-  for (int depth = 0; live > 0; ++depth) {
+  if (!resume)
+    for (int i = 0; i < n; ++i) {
+      rays.set(i, camera_rays[i]);
+      lanes[i].prev_p = camera_rays[i].o;
+    }
+  for (int depth = first_depth; live > 0; ++depth) {
+    // One live lane left after the camera rays: the one-lane loop takes it over, with Embree's
+    // single-ray queries and the one-vertex code (a packet step with one lane costs about what
+    // sixteen slots of loops and a 16-wide query cost, ~1,400 cycles on the Cornell box against
+    // ~750 alone). The lane's numbers and terms are those it gets traced alone from its camera
+    // ray (the packet test), so its radiance keeps its bits.
+    if constexpr (K > 1) {
+      if (live == 1 && depth > 0) {
+        int i = 0;
+        while (!rays.active(i)) ++i;
+        const PathResume r{lanes[i], S::get(sum, i), rays.ray(i), depth};
+        RGB alone;
+        trace_paths<1, SingleRay>(ctx, nullptr, samplers + i, 1, &alone, counters, &r);
+        S::put(sum, i, alone);
+        break;
+      }
+    }
     counters.rays += uint64_t(live);
     // The camera rays of one pixel as a coherent packet (x1.03-1.04 on the Cornell box and
     // veach-mis); the shadow rays of the first vertices towards one light gained on the Cornell
