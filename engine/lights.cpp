@@ -215,16 +215,20 @@ void LightSet::build_bvh(const std::string& mode) {
 // The light u_select and u.x pick (see the constructor), with u.x rescaled to [0, 1) within the
 // picked primitive's interval so that (u.x, u.y) stays a stratified 2D sample over the group's
 // surface. ~0 when nothing can be picked.
-size_t LightSet::select(float u_select, float& ux) const {
+size_t LightSet::select(float& ux) const {
   const size_t ng = groups_.size();
   if (ng == 0) return kNoLight;
-  // First cdf entry > u: the group whose interval [cdf_g, cdf_g+1) holds u (one group: it).
+  // First cdf entry > ux: the group whose interval [cdf_g, cdf_g+1) holds ux (one group: it),
+  // and ux rescaled to [0, 1) within it (as the step within the group below, whose lane version
+  // pick_in_group_lanes also does this step for pick_sphere_entries).
   size_t g = 0;
   if (ng > 1) {
-    g = size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(u_select)) -
-               (cdf_.begin() + 1));
+    g = size_t(std::upper_bound(cdf_.begin() + 1, cdf_.end(), double(ux)) - (cdf_.begin() + 1));
     g = std::min(g, ng - 1);
     while (cdf_[g + 1] == cdf_[g] && g > 0) --g;  // a zero-width interval cannot be selected
+    double lo = g > 0 ? cdf_[g] : 0.0, hi = cdf_[g + 1];
+    ux = hi > lo ? float(std::clamp((double(ux) - lo) / (hi - lo), 0.0, 1.0)) : 0.5f;
+    ux = std::min(ux, 0x1.fffffep-1f);
   }
   const Group& gr = groups_[g];
   size_t i = gr.first;
@@ -249,8 +253,8 @@ size_t LightSet::select(float u_select, float& ux) const {
   return pmf_[i] > 0 ? i : kNoLight;
 }
 
-bool LightSet::sample_by_power(Vec3 p, float u_select, Vec2 u_point, LightSample& ls) const {
-  size_t i = select(u_select, u_point.x);
+bool LightSet::sample_by_power(Vec3 p, Vec2 u_point, LightSample& ls) const {
+  size_t i = select(u_point.x);
   if (i == kNoLight) return false;
   return sample_selected(i, pmf_[i], p, u_point, ls);
 }
@@ -264,7 +268,7 @@ bool LightSet::sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample&
 bool LightSet::pick(Vec3 p, Vec3 n, float u_select, Vec2& u_point, size_t& light,
                     float& pmf) const {
   if (!uses_bvh()) {
-    light = select(u_select, u_point.x);
+    light = select(u_point.x);
     pmf = light == kNoLight ? 0.0f : pmf_[light];
     return light != kNoLight;
   }
@@ -310,8 +314,8 @@ bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightS
   return with_selection(ok, pmf, ls);
 }
 
-bool LightSet::pick_triangle(float u_select, float& ux, TriangleLight& light) const {
-  size_t i = select(u_select, ux);
+bool LightSet::pick_triangle(float& ux, TriangleLight& light) const {
+  size_t i = select(ux);
   if (i == kNoLight) return false;
   light = triangle_light(uint32_t(i));
   return true;
@@ -355,20 +359,18 @@ void pick_in_group_lanes(const double* __restrict cdf, int count, float* __restr
 }
 }  // namespace
 
-void LightSet::pick_triangles(const float* u_select, float* ux, int n, uint32_t* light) const {
-  for (int j = 0; j < n; ++j) light[j] = uint32_t(select(u_select[j], ux[j]));  // kNoLight: kNoPick
+void LightSet::pick_triangles(float* ux, int n, uint32_t* light) const {
+  for (int j = 0; j < n; ++j) light[j] = uint32_t(select(ux[j]));  // kNoLight: kNoPick
 }
 
 void LightSet::pick_entries(float* ux, uint32_t* entry) const {
   pick_in_group_lanes(within_cdf_.data() + groups_[0].first, int(groups_[0].count), ux, entry);
 }
 
-// select()'s first step over the groups (one sphere each): the entries of cdf_[1..] that x does
-// not pass; its rescaled copy of u_select is not used (select() does not rescale u_select).
-void LightSet::pick_sphere_entries(const float* u_select, uint32_t* entry) const {
-  alignas(64) float u[kPickLanes];
-  for (int j = 0; j < kPickLanes; ++j) u[j] = u_select[j];
-  pick_in_group_lanes(cdf_.data() + 1, sphere_table_.count, u, entry);
+// select()'s first step over the groups (one sphere each, so no second step): the entries of
+// cdf_[1..] that ux does not pass, and ux rescaled within its group's interval.
+void LightSet::pick_sphere_entries(float* ux, uint32_t* entry) const {
+  pick_in_group_lanes(cdf_.data() + 1, sphere_table_.count, ux, entry);
 }
 
 // A uniformly distributed point of an area light's primitive (density 1 / area), its error bound
@@ -487,9 +489,9 @@ Vec3 sample_uniform_cone(Vec2 u, float cos_max) {
 }
 }  // namespace
 
-bool LightSet::sample_emission(float u_select, Vec2 u_pos, Vec2 u_dir, EmissionSample& es,
+bool LightSet::sample_emission(Vec2 u_pos, Vec2 u_dir, EmissionSample& es,
                                bool infinite_lights) const {
-  size_t i = select(u_select, u_pos.x);
+  size_t i = select(u_pos.x);
   if (i == kNoLight) return false;
   es = EmissionSample{};
   es.light = uint32_t(i);

@@ -88,12 +88,11 @@ TEST(InfiniteLightPaths, EmissionStartsCarryTheFluxOntoAPatch) {
     double sum = 0, sum2 = 0;
     for (int k = 0; k < n; ++k) {
       rng.start_light_path(3, 0, 0, uint64_t(k));
-      float u_select = rng.get_1d();
       Vec2 u_pos = rng.get_2d(), u_dir = rng.get_2d();
       EmissionSample es;
       double v = 0;
       float t;
-      if (lights.sample_emission(u_select, u_pos, u_dir, es, true) && crosses_patch(es, t)) {
+      if (lights.sample_emission(u_pos, u_dir, es, true) && crosses_patch(es, t)) {
         EXPECT_TRUE(es.is_infinite);
         EXPECT_GT(t, 0) << "a start inside the scene's bounding sphere";
         v = es.beta.y / area;

@@ -271,11 +271,10 @@ struct Tracer {
       if (!ctx.accel.visible(qs.hit, cc.p_lens, Vec3(0.0f), cc.wi)) return RGB(0.0f);
       raster = cc.raster;
     } else if (s == 1) {
-      float u_select = sampler.get_1d();
+      sampler.skip_1d();  // the light is picked by u_point.x (LightSet::select)
       Vec2 u_point = sampler.get_2d();
       LightSample ls;
-      if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_select, u_point, ls))
-        return RGB(0.0f);
+      if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_point, ls)) return RGB(0.0f);
       sampled.kind = VertexKind::Light;
       sampled.light = ls.light;
       sampled.infinite = ls.is_infinite;

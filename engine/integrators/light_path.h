@@ -92,9 +92,9 @@ void trace_subpath(const RenderContext& ctx, Sampler& sampler, Ray ray, RGB beta
 // (LightSet::sample_emission); without (BDPT), a pick of one is false.
 inline bool sample_light_path_start(const RenderContext& ctx, Sampler& sampler, EmissionSample& es,
                                     bool infinite_lights) {
-  float u_select = sampler.get_1d();
+  sampler.skip_1d();  // the light is picked by u_pos.x (LightSet::select)
   Vec2 u_pos = sampler.get_2d(), u_dir = sampler.get_2d();
-  return ctx.lights.sample_emission(u_select, u_pos, u_dir, es, infinite_lights);
+  return ctx.lights.sample_emission(u_pos, u_dir, es, infinite_lights);
 }
 
 // The first ray of a light path leaving its emission point.

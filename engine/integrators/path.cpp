@@ -653,7 +653,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         if (given_light) {
           if (spheres_in_lanes) {
             alignas(64) uint32_t entry[SurfaceLanes::N];
-            ctx.lights.pick_sphere_entries(u[kULight][0], entry);
+            ctx.lights.pick_sphere_entries(u[kUPoint][0], entry);  // x rescaled in place
             lanes_sphere_lights(dl, ctx.lights.sphere_table(), entry);
             // A point inside its sphere: the light sampled one by one (sample_selected).
             for (int j = 0; j < dl.m; ++j) {
@@ -688,11 +688,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
           diffuse_lanes_nee<false>(dl);
         } else {
           // Picked lane by lane as select() picks (LightSet::pick_triangles), back into the slots.
-          float u_select[SurfaceLanes::N], ux[SurfaceLanes::N];
+          float ux[SurfaceLanes::N];
           uint32_t picked[SurfaceLanes::N];
-          for (int j = 0; j < dl.m; ++j)
-            u_select[j] = u[kULight][0][dl.lane[j]], ux[j] = u[kUPoint][0][dl.lane[j]];
-          ctx.lights.pick_triangles(u_select, ux, dl.m, picked);
+          for (int j = 0; j < dl.m; ++j) ux[j] = u[kUPoint][0][dl.lane[j]];
+          ctx.lights.pick_triangles(ux, dl.m, picked);
           for (int j = 0; j < dl.m; ++j) {
             const int i = dl.lane[j];
             u[kUPoint][0][i] = ux[j];

@@ -114,7 +114,8 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // 8: the sphere cone's and the visible-normal sample's phi by polynomials (cos_sin_turn).
 // 9: the path tracer's diffuse vertices at the last depth take their light sample at full weight
 // and trace no BSDF ray (path.cpp).
-constexpr int kEstimatorVersion = 9;
+// 10: power selection picks the light's group by u_point.x too, rescaled (LightSet::select).
+constexpr int kEstimatorVersion = 10;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
