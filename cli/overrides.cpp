@@ -83,7 +83,7 @@ void add_override_options(CLI::App& cmd, OverrideArgs& a) {
   cmd.add_option("--res", a.res, "resolution WIDTHxHEIGHT");
   cmd.add_option("--max-depth", a.max_depth, "max scattering events")->check(finite_in(0, 1e6));
   cmd.add_option("--filter", a.filter, "pixel filter (box, triangle, gaussian)");
-  cmd.add_option("--sampler", a.sampler, "sampler (independent, sobol)");
+  cmd.add_option("--sampler", a.sampler, "sampler (independent, sobol, sobol-sequence)");
   cmd.add_option("--light-selection", a.light_selection,
                  "light selection for next-event estimation (auto, power, bvh)");
   cmd.add_option("--noise-target", a.noise_target, "stop when relMSE <= this")
