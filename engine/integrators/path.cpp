@@ -652,8 +652,13 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         counters.lane_vertices += uint64_t(dl.m);
         if (given_light) {
           if (spheres_in_lanes) {
+            alignas(64) float ux[SurfaceLanes::N];
             alignas(64) uint32_t entry[SurfaceLanes::N];
-            ctx.lights.pick_sphere_entries(u[kUPoint][0], entry);  // x rescaled in place
+            for (int i = 0; i < SurfaceLanes::N; ++i) ux[i] = u[kUPoint][0][i];
+            ctx.lights.pick_sphere_entries(ux, entry);  // ux rescaled
+            // Only the plain lanes take the rescaled x: a generic lane's pick (below) rescales
+            // its own, as it does alone.
+            for (int j = 0; j < dl.m; ++j) u[kUPoint][0][dl.lane[j]] = ux[dl.lane[j]];
             lanes_sphere_lights(dl, ctx.lights.sphere_table(), entry);
             // A point inside its sphere: the light sampled one by one (sample_selected).
             for (int j = 0; j < dl.m; ++j) {
