@@ -436,14 +436,6 @@ bool plain_rough_conductor(const Material& m) {
          !TrowbridgeReitz::effectively_smooth(m.roughness.value);
 }
 
-// The path estimator for n <= K camera samples of one pixel, traced in lockstep: at every depth
-// the live lanes' rays are cast together (one packet query), each lane is shaded, then the lanes'
-// shadow rays are cast together. A lane's numbers are drawn in the same order whatever the other
-// lanes do (light sample, BSDF sample, roulette; its shadow test is known only after all three),
-// and its NEE term is added after the test and before its next vertex, so each lane's radiance is
-// the one it would get traced alone: bit-identical with K = 1 (tests/integrators_test.cpp).
-// Every vertex consumes the same dimensions whether or not it reads them (skipped ones cost
-// nothing), so a material change does not reshuffle the random numbers of later bounces.
 // A path's state between two depths.
 struct PathLane {
   RGB beta{1.0f};
@@ -461,6 +453,14 @@ struct PathResume {
   int depth;
 };
 
+// The path estimator for n <= K camera samples of one pixel, traced in lockstep: at every depth
+// the live lanes' rays are cast together (one packet query), each lane is shaded, then the lanes'
+// shadow rays are cast together. A lane's numbers are drawn in the same order whatever the other
+// lanes do (light sample, BSDF sample, roulette; its shadow test is known only after all three),
+// and its NEE term is added after the test and before its next vertex, so each lane's radiance is
+// the one it would get traced alone: bit-identical with K = 1 (tests/integrators_test.cpp).
+// Every vertex consumes the same dimensions whether or not it reads them (skipped ones cost
+// nothing), so a material change does not reshuffle the random numbers of later bounces.
 template <int K, class Packet>
 void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samplers, int n,
                  RGB* radiance, TraceCounters& counters, const PathResume* resume = nullptr) {
