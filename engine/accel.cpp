@@ -149,8 +149,14 @@ float sphere_distance(const SphereShape& s, Vec3 o, Vec3 d, float t_embree) {
 }  // namespace
 
 Accel::Accel(const Scene& scene) : scene_(scene) {
-  device_ = rtcNewDevice(nullptr);
-  if (!device_) throw std::runtime_error("embree: cannot create device");
+  // RAYFARM_EMBREE_CONFIG: Embree's device configuration (e.g. "isa=avx2" to run the kernels of
+  // another CPU kind, as a test does; docs/operations.md), else its defaults.
+  const char* config = std::getenv("RAYFARM_EMBREE_CONFIG");
+  device_ = rtcNewDevice(config);
+  if (!device_)
+    throw std::runtime_error(
+        std::string("embree: cannot create device") +
+        (config ? " with RAYFARM_EMBREE_CONFIG=\"" + std::string(config) + "\"" : std::string()));
   rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
   rtc_scene_ = rtcNewScene(device_);
   // Medium (Embree's default, binned SAH without spatial splits): on the million-triangle benchmark
@@ -226,6 +232,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  packet.quiet_inactive();
   rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
   const RTCHit16& h = packet.rh.hit;
   // The lanes' hits are scattered over the meshes: on a scene larger than the caches, fetch every
@@ -299,6 +306,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
 void Accel::occluded_packet(RayPacket& packet, int n, int* blocked) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
+  packet.quiet_inactive();
   rtcOccluded16(packet.valid, rtc_scene_, &ctx, &packet.rh.ray);
   for (int i = 0; i < n; ++i)  // Embree: -inf on a hit; without a branch (false when inactive)
     blocked[i] = packet.active(i) & (packet.rh.ray.tfar[i] < 0);

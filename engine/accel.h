@@ -119,6 +119,25 @@ class Accel {
     void activate(int i) { valid[i] = -1; }
     void activate_if(int i, bool on) { valid[i] = on ? -1 : 0; }  // activate or clear
     bool active(int i) const { return valid[i] != 0; }
+    // Every inactive lane's ray made an empty segment of finite numbers (origin and direction 0,
+    // tnear 0, tfar -inf), which the queries call before Embree reads the packet. A 16-wide query
+    // on a device without 16-wide kernels (an AVX2 CPU) goes through Embree's ray-stream path,
+    // which ignores the valid mask: it traces every lane with tnear <= tfar and asserts every
+    // traced ray finite, so the NaNs a lane loop leaves in unused slots aborted the process there
+    // (tests/accel_test.cpp, Accel.PacketQueriesOnEmbreesAvx2Kernels).
+    void quiet_inactive() {
+      for (int i = 0; i < kPacket; ++i) {
+        const bool on = valid[i] != 0;
+        rh.ray.org_x[i] = on ? rh.ray.org_x[i] : 0.0f;
+        rh.ray.org_y[i] = on ? rh.ray.org_y[i] : 0.0f;
+        rh.ray.org_z[i] = on ? rh.ray.org_z[i] : 0.0f;
+        rh.ray.dir_x[i] = on ? rh.ray.dir_x[i] : 0.0f;
+        rh.ray.dir_y[i] = on ? rh.ray.dir_y[i] : 0.0f;
+        rh.ray.dir_z[i] = on ? rh.ray.dir_z[i] : 0.0f;
+        rh.ray.tnear[i] = on ? rh.ray.tnear[i] : 0.0f;
+        rh.ray.tfar[i] = on ? rh.ray.tfar[i] : -kInf;
+      }
+    }
     Ray ray(int i) const {
       return {{rh.ray.org_x[i], rh.ray.org_y[i], rh.ray.org_z[i]},
               {rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]},

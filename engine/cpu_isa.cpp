@@ -1,8 +1,11 @@
 #include "engine/build_info.h"
 
+#include <cstdlib>
+
 namespace rf {
 
-std::string cpu_isa() {
+namespace {
+std::string cpu_kind() {
 #if defined(__x86_64__)
   __builtin_cpu_init();
   if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl"))
@@ -16,6 +19,14 @@ std::string cpu_isa() {
 #else
   return "unknown";
 #endif
+}
+}  // namespace
+
+// With RAYFARM_EMBREE_CONFIG set (engine/accel.cpp), Embree may run another CPU kind's kernels,
+// whose hits can differ in the last bits: the configuration is part of the kind.
+std::string cpu_isa() {
+  const char* embree = std::getenv("RAYFARM_EMBREE_CONFIG");
+  return embree && *embree ? cpu_kind() + " embree:" + embree : cpu_kind();
 }
 
 }  // namespace rf
