@@ -436,6 +436,17 @@ bool plain_rough_conductor(const Material& m) {
          !TrowbridgeReitz::effectively_smooth(m.roughness.value);
 }
 
+// Whether every material of the scene is shaded in the lanes (plain_diffuse or
+// plain_rough_conductor), so that no vertex is shaded one by one. A call per packet, so at most
+// kMaterials of them are looked at: a scene with more is taken to have others.
+bool only_plain_materials(const Scene& scene) {
+  constexpr size_t kMaterials = 64;
+  if (scene.materials.size() > kMaterials) return false;
+  for (const Material& m : scene.materials)
+    if (!plain_diffuse(m) && !plain_rough_conductor(m)) return false;
+  return true;
+}
+
 // A path's state between two depths.
 struct PathLane {
   RGB beta{1.0f};
@@ -478,6 +489,13 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   static_assert(K <= Sampler::kMaxLanes);
   static_assert(SurfaceLanes::N == LightSet::kPickLanes);  // pick_entries fills all its lanes
   const bool lockstep_draws = K > 1 && samplers[0].kind() != Sampler::Kind::Independent;
+  // The numbers nothing reads are skipped, in the lockstep draws too (a skip consumes the dimension
+  // a draw would, so no later number changes): the light choice is read only by the light BVH
+  // (selection by power takes the point sample's x), the lobe choice only by the vertices shaded
+  // one by one, which a scene of plain materials never has. Drawing them was ~2 of a vertex's 7
+  // dimensions of Owen-scrambled Sobol arithmetic (docs/performance.md).
+  const uint8_t light_choice = ctx.lights.uses_bvh();
+  const uint8_t lobe_choice = !(K > 1 && only_plain_materials(ctx.scene));
   int shading[K], generic[K];
   // Plain diffuse and rough-conductor vertices are shaded together (SurfaceLanes); their light
   // samples too when all lights are triangles by power, else their lights are picked one by one
@@ -542,7 +560,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       int m = 0;
       for (int i = 0; i < n; ++i)  // without a branch (found: traced and hit)
         shading[m] = i, m += hits.found[i] != 0;
-      const uint8_t draws[kVertexDraws] = {1, 2, 1, 2, uint8_t(roulette ? 1 : 0)};
+      const uint8_t draws[kVertexDraws] = {light_choice, 2, lobe_choice, 2, uint8_t(roulette)};
       Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
     }
     bool any_shadow = false, conductors = false;
@@ -605,7 +623,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       // Without lockstep draws, this lane's numbers in the one-lane order (the lobe choice is not
       // read); with them, u[kURoulette] is read only where roulette runs.
       if (!lockstep_draws) {
-        u[kULight][0][i] = sampler.get_1d();
+        u[kULight][0][i] = sampler.get_1d_if(light_choice);
         const Vec2 u_point = sampler.get_2d();
         sampler.skip_1d();
         const Vec2 u_dir = sampler.get_2d();
