@@ -206,7 +206,9 @@ TEST(Accel, PacketQueriesOnEmbreesAvx2Kernels) {
       SurfaceHit single;
       const bool found = accel.intersect(ray[i], single);
       ASSERT_EQ(out.found[i] != 0, found) << "packet " << packet << " lane " << i;
-      if (found) EXPECT_NEAR(out.t[i], single.t, 1e-5f * single.t);
+      if (found) {
+        EXPECT_NEAR(out.t[i], single.t, 1e-5f * single.t);
+      }
       const bool occluded = accel.occluded(ray[i].o, ray[i].d, tmax[i]);
       EXPECT_EQ(blocked[i] != 0, occluded) << "packet " << packet << " lane " << i;
       (found ? hits : misses) += 1;

@@ -4,6 +4,16 @@
 
 namespace rf {
 
+LaneKind lane_kind(const Material& m) {
+  const bool constant =
+      m.reflectance.texture < 0 && m.specular.texture < 0 && m.roughness.texture < 0;
+  if (constant && m.type == MaterialType::Diffuse) return LaneKind::Diffuse;
+  if (constant && m.type == MaterialType::RoughConductor &&
+      !TrowbridgeReitz::effectively_smooth(m.roughness.value))
+    return LaneKind::RoughConductor;
+  return LaneKind::OneByOne;
+}
+
 // The footprint is a ray-cone estimate: the cone's width at the hit, converted to uv units by the
 // triangle's uv-to-world area ratio.
 BsdfParams material_params_at(const RenderContext& ctx, const SurfaceHit& hit, float cone_width) {

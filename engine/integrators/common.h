@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include "engine/accel.h"
 #include "engine/bsdf.h"
@@ -56,6 +57,12 @@ class PassCache {
   mutable std::map<uint64_t, std::shared_ptr<Entry>> entries_;
 };
 
+// How the path tracer's packets shade the vertices of a material (engine/integrators/path.cpp):
+// in the vectorised lanes, as a constant Lambertian lobe or as a constant rough conductor (not
+// smooth enough to be a mirror), else one by one.
+enum class LaneKind : uint8_t { OneByOne, Diffuse, RoughConductor };
+LaneKind lane_kind(const Material& m);
+
 struct RenderContext {
   const Scene& scene;
   const Accel& accel;
@@ -64,6 +71,15 @@ struct RenderContext {
   const PerspectiveCamera& camera;
   const PassCache& pass_cache;
   float pixel_spread = 0;  // angle one pixel subtends at the camera (for texture footprints)
+  // lane_kind of each of the scene's materials, and whether none is OneByOne (set_lane_kinds).
+  std::vector<LaneKind> lane_kinds;
+  bool all_in_lanes = false;
+  void set_lane_kinds() {
+    lane_kinds.clear();
+    for (const Material& m : scene.materials) lane_kinds.push_back(lane_kind(m));
+    all_in_lanes = true;
+    for (LaneKind k : lane_kinds) all_in_lanes &= k != LaneKind::OneByOne;
+  }
 };
 
 // Per-thread counters an integrator updates; summed into the task's buffer.

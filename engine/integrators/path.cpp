@@ -106,7 +106,7 @@ struct SurfaceLanes : LaneSlots<Accel::kPacket> {
     float bsdf_pdf[N];
     int continues[N], survives[N];
   } cont;
-  // Rough-conductor vertices (plain_rough_conductor) share the arrays above: the vertex, the
+  // Rough-conductor vertices (LaneKind::RoughConductor) share the arrays above: the vertex, the
   // light sample (the NEE loop keeps it in ls_*: direction, radiance, pdf, usable, delta) and the
   // shadow ray. Their lobe (alpha, masking, Fresnel) and their results (c_*), taken over the
   // diffuse loops' ones lane by lane.
@@ -423,30 +423,6 @@ RF_SIMD_CLONES void lanes_to_packets(const SurfaceLanes& L, RTCRayHit16& next, R
   }
 }
 
-// Whether a material is diffuse with constant parameters (SurfaceLanes).
-bool plain_diffuse(const Material& m) {
-  return m.type == MaterialType::Diffuse && m.reflectance.texture < 0 && m.specular.texture < 0 &&
-         m.roughness.texture < 0;
-}
-// Whether a material is a rough conductor (not smooth enough to be a mirror) with constant
-// parameters (SurfaceLanes::conductor).
-bool plain_rough_conductor(const Material& m) {
-  return m.type == MaterialType::RoughConductor && m.reflectance.texture < 0 &&
-         m.specular.texture < 0 && m.roughness.texture < 0 &&
-         !TrowbridgeReitz::effectively_smooth(m.roughness.value);
-}
-
-// Whether every material of the scene is shaded in the lanes (plain_diffuse or
-// plain_rough_conductor), so that no vertex is shaded one by one. A call per packet, so at most
-// kMaterials of them are looked at: a scene with more is taken to have others.
-bool only_plain_materials(const Scene& scene) {
-  constexpr size_t kMaterials = 64;
-  if (scene.materials.size() > kMaterials) return false;
-  for (const Material& m : scene.materials)
-    if (!plain_diffuse(m) && !plain_rough_conductor(m)) return false;
-  return true;
-}
-
 // A path's state between two depths.
 struct PathLane {
   RGB beta{1.0f};
@@ -492,10 +468,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   // The numbers nothing reads are skipped, in the lockstep draws too (a skip consumes the dimension
   // a draw would, so no later number changes): the light choice is read only by the light BVH
   // (selection by power takes the point sample's x), the lobe choice only by the vertices shaded
-  // one by one, which a scene of plain materials never has. Drawing them was ~2 of a vertex's 7
-  // dimensions of Owen-scrambled Sobol arithmetic (docs/performance.md).
+  // one by one, which a scene whose materials all have a lane kind never has. Drawing them was ~2
+  // of a vertex's 7 dimensions of Owen-scrambled Sobol arithmetic (docs/performance.md).
   const uint8_t light_choice = ctx.lights.uses_bvh();
-  const uint8_t lobe_choice = !(K > 1 && only_plain_materials(ctx.scene));
+  const uint8_t lobe_choice = !(K > 1 && ctx.all_in_lanes);
   int shading[K], generic[K];
   // Plain diffuse and rough-conductor vertices are shaded together (SurfaceLanes); their light
   // samples too when all lights are triangles by power, else their lights are picked one by one
@@ -600,9 +576,10 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
         continue;
       }
       const Material& material = ctx.scene.materials[mesh.material];
-      const bool rough_conductor = surface_lanes && plain_rough_conductor(material);
+      const LaneKind kind = ctx.lane_kinds[mesh.material];
+      const bool rough_conductor = surface_lanes && kind == LaneKind::RoughConductor;
       D::put(dl.wo, i, wo);  // (lanes_to_packets overwrites the ray packet below)
-      if (!(surface_lanes && (plain_diffuse(material) || rough_conductor))) {
+      if (!(surface_lanes && kind != LaneKind::OneByOne)) {
         generic[generics++] = i;
         continue;
       }
