@@ -158,6 +158,7 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
         std::string("embree: cannot create device") +
         (config ? " with RAYFARM_EMBREE_CONFIG=\"" + std::string(config) + "\"" : std::string()));
   rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
+  quiet_packets_ = !rtcGetDeviceProperty(device_, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED);
   rtc_scene_ = rtcNewScene(device_);
   // Medium (Embree's default, binned SAH without spatial splits): on the million-triangle benchmark
   // scene it builds in 0.6 s less than high quality (1.35 s against 1.95 s for a whole 1-spp
@@ -232,7 +233,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  packet.quiet_inactive();
+  if (quiet_packets_) packet.quiet_inactive();
   rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
   const RTCHit16& h = packet.rh.hit;
   // The lanes' hits are scattered over the meshes: on a scene larger than the caches, fetch every
@@ -306,7 +307,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
 void Accel::occluded_packet(RayPacket& packet, int n, int* blocked) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
-  packet.quiet_inactive();
+  if (quiet_packets_) packet.quiet_inactive();
   rtcOccluded16(packet.valid, rtc_scene_, &ctx, &packet.rh.ray);
   for (int i = 0; i < n; ++i)  // Embree: -inf on a hit; without a branch (false when inactive)
     blocked[i] = packet.active(i) & (packet.rh.ray.tfar[i] < 0);
