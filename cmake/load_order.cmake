@@ -3,23 +3,28 @@
 # tries the libraries of the global scope in order (the executable's NEEDED entries, then theirs,
 # breadth first), and libraries such as OpenVDB and Xerces bind most of their own symbols through
 # it from deep in that order. Naming the libraries that the most bindings resolve to first on the
-# link line puts them first in the scope: ~0.13 s instead of ~0.2 s for `rayfarm --help`
-# (docs/performance.md). Only libraries that the named imported targets load anyway are named
-# (found by ldd), so the process loads no library it did not load before; the list is
-# bench/load_order.py's ranking on Debian 12, and a library not found is skipped. Which copy of a
-# vague-linkage symbol (an inline function, a template instance) a library binds to can change
-# with the order, as it does with any change of dependencies; they are one definition.
+# link line puts them first in the scope: ~0.14 s instead of ~0.2 s for `rayfarm --help`
+# (docs/performance.md). The list is bench/load_order.py's ranking on Debian 12 without the
+# libraries the binary links anyway (the C and C++ runtimes, gRPC, OpenSSL, OpenImageIO,
+# protobuf, SQLite), which keep their places: it holds only libraries that the named imported
+# targets load through their own dependencies (found by ldd; one not found is skipped), so the
+# process loads no library it did not load before, and the runtime packages that bring
+# OpenImageIO bring them (deploy/check.sh reads the list the build writes, load_order.txt). Which
+# copy of a vague-linkage symbol (an inline function, a template instance) a library binds to can
+# change with the order, as it does with any change of dependencies; they are one definition.
 set(RAYFARM_FRONT_LOADED
-    libopenvdb.so.10.0 libc.so.6 libxerces-c-3.2.so libgdal.so.32 libstdc++.so.6
-    libgeos.so.3.11.1 libgrpc.so.29 libcrypto.so.3 libproj.so.25 libOpenImageIO.so.2.4
-    libdcmdata.so.17 libprotobuf.so.32 libpoppler.so.126 libgdcmMSFF.so.3.0 libkmldom.so.1
-    libsqlite3.so.0 libopencv_core.so.406 libnetcdf.so.19 libglib-2.0.so.0 libOpenEXR-3_1.so.30
-    liblapack.so.3 libOpenColorIO.so.2.1 libhdf5_serial.so.103 liblog4cplus-2.0.so.3)
+    libopenvdb.so.10.0 libxerces-c-3.2.so libgdal.so.32 libgeos.so.3.11.1 libproj.so.25
+    libdcmdata.so.17 libpoppler.so.126 libgdcmMSFF.so.3.0 libkmldom.so.1 libopencv_core.so.406
+    libnetcdf.so.19 libglib-2.0.so.0 libOpenEXR-3_1.so.30 libOpenColorIO.so.2.1
+    libhdf5_serial.so.103 liblog4cplus-2.0.so.3 libspatialite.so.7 libgeos_c.so.1
+    librttopo.so.1 libnss3.so libdfalt.so.0 libnettle.so.8 libmbedcrypto.so.7 libgio-2.0.so.0)
 
 # rayfarm_load_order(TARGET IMPORTED_TARGET...): TARGET's link line starts with the libraries of
-# RAYFARM_FRONT_LOADED that the imported targets' libraries load (ldd), in that order. Nothing
-# with sanitizers (their runtime must load first) or without ldd.
+# RAYFARM_FRONT_LOADED that the imported targets' libraries load (ldd), in that order, and
+# ${CMAKE_BINARY_DIR}/load_order.txt names them (empty when none). Nothing with sanitizers (their
+# runtime must load first) or without ldd.
 function(rayfarm_load_order target)
+  file(WRITE "${CMAKE_BINARY_DIR}/load_order.txt" "")
   find_program(RAYFARM_LDD ldd)
   if(RAYFARM_SANITIZE OR NOT RAYFARM_LDD OR NOT CMAKE_SYSTEM_NAME STREQUAL "Linux")
     return()
@@ -46,8 +51,9 @@ function(rayfarm_load_order target)
   foreach(name IN LISTS RAYFARM_FRONT_LOADED)
     string(REPLACE "." "\\." pattern "${name}")
     string(REPLACE "+" "\\+" pattern "${pattern}")
-    if(loaded MATCHES "[\t /]${pattern} => ([^ \n]+)")
+    if(loaded MATCHES "[\t /]${pattern} => (/[^ \n]+)")  # not "=> not found"
       list(APPEND paths "${CMAKE_MATCH_1}")
+      file(APPEND "${CMAKE_BINARY_DIR}/load_order.txt" "${name}\n")
     endif()
   endforeach()
   if(paths)

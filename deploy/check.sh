@@ -5,8 +5,9 @@
 #   - yamllint on every YAML file of deploy/ (deploy/.yamllint);
 #   - deploy/compose.yaml validates with Debian's docker-compose (v1): `config -q`;
 #   - deploy/Dockerfile passes hadolint, and its runtime stage installs exactly the Debian
-#     packages of the built binary's NEEDED libraries (beside the base image's libc and libstdc++),
-#     so a missing runtime library is caught here, not in a pod;
+#     packages of the built binary's NEEDED libraries (beside the base image's libc and libstdc++,
+#     and those named only for the loader's lookup order, which other NEEDED libraries load), so
+#     a missing runtime library is caught here, not in a pod;
 #   - the Kustomize overlays render with the kubectl on PATH and with Debian 12's kubectl 1.20
 #     (kustomize v2.0.3; unpacked, never installed over another kubectl), and what they render,
 #     with deploy/k8s/extras/, validates (deploy/k8s/check_manifests.py: kubernetes-validate
@@ -53,8 +54,24 @@ docker-compose -f "$ROOT/deploy/compose.yaml" config -q || fail "deploy/compose.
 hadolint "$ROOT/deploy/Dockerfile" || fail "deploy/Dockerfile: hadolint findings above"
 binary="$BUILD/bin/rayfarm"
 [ -x "$binary" ] || "$ROOT/rayfarm" --help >/dev/null  # builds it
+# The libraries the link names first only for the loader's lookup order (cmake/load_order.cmake
+# writes them to load_order.txt) come with another NEEDED library's package: each must be in the
+# ldd closure of a NEEDED library not named there.
+mapfile -t order_only < <(cat "$BUILD/load_order.txt" 2>/dev/null || true)
+is_order_only() { printf '%s\n' "${order_only[@]}" | grep -qxF "$1"; }
+others=()
+while read -r lib; do
+  is_order_only "$lib" && continue
+  others+=("$(ldd "$binary" | awk -v l="$lib" '$1 == l { print $3 }')")
+done < <(readelf -d "$binary" | sed -n 's/.*(NEEDED).*\[\(.*\)\]/\1/p')
+closure=$(for o in "${others[@]}"; do [ -n "$o" ] && ldd "$o"; done | awk '{ print $1 }' | sort -u)
 needed=()
 while read -r lib; do
+  if is_order_only "$lib"; then
+    grep -qxF "$lib" <<<"$closure" ||
+      fail "$lib is named for the load order but no other NEEDED library of $binary loads it"
+    continue
+  fi
   path=$(ldd "$binary" | awk -v l="$lib" '$1 == l { print $3 }')
   [ -n "$path" ] || { fail "$lib (NEEDED by $binary) is not found by ldd"; continue; }
   real=$(realpath "$path")

@@ -6,8 +6,10 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
+#include <string>
 
 namespace rf {
 
@@ -149,10 +151,20 @@ float sphere_distance(const SphereShape& s, Vec3 o, Vec3 d, float t_embree) {
 }  // namespace
 
 Accel::Accel(const Scene& scene) : scene_(scene) {
-  // RAYFARM_EMBREE_CONFIG: Embree's device configuration (e.g. "isa=avx2" to run the kernels of
-  // another CPU kind, as a test does; docs/operations.md), else its defaults.
+  // RAYFARM_EMBREE_CONFIG=isa=NAME: Embree's kernels for another CPU kind (e.g. isa=avx2 on an
+  // AVX-512 machine, as Accel.PacketQueriesOnEmbreesAvx2Kernels does; docs/design.md). Only that
+  // key: Embree's other settings (its thread count among them) are not ours to hand out.
   const char* config = std::getenv("RAYFARM_EMBREE_CONFIG");
-  device_ = rtcNewDevice(config);
+  if (config && *config) {
+    const std::string c = config;
+    const bool isa =
+        c.size() > 4 && c.compare(0, 4, "isa=") == 0 &&
+        c.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789.", 4) == std::string::npos;
+    if (!isa)
+      throw std::runtime_error("RAYFARM_EMBREE_CONFIG=\"" + c +
+                               "\": only isa=NAME is accepted (e.g. isa=avx2)");
+  }
+  device_ = rtcNewDevice(config && *config ? config : nullptr);
   if (!device_)
     throw std::runtime_error(
         std::string("embree: cannot create device") +

@@ -93,7 +93,8 @@ class Accel {
 
   // The same queries for up to kPacket rays at once, through Embree's 16-wide packet queries.
   // A RayPacket holds the rays in Embree's layout between queries: set(i, ray) makes lane i
-  // active with that ray, clear(i) inactive; the queries trace the active lanes only and give,
+  // active with that ray, clear(i) inactive; the queries trace the active lanes only (on a device
+  // without 16-wide kernels after quieting the others, RayPacket::quiet_inactive) and give,
   // lane by lane, what intersect / occluded give for the same ray: Embree's triangle kernels agree
   // bit for bit, and a sphere hit takes rayfarm's own distance (hit_from_embree), since Embree's
   // packet and single-ray sphere kernels round t differently. A grazing occlusion test could
@@ -178,6 +179,9 @@ class Accel {
   void intersect_packet(RayPacket& packet, int n, PacketHits& hits, bool coherent = false) const;
   // Whether something blocks each active lane's segment (t in (0, tmax)): blocked[i] 1 or 0, i < n.
   void occluded_packet(RayPacket& packet, int n, int* blocked) const;
+  // Whether the packet queries quiet the inactive lanes (RayPacket::quiet_inactive): the device
+  // has no 16-wide kernels.
+  bool quiets_inactive_lanes() const { return quiet_packets_; }
 
   // Spawns a ray from a hit towards w.
   Ray spawn(const SurfaceHit& from, Vec3 w) const {

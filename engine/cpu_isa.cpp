@@ -23,10 +23,14 @@ std::string cpu_kind() {
 }  // namespace
 
 // With RAYFARM_EMBREE_CONFIG set (engine/accel.cpp), Embree may run another CPU kind's kernels,
-// whose hits can differ in the last bits: the configuration is part of the kind.
+// whose hits can differ in the last bits: the configuration is part of the kind (commas, which
+// separate the kinds of a merged buffer, written as semicolons).
 std::string cpu_isa() {
   const char* embree = std::getenv("RAYFARM_EMBREE_CONFIG");
-  return embree && *embree ? cpu_kind() + " embree:" + embree : cpu_kind();
+  if (!embree || !*embree) return cpu_kind();
+  std::string config = embree;
+  for (char& c : config) c = c == ',' ? ';' : c;
+  return cpu_kind() + " embree:" + config;
 }
 
 }  // namespace rf

@@ -14,16 +14,8 @@ Renderer::Renderer(const Scene& scene)
                                                   scene.film.height)) {
   check_renderable(scene);
   float t = std::tan(0.5f * scene.camera.fov_deg * kPi / 180.0f);
-  context_.reset(new RenderContext{scene_,
-                                   *accel_,
-                                   *lights_,
-                                   *textures_,
-                                   *camera_,
-                                   pass_cache_,
-                                   2 * t / float(std::min(scene.film.width, scene.film.height)),
-                                   {},
-                                   false});
-  context_->set_lane_kinds();
+  context_.reset(new RenderContext(scene_, *accel_, *lights_, *textures_, *camera_, pass_cache_,
+                                   2 * t / float(std::min(scene.film.width, scene.film.height))));
 }
 
 bool Renderer::has_lights() const { return !lights_->empty(); }

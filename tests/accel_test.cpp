@@ -96,17 +96,22 @@ void check_sphere_hits(const Accel& accel, const SphereShape& s, uint64_t seed) 
 
 // The benchmark's packet query (Accel::cast8) answers like the single-ray one, for full and
 // partial packets (lanes past n unused), hits and misses: a triangle quad and an exact sphere.
+// The square [-1, 1]^2 at z = -3, material 0: what rays from the origin towards -z hit.
+Mesh quad_facing_origin() {
+  Mesh quad;
+  quad.material = 0;
+  quad.positions = {{-1, -1, -3}, {1, -1, -3}, {1, 1, -3}, {-1, 1, -3}};
+  quad.indices = {0, 1, 2, 0, 2, 3};
+  return quad;
+}
+
 // Hit or miss must agree exactly; t within 1e-5 relative, because Embree's packet kernel for
 // spheres rounds differently from its single-ray one (about 1 in 8 sphere hits differ in the
 // last bits here; triangles agree bit for bit), while a wrong lane or component is off by far
 // more. The counts of exact differences are printed, not asserted: they depend on Embree's ISA.
 TEST(Accel, PacketCastsEqualSingleCasts) {
   Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
-  Mesh quad;
-  quad.material = 0;
-  for (Vec3 p : {Vec3(-1, -1, -3), Vec3(1, -1, -3), Vec3(1, 1, -3), Vec3(-1, 1, -3)})
-    quad.positions.push_back(p);
-  quad.indices = {0, 1, 2, 0, 2, 3};
+  const Mesh quad = quad_facing_origin();
   Mesh sphere;
   sphere.sphere = test_sphere({0.5f, 0.2f, -2.0f}, 0.4f);
   Scene s = test::make_scene({m}, {quad, sphere}, {0, 0, 0}, {0, 0, -1}, 4, 4, "packets");
@@ -165,15 +170,13 @@ TEST(Accel, PacketQueriesOnEmbreesAvx2Kernels) {
   EXPECT_NE(cpu_isa().find("embree:isa=avx2"), std::string::npos) << cpu_isa();
 
   Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
-  Mesh quad;
-  quad.material = 0;
-  for (Vec3 p : {Vec3(-1, -1, -3), Vec3(1, -1, -3), Vec3(1, 1, -3), Vec3(-1, 1, -3)})
-    quad.positions.push_back(p);
-  quad.indices = {0, 1, 2, 0, 2, 3};
+  const Mesh quad = quad_facing_origin();
   Scene s = test::make_scene({m}, {quad}, {0, 0, 0}, {0, 0, -1}, 4, 4, "avx2");
   Accel accel(s);
+  ASSERT_TRUE(accel.quiets_inactive_lanes()) << "Embree kept 16-wide kernels with isa=avx2";
   IndependentSampler smp;
   const float nan = std::numeric_limits<float>::quiet_NaN();
+  constexpr unsigned kUntouched = 12345;
   int hits = 0, misses = 0, blocked_lanes = 0;
   for (int packet = 0; packet < 500; ++packet) {
     Accel::RayPacket rays, shadow;
@@ -187,6 +190,7 @@ TEST(Accel, PacketQueriesOnEmbreesAvx2Kernels) {
       tmax[i] = 2.0f + 2.0f * smp.get_1d();  // the quad is 3 to 3.5 away
       shadow.set(i, Ray{ray[i].o, ray[i].d, tmax[i]});
       if ((i + packet) % 3 == 0) {  // inactive, with what a lane loop may leave there
+        rays.rh.hit.geomID[i] = kUntouched;  // and a hit no query may write
         for (Accel::RayPacket* p : {&rays, &shadow}) {
           p->rh.ray.org_x[i] = p->rh.ray.dir_y[i] = nan;  // tfar left: Embree traces tnear <= tfar
           p->clear(i);
@@ -198,9 +202,8 @@ TEST(Accel, PacketQueriesOnEmbreesAvx2Kernels) {
     int blocked[Accel::kPacket];
     accel.occluded_packet(shadow, Accel::kPacket, blocked);
     for (int i = 0; i < Accel::kPacket; ++i) {
-      if (!rays.active(i)) {
-        EXPECT_FALSE(out.found[i]);
-        EXPECT_EQ(blocked[i], 0);
+      if (!rays.active(i)) {  // not traced: Embree left its hit as it was
+        EXPECT_EQ(rays.rh.hit.geomID[i], kUntouched) << "packet " << packet << " lane " << i;
         continue;
       }
       SurfaceHit single;
@@ -218,6 +221,32 @@ TEST(Accel, PacketQueriesOnEmbreesAvx2Kernels) {
   EXPECT_GT(hits, 1000);
   EXPECT_GT(misses, 1000);
   EXPECT_GT(blocked_lanes, 400);
+}
+
+// RAYFARM_EMBREE_CONFIG takes isa=NAME only (Embree's other settings, its thread count among them,
+// are not an operator's to change through it): anything else is refused by name.
+TEST(Accel, EmbreeConfigOtherThanIsaIsRefused) {
+  Material m{"m", MaterialType::Diffuse, {RGB(0.5f)}};
+  Mesh quad;
+  quad.material = 0;
+  quad.positions = {{-1, -1, -3}, {1, -1, -3}, {1, 1, -3}};
+  quad.indices = {0, 1, 2};
+  Scene s = test::make_scene({m}, {quad}, {0, 0, 0}, {0, 0, -1}, 4, 4, "config");
+  const char* old = std::getenv("RAYFARM_EMBREE_CONFIG");
+  const std::string saved = old ? old : "";
+  for (const char* bad : {"threads=1", "isa=avx2,threads=1", "verbose=3", "isa="}) {
+    ::setenv("RAYFARM_EMBREE_CONFIG", bad, 1);
+    try {
+      Accel accel(s);
+      ADD_FAILURE() << bad << " was accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("RAYFARM_EMBREE_CONFIG"), std::string::npos) << e.what();
+    }
+  }
+  if (old)
+    ::setenv("RAYFARM_EMBREE_CONFIG", saved.c_str(), 1);
+  else
+    ::unsetenv("RAYFARM_EMBREE_CONFIG");
 }
 
 TEST(AccelSphere, HitsAreAnalyticAndSpawnedRaysAreRobust) {

@@ -64,6 +64,19 @@ enum class LaneKind : uint8_t { OneByOne, Diffuse, RoughConductor };
 LaneKind lane_kind(const Material& m);
 
 struct RenderContext {
+  RenderContext(const Scene& scene_, const Accel& accel_, const LightSet& lights_,
+                const TextureEvaluator& textures_, const PerspectiveCamera& camera_,
+                const PassCache& pass_cache_, float pixel_spread_)
+      : scene(scene_),
+        accel(accel_),
+        lights(lights_),
+        textures(textures_),
+        camera(camera_),
+        pass_cache(pass_cache_),
+        pixel_spread(pixel_spread_) {
+    for (const Material& m : scene.materials) lane_kinds.push_back(lane_kind(m));
+    for (LaneKind k : lane_kinds) all_in_lanes &= k != LaneKind::OneByOne;
+  }
   const Scene& scene;
   const Accel& accel;
   const LightSet& lights;
@@ -71,15 +84,9 @@ struct RenderContext {
   const PerspectiveCamera& camera;
   const PassCache& pass_cache;
   float pixel_spread = 0;  // angle one pixel subtends at the camera (for texture footprints)
-  // lane_kind of each of the scene's materials, and whether none is OneByOne (set_lane_kinds).
+  // lane_kind of each of the scene's materials, and whether none is OneByOne.
   std::vector<LaneKind> lane_kinds;
-  bool all_in_lanes = false;
-  void set_lane_kinds() {
-    lane_kinds.clear();
-    for (const Material& m : scene.materials) lane_kinds.push_back(lane_kind(m));
-    all_in_lanes = true;
-    for (LaneKind k : lane_kinds) all_in_lanes &= k != LaneKind::OneByOne;
-  }
+  bool all_in_lanes = true;
 };
 
 // Per-thread counters an integrator updates; summed into the task's buffer.

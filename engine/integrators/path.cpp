@@ -58,7 +58,8 @@ void occluded(const Accel& accel, SingleRay& p, int, int* blocked) {
 // earlier vertices; their results are never read; likewise a diffuse loop's results on a
 // conductor's slot and the conductor loops' on a diffuse one): with a trip count that is a
 // multiple of every vector width the loops have no scalar remainder.
-// A vertex's draws: light choice, light point, lobe choice, direction, roulette (or its skip).
+// A vertex's draws: light choice, light point, lobe choice, direction, roulette (each a skip where
+// nothing reads it: see trace_paths).
 enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
 
 struct SurfaceLanes : LaneSlots<Accel::kPacket> {
@@ -460,8 +461,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   alignas(64) float sum[3][K], nee_term[3][K] = {};
   alignas(64) int blocked[K] = {};
   // With a Sobol sampler the lanes that shade a vertex draw its numbers together, in the order one
-  // lane draws them (Sampler::get_lanes): all of them, read or not, where one lane alone skips
-  // the unread ones; a skip and a draw consume the same dimension, so the values are the same.
+  // lane draws them (Sampler::get_lanes): all that some vertex of the scene may read, where one
+  // lane alone skips those it does not read; a skip and a draw consume the same dimension, so the
+  // values are the same.
   static_assert(K <= Sampler::kMaxLanes);
   static_assert(SurfaceLanes::N == LightSet::kPickLanes);  // pick_entries fills all its lanes
   const bool lockstep_draws = K > 1 && samplers[0].kind() != Sampler::Kind::Independent;
