@@ -29,6 +29,16 @@ void sobol_2d_lanes(const uint32_t* __restrict r, uint64_t h, float* __restrict 
   }
 }
 
+// sobol_draw_2d_joint likewise (h0: the first draw's hash).
+RF_SIMD_CLONES
+void sobol_joint_lanes(const uint32_t* __restrict r, uint64_t h0, uint64_t h, int k,
+                       float* __restrict a, float* __restrict b) {
+  for (int j = 0; j < kLanes; ++j) {
+    const Vec2 v = sobol_draw_2d_joint(r[j], h0, h, k);
+    a[j] = v.x, b[j] = v.y;
+  }
+}
+
 }  // namespace
 
 void Sampler::start_camera_samples(Sampler* s, int n, uint64_t seed, uint32_t frame, uint32_t pass,
@@ -84,6 +94,9 @@ void Sampler::get_lanes(Sampler* s, const int* lane, int n, const uint8_t* draws
           s[i].skip_1d();
         } else if (draws[k] == 1) {
           out[k][0][i] = s[i].get_1d();
+        } else if (draws[k] >= kJointDraw) {
+          Vec2 v = s[i].get_2d_joint(draws[k] - kJointDraw);
+          out[k][0][i] = v.x, out[k][1][i] = v.y;
         } else {
           Vec2 v = s[i].get_2d();
           out[k][0][i] = v.x, out[k][1][i] = v.y;
@@ -102,7 +115,9 @@ void Sampler::get_lanes(Sampler* s, const int* lane, int n, const uint8_t* draws
       continue;
     }
     const uint64_t h = first.dimension_hash();
-    if (draws[k] == 1)
+    if (draws[k] >= kJointDraw)
+      sobol_joint_lanes(r, first.first_draw_hash(), h, draws[k] - kJointDraw, out[k][0], out[k][1]);
+    else if (draws[k] == 1)
       sobol_1d_lanes(r, h, out[k][0]);
     else
       sobol_2d_lanes(r, h, out[k][0], out[k][1]);

@@ -164,6 +164,46 @@ inline Vec2 sobol_draw_2d(uint32_t index_reversed, uint64_t h) {
           fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
 }
 
+// The index transforms of the joint draws (SobolSampler::get_2d_joint): pair k maps the shuffled
+// index n of the camera sample's first draw to L_k n, a linear map over GF(2) of its low 12 bits
+// whose output bit j is input bit j XOR some input bits above j (row j of kJointRows[k]: the input
+// bits it sums). Such a map is a bijection that sends every aligned block of 2^m indices onto
+// itself, so the pair, (C0 L_k n, C1 L_k n) in Sobol's dimensions 0 and 1, is a (0,m,2)-net over
+// any 2^m samples like every other draw, and with the first draw (C0 n, C1 n) the four coordinates
+// form one digital net: a 4D elementary box of volume 2^(t-m) holds 2^t of the 2^m samples, where
+// independently shuffled draws give no 4D stratification at all. The rows were found by a search
+// over such maps for the smallest t at m = 3..12 (bench/joint_nets.py): t <= 4 for m <= 12 with
+// the first draw, for either pair, and between the two pairs; independently shuffled draws have
+// no such bound. Maps of equal t differ much in a render's error, so these were also chosen by
+// renders (docs/performance.md, "Draws stratified with the pixel").
+constexpr int kJointPairs = 2;
+constexpr int kJointBits = 12;
+inline constexpr uint16_t kJointRows[kJointPairs][kJointBits] = {
+    {0xa27, 0x15a, 0x98c, 0xa58, 0xc30, 0x1e0, 0xc40, 0x080, 0xb00, 0xa00, 0xc00, 0x800},
+    {0x3d7, 0xdda, 0x564, 0xb88, 0xa50, 0x6a0, 0xe40, 0x580, 0x900, 0x200, 0xc00, 0x800}};
+// The same maps by columns: column i is the output bits that input bit i feeds.
+inline constexpr std::array<std::array<uint32_t, kJointBits>, kJointPairs> kJointColumns = [] {
+  std::array<std::array<uint32_t, kJointBits>, kJointPairs> c{};
+  for (int k = 0; k < kJointPairs; ++k)
+    for (int j = 0; j < kJointBits; ++j)
+      for (int i = 0; i < kJointBits; ++i)
+        if ((kJointRows[k][j] >> i) & 1) c[k][i] |= 1u << j;
+  return c;
+}();
+// L_k n (bits 12 and up unchanged); masks only, so it vectorises over lanes.
+inline uint32_t joint_index(uint32_t n, int k) {
+  uint32_t y = n & ~((1u << kJointBits) - 1);
+  for (int i = 0; i < kJointBits; ++i) y ^= kJointColumns[k][i] & (0u - ((n >> i) & 1u));
+  return y;
+}
+// Joint pair k of a sample: its index is the first draw's shuffled index (hash h0), transformed;
+// its coordinates are scrambled with its own slot's seeds (hash h), as sobol_draw_2d's.
+inline Vec2 sobol_draw_2d_joint(uint32_t index_reversed, uint64_t h0, uint64_t h, int k) {
+  const uint32_t index = joint_index(sobol_shuffled_index(index_reversed, h0), k);
+  return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
+          fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
+}
+
 // Padded, shuffled, Owen-scrambled 2D Sobol. Every get_1d/get_2d call is one dimension slot d,
 // and draws from Sobol dimensions 0 (and 1), the (0,2)-sequence, independently of other slots:
 // - the sample index is Owen-scrambled as an integer with a seed hashed from (seed, frame, pass,
@@ -205,6 +245,12 @@ class SobolSampler {
   }
   float get_1d() { return sobol_draw_1d(index_reversed_, dimension_hash()); }
   Vec2 get_2d() { return sobol_draw_2d(index_reversed_, dimension_hash()); }
+  // A 2D draw at the next slot, stratified jointly with the sample's first draw (slot 0, the
+  // camera's filter offset) as joint pair k < kJointPairs (sobol_draw_2d_joint).
+  Vec2 get_2d_joint(int k) {
+    const uint64_t h = dimension_hash();
+    return sobol_draw_2d_joint(index_reversed_, first_draw_hash(), h, k);
+  }
   void skip_1d() { ++dimension_; }
   void skip_2d() { ++dimension_; }
   uint32_t dimension() const { return dimension_; }
@@ -213,6 +259,8 @@ class SobolSampler {
   friend class Sampler;  // its lockstep draws (get_lanes) share dimension_hash() across lanes
   // hash_combine(key_, dimension_++), its key-only terms summed once per sample (the same value).
   uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(dimension_++) + key_term_)); }
+  // dimension_hash() of slot 0.
+  uint64_t first_draw_hash() const { return mix64(key_ ^ key_term_); }
   uint64_t key_ = 0, key_term_ = 0;
   uint32_t index_reversed_ = 0;
   uint32_t dimension_ = 0;
@@ -257,16 +305,27 @@ class Sampler {
   // get_1d / get_2d when `needed`, else the skip and 0.
   float get_1d_if(bool needed) { return needed ? get_1d() : (skip_1d(), 0.0f); }
   Vec2 get_2d_if(bool needed) { return needed ? get_2d() : (skip_2d(), Vec2{0.0f, 0.0f}); }
+  // A 2D draw that the Sobol kinds stratify jointly with the camera sample's filter offset (its
+  // first draw) as joint pair k < kJointPairs (SobolSampler::get_2d_joint); the independent
+  // sampler and light paths draw as get_2d. Same dimensions consumed as get_2d.
+  Vec2 get_2d_joint(int k) {
+    return sobol_active_ ? sobol_.get_2d_joint(k) : independent_.get_2d();
+  }
+  Vec2 get_2d_joint_if(bool needed, int k) {
+    return needed ? get_2d_joint(k) : (skip_2d(), Vec2{0.0f, 0.0f});
+  }
   Kind kind() const { return kind_; }
 
   // Lockstep draws for the samples of one pixel traced together (the path tracer's packets).
-  // draws[k] is 1 (a get_1d), 2 (a get_2d) or 0 (a skip): for each j < n, lane i = lane[j] gets
+  // draws[k] is 1 (a get_1d), 2 (a get_2d), 0 (a skip) or kJointDraw + p (a get_2d_joint(p)): for
+  // each j < n, lane i = lane[j] gets
   // out[k][c][i] = coordinate c of its k-th draw, bit for bit what s[i] would give drawing them
   // one by one, with the same dimensions consumed. Sobol samplers started for one pixel and pass
   // and at one dimension share each dimension's hash, and their per-sample scrambles run in SIMD
   // where the CPU has it; otherwise (the independent kind, or lanes whose keys differ) each lane
   // draws alone. The entries of lanes not named are left unspecified.
   static constexpr int kMaxLanes = 16;
+  static constexpr uint8_t kJointDraw = 3;
   using LaneDraws = float[2][kMaxLanes];
   static void get_lanes(Sampler* s, const int* lane, int n, const uint8_t* draws, int count,
                         LaneDraws* out);

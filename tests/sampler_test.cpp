@@ -409,7 +409,7 @@ TEST(Sampler, SkippedDimensionsLeaveLaterNumbersUnchanged) {
 TEST(Sampler, LockstepDrawsAreEachLanesOwnDraws) {
   const std::vector<std::vector<int>> subsets = {
       {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15}, {1, 3, 4, 9, 15}, {7}};
-  const uint8_t draws[] = {1, 2, 0, 2, 1, 2};
+  const uint8_t draws[] = {1, 2, 0, Sampler::kJointDraw, 1, Sampler::kJointDraw + 1};
   constexpr int kDraws = int(sizeof(draws));
   for (Sampler::Kind kind :
        {Sampler::Kind::Independent, Sampler::Kind::Sobol, Sampler::Kind::SobolSequence})
@@ -435,7 +435,9 @@ TEST(Sampler, LockstepDrawsAreEachLanesOwnDraws) {
                 ASSERT_EQ(s.get_1d(), out[k][0][i]) << "lane " << i << " draw " << k;
                 ++compared;
               } else {
-                Vec2 v = s.get_2d();
+                Vec2 v = draws[k] >= Sampler::kJointDraw
+                             ? s.get_2d_joint(draws[k] - Sampler::kJointDraw)
+                             : s.get_2d();
                 ASSERT_EQ(v.x, out[k][0][i]) << "lane " << i << " draw " << k;
                 ASSERT_EQ(v.y, out[k][1][i]) << "lane " << i << " draw " << k;
                 ++compared;
@@ -538,6 +540,178 @@ TEST(SamplerTest, SobolSequenceEveryPassIsUnbiased) {
     EXPECT_LT(std::fabs(mean - exact), 4 * se) << "slot " << slot;
     EXPECT_GT(se, 0.0);
   }
+}
+
+}  // namespace
+}  // namespace rf
+
+namespace rf {
+namespace {
+
+// The draws of the path tracer's first vertex: the filter offset (slot 0), a 1D draw, joint pair 0
+// (slot 3), a 1D draw, joint pair 1 (slot 5); `joint` false draws slots 3 and 5 padded (get_2d),
+// as every later vertex does.
+struct FirstVertex {
+  Vec2 filter, point, dir;
+};
+FirstVertex first_vertex(Sampler& s, uint64_t seed, uint32_t pass, int px, uint64_t index,
+                         bool joint = true) {
+  s.start_camera_sample(seed, 0, pass, px, 5, index);
+  FirstVertex v;
+  v.filter = s.get_2d();
+  s.get_1d();
+  v.point = joint ? s.get_2d_joint(0) : s.get_2d();
+  s.get_1d();
+  v.dir = joint ? s.get_2d_joint(1) : s.get_2d();
+  return v;
+}
+
+// Whether every 4D elementary box of volume 2^(t - m) holds exactly 2^t of the 2^m points (a
+// (t,m,4)-net in base 2).
+bool is_4d_net(const std::vector<Vec2>& a, const std::vector<Vec2>& b, int m, int t,
+               std::string* why) {
+  const int total = m - t;
+  for (int k0 = 0; k0 <= total; ++k0)
+    for (int k1 = 0; k0 + k1 <= total; ++k1)
+      for (int k2 = 0; k0 + k1 + k2 <= total; ++k2) {
+        const int k3 = total - k0 - k1 - k2;
+        std::vector<int> count(size_t(1) << total, 0);
+        for (size_t i = 0; i < a.size(); ++i) {
+          auto cell = [](float x, int k) { return uint32_t(double(x) * (1u << k)); };
+          size_t c = cell(a[i].x, k0);
+          c = (c << k1) | cell(a[i].y, k1);
+          c = (c << k2) | cell(b[i].x, k2);
+          c = (c << k3) | cell(b[i].y, k3);
+          count[c]++;
+        }
+        for (int c : count)
+          if (c != 1 << t) {
+            *why = "a box of 2^-" + std::to_string(k0) + " x 2^-" + std::to_string(k1) + " x 2^-" +
+                   std::to_string(k2) + " x 2^-" + std::to_string(k3) + " holds " +
+                   std::to_string(c) + " points, not " + std::to_string(1 << t);
+            return false;
+          }
+      }
+  return true;
+}
+
+// The joint pairs (Sampler::get_2d_joint): each is a (0,m,2)-net over the 2^m samples of a pixel
+// like any draw (every power-of-two prefix too), and with the filter offset a (t,m,4)-net, t the
+// design values of the index maps (engine/sampler.h: pair 0 t <= 3 and pair 1 t <= 4 for
+// m <= 8, both <= 4 up to m = 12). The same draws padded (get_2d, independently shuffled) are no
+// 4D net at those t from m = 6 on (below, such t leave boxes only coarse in every axis): the
+// check fails them, which is the property the joint draws add.
+TEST(SamplerTest, JointPairsAreNetsAndStratifiedWithTheFilterOffset) {
+  std::string why;
+  const int t_point[13] = {0, 0, 1, 2, 1, 2, 2, 3, 3, 4, 3, 4, 3};
+  const int t_dir[13] = {0, 0, 1, 2, 3, 2, 2, 3, 4, 4, 4, 4, 4};
+  for (Sampler::Kind kind : {Sampler::Kind::Sobol, Sampler::Kind::SobolSequence})
+    for (int m : {2, 4, 6, 8, 10, 12})
+      for (uint32_t pass : {0u, 3u}) {
+        SCOPED_TRACE(std::string(kind_name(kind)) + " m=" + std::to_string(m) + " pass " +
+                     std::to_string(pass));
+        const uint64_t n = uint64_t(1) << m;
+        Sampler s(kind, n);
+        std::vector<Vec2> filter, point, dir, padded_point, padded_dir;
+        for (uint64_t i = 0; i < n; ++i) {
+          FirstVertex v = first_vertex(s, 9, pass, 17, i);
+          filter.push_back(v.filter), point.push_back(v.point), dir.push_back(v.dir);
+          FirstVertex p = first_vertex(s, 9, pass, 17, i, false);
+          ASSERT_EQ(p.filter.x, v.filter.x);  // the same first draw
+          padded_point.push_back(p.point), padded_dir.push_back(p.dir);
+        }
+        ASSERT_TRUE(is_02_net(point, m, &why)) << why;
+        ASSERT_TRUE(is_02_net(dir, m, &why)) << why;
+        for (int j = 1; j < m; j += 3) {
+          std::vector<Vec2> prefix(point.begin(), point.begin() + (1 << j));
+          ASSERT_TRUE(is_02_net(prefix, j, &why)) << why << " prefix 2^" << j;
+        }
+        ASSERT_TRUE(is_4d_net(filter, point, m, t_point[m], &why)) << why << " (point)";
+        ASSERT_TRUE(is_4d_net(filter, dir, m, t_dir[m], &why)) << why << " (direction)";
+        if (m >= 6) {
+          EXPECT_FALSE(is_4d_net(filter, padded_point, m, t_point[m], &why));
+          EXPECT_FALSE(is_4d_net(filter, padded_dir, m, t_dir[m], &why));
+        }
+      }
+}
+
+// sobol-sequence's passes keep the joint structure: passes 0..3 of 64 samples together are the
+// first 256 samples of the pixel's sequence, a (3,8,4)-net with the filter offset.
+TEST(SamplerTest, SobolSequenceJointPairsSpanPasses) {
+  std::string why;
+  Sampler s(Sampler::Kind::SobolSequence, 64);
+  std::vector<Vec2> filter, point;
+  for (uint32_t pass = 0; pass < 4; ++pass)
+    for (uint64_t i = 0; i < 64; ++i) {
+      FirstVertex v = first_vertex(s, 2, pass, 40, i);
+      filter.push_back(v.filter), point.push_back(v.point);
+    }
+  EXPECT_TRUE(is_4d_net(filter, point, 8, 3, &why)) << why;
+}
+
+// Joint draws are unbiased over scrambles (each coordinate keeps its own Owen scramble): the
+// mean over 256 passes of a 16-sample estimate of SobolIsUnbiasedOverPasses' discontinuous
+// integrand, drawn from either pair, lies within 4 standard errors of the truth.
+TEST(SamplerTest, JointPairsAreUnbiasedOverPasses) {
+  const double exact = 1.0 / 6.0 + 0.245;
+  Sampler s(Sampler::Kind::Sobol);
+  for (int pair : {0, 1}) {
+    double sum = 0, sum_sq = 0;
+    const int passes = 256;
+    for (uint32_t pass = 0; pass < uint32_t(passes); ++pass) {
+      double est = 0;
+      for (int i = 0; i < 16; ++i) {
+        FirstVertex v = first_vertex(s, 5, pass, 8, uint64_t(i));
+        Vec2 u = pair == 0 ? v.point : v.dir;
+        est += double(u.x) * u.y * u.y + (u.x + u.y < 0.7f ? 1.0 : 0.0);
+      }
+      est /= 16;
+      sum += est, sum_sq += est * est;
+    }
+    double mean = sum / passes;
+    double se = std::sqrt((sum_sq / passes - mean * mean) / (passes - 1));
+    EXPECT_LT(std::fabs(mean - exact), 4 * se) << "pair " << pair;
+    EXPECT_GT(se, 0.0);
+  }
+}
+
+// What the joint draws are for: an integrand in which the filter offset and a later draw act
+// together, here a narrow bump of their sum (a highlight whose place moves with the pixel
+// position and the lobe sample). RMS error over 1024 pixels at 256 spp, joint against padded.
+// Measured: padded / joint 2.16. The RMS over 1024 pixels is known to a few per cent, so asserting
+// a ratio above 1.6 fails only if the 4D stratification is lost (then the ratio is 1).
+TEST(SamplerTest, JointPairsIntegrateAShiftedBumpBetterThanPadded) {
+  auto f = [](Vec2 a, Vec2 b) {
+    double x = a.x + b.x - 1.0, y = a.y + b.y - 1.0;
+    return std::exp(-(x * x + y * y) / (2 * 0.1 * 0.1));
+  };
+  // The exact integral: the sum of two uniforms has a triangular density on [0, 2].
+  double exact = 0;
+  {
+    const int n = 4000;
+    double axis = 0;
+    for (int i = 0; i < n; ++i) {
+      double s = (i + 0.5) / n * 2.0, tri = s < 1 ? s : 2 - s;
+      axis += std::exp(-(s - 1) * (s - 1) / (2 * 0.01)) * tri * (2.0 / n);
+    }
+    exact = axis * axis;
+  }
+  double sq[2] = {0, 0};
+  Sampler s(Sampler::Kind::Sobol);
+  for (int px = 0; px < 1024; ++px)
+    for (int joint : {0, 1}) {
+      double est = 0;
+      for (int i = 0; i < 256; ++i) {
+        FirstVertex v = first_vertex(s, 13, 0, px, uint64_t(i), joint != 0);
+        est += f(v.filter, v.point);
+      }
+      est = est / 256 - exact;
+      sq[joint] += est * est;
+    }
+  const double padded = std::sqrt(sq[0] / 1024), joint = std::sqrt(sq[1] / 1024);
+  std::printf("shifted bump, 256 spp: RMS error padded %.3g, joint %.3g, ratio %.2f\n", padded,
+              joint, padded / joint);
+  EXPECT_GT(padded / joint, 1.6);
 }
 
 }  // namespace

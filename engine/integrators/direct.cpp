@@ -39,7 +39,9 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
                                                           : 0;
   for (int k = 0; k < light_rounds; ++k) {
     float u = sampler.get_1d();
-    Vec2 up = sampler.get_2d();
+    // The first round of each strategy is stratified jointly with the filter offset, as the path
+    // tracer's first vertex (Sampler::get_2d_joint).
+    Vec2 up = k == 0 ? sampler.get_2d_joint(0) : sampler.get_2d();
     LightSample ls;
     if (!ctx.lights.sample(hit.p, n_receiver, u, up, ls)) continue;
     if (n_light == 0 && !ls.is_delta) continue;  // "bsdf" strategy: only delta lights here
@@ -59,7 +61,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
   int bsdf_rounds = bsdf.is_delta() ? std::max(1, s.bsdf_samples) : int(n_bsdf);
   for (int k = 0; k < bsdf_rounds; ++k) {
     float uc = sampler.get_1d();
-    Vec2 u = sampler.get_2d();
+    Vec2 u = k == 0 ? sampler.get_2d_joint(1) : sampler.get_2d();
     BsdfSample bs;
     if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) continue;
     RGB weight = bs.f * (std::fabs(dot(bs.wi, ns)) / (bs.pdf_solid_angle * float(bsdf_rounds)));

@@ -115,7 +115,9 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // 9: the path tracer's diffuse vertices at the last depth take their light sample at full weight
 // and trace no BSDF ray (path.cpp).
 // 10: power selection picks the light's group by u_point.x too, rescaled (LightSet::select).
-constexpr int kEstimatorVersion = 10;
+// 11: the Sobol kinds draw the first vertex's light point and direction (path) and the first
+// round of each strategy (direct) jointly with the filter offset (Sampler::get_2d_joint).
+constexpr int kEstimatorVersion = 11;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
