@@ -121,7 +121,8 @@ def main():
     args = ap.parse_args()
     if args.search:
         L, t = search(args.search[0], args.search[1], [SHIPPED[k] for k in args.against])
-        print('t (m = 3..12):', t)
+        print(('t' if not args.against else 't summed over the first draw and the pairs against')
+              + ' (m = 3..12):', t)
         print('rows:', ', '.join('0x%03x' % v for v in L))
         return
     print('m  t(first, pair 0)  t(first, pair 1)  t(pair 0, pair 1)  t(all six)')

@@ -109,14 +109,16 @@ void Sampler::get_lanes(Sampler* s, const int* lane, int n, const uint8_t* draws
   uint32_t r[kLanes] = {};
   for (int j = 0; j < n; ++j) r[lane[j]] = s[lane[j]].sobol_.index_reversed_;
   SobolSampler& first = s[lane[0]].sobol_;
+  const uint64_t h0 = first.first_draw_hash();  // the joint pairs' shuffle
   for (int k = 0; k < count; ++k) {
     if (draws[k] == 0) {
       first.skip_1d();
       continue;
     }
     const uint64_t h = first.dimension_hash();
+    assert(draws[k] < kJointDraw + kJointPairs);
     if (draws[k] >= kJointDraw)
-      sobol_joint_lanes(r, first.first_draw_hash(), h, draws[k] - kJointDraw, out[k][0], out[k][1]);
+      sobol_joint_lanes(r, h0, h, draws[k] - kJointDraw, out[k][0], out[k][1]);
     else if (draws[k] == 1)
       sobol_1d_lanes(r, h, out[k][0]);
     else

@@ -5,7 +5,8 @@
 //
 // - IndependentSampler: hashed uniform numbers.
 // - SobolSampler: padded, shuffled, Owen-scrambled 2D Sobol (pbrt-v4's PaddedSobolSampler with
-//   Burley 2020, "Practical Hash-based Owen Scrambling"). See the class.
+//   Burley 2020, "Practical Hash-based Owen Scrambling"). See the class. Its joint pairs
+//   (get_2d_joint) are the exception to padding: draws stratified with the sample's first one.
 // - Sampler: the tag-and-switch front the integrators use (RenderSettings::sampler). Its
 //   SobolSequence kind ("sobol-sequence") keys the Sobol scrambles without the pass and gives
 //   pass p the sample indices p * spp_per_pass + i: one scrambled sequence per pixel, each pass a
@@ -13,6 +14,7 @@
 #pragma once
 
 #include <array>
+#include <cassert>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -158,24 +160,27 @@ inline float sobol_draw_1d(uint32_t index_reversed, uint64_t h) {
   return fraction_to_float(
       scrambled_sobol(sobol_shuffled_index(index_reversed, h), 0, uint32_t(h >> 32)));
 }
-inline Vec2 sobol_draw_2d(uint32_t index_reversed, uint64_t h) {
-  uint32_t index = sobol_shuffled_index(index_reversed, h);
+// Sobol dimensions 0 and 1 at a (shuffled) index, each scrambled with its own seed from h.
+inline Vec2 sobol_point_2d(uint32_t index, uint64_t h) {
   return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
           fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
+}
+inline Vec2 sobol_draw_2d(uint32_t index_reversed, uint64_t h) {
+  return sobol_point_2d(sobol_shuffled_index(index_reversed, h), h);
 }
 
 // The index transforms of the joint draws (SobolSampler::get_2d_joint): pair k maps the shuffled
 // index n of the camera sample's first draw to L_k n, a linear map over GF(2) of its low 12 bits
 // whose output bit j is input bit j XOR some input bits above j (row j of kJointRows[k]: the input
-// bits it sums). Such a map is a bijection that sends every aligned block of 2^m indices onto
-// itself, so the pair, (C0 L_k n, C1 L_k n) in Sobol's dimensions 0 and 1, is a (0,m,2)-net over
-// any 2^m samples like every other draw, and with the first draw (C0 n, C1 n) the four coordinates
-// form one digital net: a 4D elementary box of volume 2^(t-m) holds 2^t of the 2^m samples, where
-// independently shuffled draws give no 4D stratification at all. The rows were found by a search
-// over such maps for the smallest t at m = 3..12 (bench/joint_nets.py): t <= 4 for m <= 12 with
-// the first draw, for either pair, and between the two pairs; independently shuffled draws have
-// no such bound. Maps of equal t differ much in a render's error, so these were also chosen by
-// renders (docs/performance.md, "Draws stratified with the pixel").
+// bits it sums). Such a map is a bijection that sends every aligned block of 2^m indices onto an
+// aligned block of the same size, so the pair, (C0 L_k n, C1 L_k n) in Sobol's dimensions 0 and 1,
+// is a (0,m,2)-net over any 2^m samples like every other draw, and with the first draw (C0 n, C1 n)
+// the four coordinates form one digital net: a 4D elementary box of volume 2^(t-m) holds 2^t of the
+// 2^m samples, where independently shuffled draws give no 4D stratification at all. The rows were
+// found by a search over such maps for the smallest t at m = 3..12 (bench/joint_nets.py): t <= 4
+// for m <= 12 with the first draw, for either pair, and between the two pairs; independently
+// shuffled draws have no such bound. Maps of equal t differ much in a render's error, so these were
+// checked by renders (docs/performance.md, "Draws stratified with the pixel").
 constexpr int kJointPairs = 2;
 constexpr int kJointBits = 12;
 inline constexpr uint16_t kJointRows[kJointPairs][kJointBits] = {
@@ -199,9 +204,7 @@ inline uint32_t joint_index(uint32_t n, int k) {
 // Joint pair k of a sample: its index is the first draw's shuffled index (hash h0), transformed;
 // its coordinates are scrambled with its own slot's seeds (hash h), as sobol_draw_2d's.
 inline Vec2 sobol_draw_2d_joint(uint32_t index_reversed, uint64_t h0, uint64_t h, int k) {
-  const uint32_t index = joint_index(sobol_shuffled_index(index_reversed, h0), k);
-  return {fraction_to_float(scrambled_sobol(index, 0, uint32_t(h >> 32))),
-          fraction_to_float(scrambled_sobol(index, 1, uint32_t(mix64(h))))};
+  return sobol_point_2d(joint_index(sobol_shuffled_index(index_reversed, h0), k), h);
 }
 
 // Padded, shuffled, Owen-scrambled 2D Sobol. Every get_1d/get_2d call is one dimension slot d,
@@ -248,6 +251,7 @@ class SobolSampler {
   // A 2D draw at the next slot, stratified jointly with the sample's first draw (slot 0, the
   // camera's filter offset) as joint pair k < kJointPairs (sobol_draw_2d_joint).
   Vec2 get_2d_joint(int k) {
+    assert(unsigned(k) < unsigned(kJointPairs));
     const uint64_t h = dimension_hash();
     return sobol_draw_2d_joint(index_reversed_, first_draw_hash(), h, k);
   }
