@@ -175,12 +175,12 @@ inline Vec2 sobol_draw_2d(uint32_t index_reversed, uint64_t h) {
 // bits it sums). Such a map is a bijection that sends every aligned block of 2^m indices onto an
 // aligned block of the same size, so the pair, (C0 L_k n, C1 L_k n) in Sobol's dimensions 0 and 1,
 // is a (0,m,2)-net over any 2^m samples like every other draw, and with the first draw (C0 n, C1 n)
-// the four coordinates form one digital net: a 4D elementary box of volume 2^(t-m) holds 2^t of the
-// 2^m samples, where independently shuffled draws give no 4D stratification at all. The rows were
-// found by a search over such maps for the smallest t at m = 3..12 (bench/joint_nets.py): t <= 4
-// for m <= 12 with the first draw, for either pair, and between the two pairs; independently
-// shuffled draws have no such bound. Maps of equal t differ much in a render's error, so these were
-// checked by renders (docs/performance.md, "Draws stratified with the pixel").
+// the four coordinates form one (scrambled) digital net: a 4D elementary box of volume 2^(t-m)
+// holds 2^t of the 2^m samples, where independently shuffled draws give no 4D stratification at
+// all. The rows were found by a search over such maps for the smallest t at m = 3..12
+// (bench/joint_nets.py): t <= 4 for m <= 12 with the first draw, for either pair, and between the
+// two pairs. Maps of equal t differ much in a render's error, so these were checked by renders
+// (docs/performance.md, "Draws stratified with the pixel").
 constexpr int kJointPairs = 2;
 constexpr int kJointBits = 12;
 inline constexpr uint16_t kJointRows[kJointPairs][kJointBits] = {
