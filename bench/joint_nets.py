@@ -6,7 +6,8 @@ A joint pair draws Sobol dimensions 0 and 1 at L n, where n is the shuffled inde
 sample's first draw and L a linear map over GF(2) of the low 12 index bits, output bit j = input
 bit j XOR input bits above j. With the first draw, (C0 n, C1 n, C0 L n, C1 L n) is a digital net;
 this prints its t-value for 2^m samples, m = 1..12, and searches (hill climbing on L's bits) for
-maps with small t at m = 3..12.
+maps with small t at m = 3..12. Pairs 2 and 3 (the second vertex) are L_0 L_1 and L_1 L_1, which
+stand with pair 1 as pairs 0 and 1 stand with the first draw; the table checks that too.
 
     python3 bench/joint_nets.py                  # t-values of the shipped maps
     python3 bench/joint_nets.py --search 1 300   # a search from seed 1 (the shipped pair 0)
@@ -81,6 +82,15 @@ def compose(rows, L, m):
     return out
 
 
+def compose_maps(A, B, j):
+    """Row j of the map A B (B first): the input bits summed into output bit j."""
+    v = 0
+    for i in range(BITS):
+        if (A[j] >> i) & 1:
+            v ^= B[i]
+    return v
+
+
 def pair(L, m):
     return [compose(sobol_rows(0, m), L, m), compose(sobol_rows(1, m), L, m)]
 
@@ -125,12 +135,16 @@ def main():
               + ' (m = 3..12):', t)
         print('rows:', ', '.join('0x%03x' % v for v in L))
         return
-    print('m  t(first, pair 0)  t(first, pair 1)  t(pair 0, pair 1)  t(all six)')
+    print('m  t(first, pair 0)  t(first, pair 1)  t(pair 0, pair 1)  t(all six)'
+          '  t(pair 1, pair 2)  t(pair 1, pair 3)')
+    L2 = [compose_maps(SHIPPED[0], SHIPPED[1], j) for j in range(BITS)]
+    L3 = [compose_maps(SHIPPED[1], SHIPPED[1], j) for j in range(BITS)]
     for m in range(1, BITS + 1):
         first = [sobol_rows(0, m), sobol_rows(1, m)]
         a, b = pair(SHIPPED[0], m), pair(SHIPPED[1], m)
-        print('%2d %17d %17d %18d %11d' % (m, t_value(first + a, m), t_value(first + b, m),
-                                           t_value(a + b, m), t_value(first + a + b, m)))
+        print('%2d %17d %17d %18d %11d %18d %18d' % (
+            m, t_value(first + a, m), t_value(first + b, m), t_value(a + b, m),
+            t_value(first + a + b, m), t_value(b + pair(L2, m), m), t_value(b + pair(L3, m), m)))
 
 
 if __name__ == '__main__':

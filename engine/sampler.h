@@ -181,18 +181,28 @@ inline Vec2 sobol_draw_2d(uint32_t index_reversed, uint64_t h) {
 // (bench/joint_nets.py): t <= 4 for m <= 12 with the first draw, for either pair, and between the
 // two pairs. Maps of equal t differ much in a render's error, so these were checked by renders
 // (docs/performance.md, "Draws stratified with the pixel").
-constexpr int kJointPairs = 2;
+// Pairs 2 and 3 are L_0 L_1 and L_1 L_1: with pair 1 they stand as pairs 0 and 1 stand with the
+// first draw (the same t-values, since L_1 maps aligned blocks to aligned blocks), so a path's
+// second vertex is stratified with the first vertex's direction as the first is with the pixel.
+constexpr int kJointPairs = 4;
 constexpr int kJointBits = 12;
-inline constexpr uint16_t kJointRows[kJointPairs][kJointBits] = {
+inline constexpr uint16_t kJointRows[2][kJointBits] = {
     {0xa27, 0x15a, 0x98c, 0xa58, 0xc30, 0x1e0, 0xc40, 0x080, 0xb00, 0xa00, 0xc00, 0x800},
     {0x3d7, 0xdda, 0x564, 0xb88, 0xa50, 0x6a0, 0xe40, 0x580, 0x900, 0x200, 0xc00, 0x800}};
-// The same maps by columns: column i is the output bits that input bit i feeds.
+// The maps by columns: column i is the output bits that input bit i feeds.
 inline constexpr std::array<std::array<uint32_t, kJointBits>, kJointPairs> kJointColumns = [] {
   std::array<std::array<uint32_t, kJointBits>, kJointPairs> c{};
-  for (int k = 0; k < kJointPairs; ++k)
+  for (int k = 0; k < 2; ++k)
     for (int j = 0; j < kJointBits; ++j)
       for (int i = 0; i < kJointBits; ++i)
         if ((kJointRows[k][j] >> i) & 1) c[k][i] |= 1u << j;
+  auto apply = [&](int a, uint32_t v) {  // L_a v
+    uint32_t y = 0;
+    for (int j = 0; j < kJointBits; ++j)
+      if ((v >> j) & 1) y ^= c[a][j];
+    return y;
+  };
+  for (int i = 0; i < kJointBits; ++i) c[2][i] = apply(0, c[1][i]), c[3][i] = apply(1, c[1][i]);
   return c;
 }();
 // L_k n (bits 12 and up unchanged); masks only, so it vectorises over lanes.

@@ -410,7 +410,12 @@ TEST(Sampler, SkippedDimensionsLeaveLaterNumbersUnchanged) {
 TEST(Sampler, LockstepDrawsAreEachLanesOwnDraws) {
   const std::vector<std::vector<int>> subsets = {
       {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15}, {1, 3, 4, 9, 15}, {7}};
-  const uint8_t draws[] = {1, 2, 0, Sampler::kJointDraw, 1, Sampler::kJointDraw + 1};
+  const uint8_t draws[] = {1,
+                           Sampler::kJointDraw + 2,
+                           0,
+                           Sampler::kJointDraw,
+                           Sampler::kJointDraw + 3,
+                           Sampler::kJointDraw + 1};
   constexpr int kDraws = int(sizeof(draws));
   for (Sampler::Kind kind :
        {Sampler::Kind::Independent, Sampler::Kind::Sobol, Sampler::Kind::SobolSequence})
@@ -549,11 +554,12 @@ TEST(SamplerTest, SobolSequenceEveryPassIsUnbiased) {
 namespace rf {
 namespace {
 
-// The draws of the path tracer's first vertex, without the lens: the filter offset (slot 0), a 1D
-// draw, joint pair 0 (slot 2), a 1D draw, joint pair 1 (slot 4); `joint` false draws slots 2 and
-// 4 padded (get_2d), as every later vertex does.
+// The draws of the path tracer's first two vertices, without the lens: the filter offset (slot
+// 0), a 1D draw, joint pair 0 (slot 2), a 1D draw, joint pair 1 (slot 4), then the second
+// vertex's pairs 2 and 3 (slots 7 and 9) among 1D draws; `joint` false draws them padded
+// (get_2d), as every later vertex does.
 struct FirstVertex {
-  Vec2 filter, point, dir;
+  Vec2 filter, point, dir, point2, dir2;
 };
 FirstVertex first_vertex(Sampler& s, uint64_t seed, uint32_t pass, int px, uint64_t index,
                          bool joint = true) {
@@ -564,6 +570,10 @@ FirstVertex first_vertex(Sampler& s, uint64_t seed, uint32_t pass, int px, uint6
   v.point = joint ? s.get_2d_joint(0) : s.get_2d();
   s.get_1d();
   v.dir = joint ? s.get_2d_joint(1) : s.get_2d();
+  s.get_1d(), s.get_1d();
+  v.point2 = joint ? s.get_2d_joint(2) : s.get_2d();
+  s.get_1d();
+  v.dir2 = joint ? s.get_2d_joint(3) : s.get_2d();
   return v;
 }
 
@@ -599,9 +609,10 @@ bool is_4d_net(const std::vector<Vec2>& a, const std::vector<Vec2>& b, int m, in
 // The joint pairs (Sampler::get_2d_joint): each is a (0,m,2)-net over the 2^m samples of a pixel
 // like any draw (every power-of-two prefix too), and with the filter offset a (t,m,4)-net, t the
 // design values of the index maps (engine/sampler.h: pair 0 t <= 3 and pair 1 t <= 4 for
-// m <= 8, both <= 4 up to m = 12). The same draws padded (get_2d, independently shuffled) are no
-// 4D net at those t from m = 6 on (below, such t leave boxes only coarse in every axis): the
-// check fails them, which is the property the joint draws add.
+// m <= 8, both <= 4 up to m = 12); pairs 2 and 3 have the same t-values with pair 1. The same draws
+// padded (get_2d, independently shuffled) are no 4D net at those t from m = 6 on (below, such t
+// leave boxes only coarse in every axis): the check fails them, which is the property the joint
+// draws add.
 TEST(SamplerTest, JointPairsAreNetsAndStratifiedWithTheFilterOffset) {
   std::string why;
   const int t_point[13] = {0, 0, 1, 2, 1, 2, 2, 3, 3, 4, 3, 4, 3};
@@ -613,16 +624,21 @@ TEST(SamplerTest, JointPairsAreNetsAndStratifiedWithTheFilterOffset) {
                      std::to_string(pass));
         const uint64_t n = uint64_t(1) << m;
         Sampler s(kind, n);
-        std::vector<Vec2> filter, point, dir, padded_point, padded_dir;
+        std::vector<Vec2> filter, point, dir, point2, dir2, padded_point, padded_dir;
         for (uint64_t i = 0; i < n; ++i) {
           FirstVertex v = first_vertex(s, 9, pass, 17, i);
           filter.push_back(v.filter), point.push_back(v.point), dir.push_back(v.dir);
+          point2.push_back(v.point2), dir2.push_back(v.dir2);
           FirstVertex p = first_vertex(s, 9, pass, 17, i, false);
           ASSERT_EQ(p.filter.x, v.filter.x);  // the same first draw
           padded_point.push_back(p.point), padded_dir.push_back(p.dir);
         }
         ASSERT_TRUE(is_02_net(point, m, &why)) << why;
         ASSERT_TRUE(is_02_net(dir, m, &why)) << why;
+        ASSERT_TRUE(is_02_net(point2, m, &why)) << why;
+        ASSERT_TRUE(is_02_net(dir2, m, &why)) << why;
+        ASSERT_TRUE(is_4d_net(dir, point2, m, t_point[m], &why)) << why << " (second point)";
+        ASSERT_TRUE(is_4d_net(dir, dir2, m, t_dir[m], &why)) << why << " (second direction)";
         for (int j = 1; j < m; j += 3) {
           std::vector<Vec2> prefix(point.begin(), point.begin() + (1 << j));
           ASSERT_TRUE(is_02_net(prefix, j, &why)) << why << " prefix 2^" << j;

@@ -62,15 +62,19 @@ void occluded(const Accel& accel, SingleRay& p, int, int* blocked) {
 // nothing reads it: see trace_paths).
 enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
 // The first vertex's light point and direction are stratified jointly with the camera sample's
-// filter offset (Sampler::get_2d_joint, pairs 0 and 1); later vertices' draws are padded. On
+// filter offset (Sampler::get_2d_joint, pairs 0 and 1), the second vertex's with the first
+// vertex's direction (pairs 2 and 3; the Cornell box's one-bounce light, 8.6% less variance at 256
+// spp); later vertices' draws are padded. On
 // veach-mis, whose error sits in the small light's image in the smoothest plate, that is 2.2x less
 // MSE at 256 spp, and in those pixels 1.8x less variance at 256 spp and 3.15x at 1024
 // (docs/performance.md).
-constexpr int kPointPair = 0, kDirPair = 1;
-constexpr uint8_t kPointDraw = Sampler::kJointDraw + kPointPair;
-constexpr uint8_t kDirDraw = Sampler::kJointDraw + kDirPair;
-inline Vec2 vertex_2d(Sampler& s, bool needed, bool first_vertex, int pair) {
-  return first_vertex ? s.get_2d_joint_if(needed, pair) : s.get_2d_if(needed);
+constexpr int kPointPair = 0, kDirPair = 1, kJointDepths = 2;
+// The lockstep draw code of a vertex's light point or direction (kPointPair or kDirPair).
+inline uint8_t vertex_draw(int depth, int pair) {
+  return depth < kJointDepths ? uint8_t(Sampler::kJointDraw + pair + 2 * depth) : 2;
+}
+inline Vec2 vertex_2d(Sampler& s, bool needed, int depth, int pair) {
+  return depth < kJointDepths ? s.get_2d_joint_if(needed, pair + 2 * depth) : s.get_2d_if(needed);
 }
 
 struct SurfaceLanes : LaneSlots<Accel::kPacket> {
@@ -545,13 +549,12 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
     // value (light sampling alone is unbiased: every light it can miss emits nothing towards the
     // vertex); other lobes keep both strategies (a glossy lobe's light samples alone are noisy).
     const bool last = depth + 1 == settings.max_depth;
-    const bool first_vertex = depth == 0;
     if (lockstep_draws && depth < settings.max_depth) {
       int m = 0;
       for (int i = 0; i < n; ++i)  // without a branch (found: traced and hit)
         shading[m] = i, m += hits.found[i] != 0;
-      const uint8_t point = first_vertex ? kPointDraw : 2, dir = first_vertex ? kDirDraw : 2;
-      const uint8_t draws[kVertexDraws] = {light_choice, point, lobe_choice, dir,
+      const uint8_t draws[kVertexDraws] = {light_choice, vertex_draw(depth, kPointPair),
+                                           lobe_choice, vertex_draw(depth, kDirPair),
                                            uint8_t(roulette)};
       Sampler::get_lanes(samplers, shading, m, draws, kVertexDraws, u);
     }
@@ -617,9 +620,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       // read); with them, u[kURoulette] is read only where roulette runs.
       if (!lockstep_draws) {
         u[kULight][0][i] = sampler.get_1d_if(light_choice);
-        const Vec2 u_point = vertex_2d(sampler, true, first_vertex, kPointPair);
+        const Vec2 u_point = vertex_2d(sampler, true, depth, kPointPair);
         sampler.skip_1d();
-        const Vec2 u_dir = vertex_2d(sampler, true, first_vertex, kDirPair);
+        const Vec2 u_dir = vertex_2d(sampler, true, depth, kDirPair);
         u[kUPoint][0][i] = u_point.x, u[kUPoint][1][i] = u_point.y;
         u[kUDir][0][i] = u_dir.x, u[kUDir][1][i] = u_dir.y;
         // Drawn before the sample is known to succeed: a lane whose sample fails ends, and
@@ -766,7 +769,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       const bool ends = last && bsdf.is_diffuse();  // see `last`
       float u_light = lockstep_draws ? u[kULight][0][i] : sampler.get_1d_if(nee);
       Vec2 u_point = lockstep_draws ? Vec2{u[kUPoint][0][i], u[kUPoint][1][i]}
-                                    : vertex_2d(sampler, nee, first_vertex, kPointPair);
+                                    : vertex_2d(sampler, nee, depth, kPointPair);
       if (nee) {
         Ray r;
         RGB l;
@@ -785,7 +788,7 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       float uc = lockstep_draws ? u[kUChoice][0][i] : sampler.get_1d_if(bsdf.sample_uses_choice());
       Vec2 u_dir = lockstep_draws
                        ? Vec2{u[kUDir][0][i], u[kUDir][1][i]}
-                       : vertex_2d(sampler, bsdf.sample_uses_direction(), first_vertex, kDirPair);
+                       : vertex_2d(sampler, bsdf.sample_uses_direction(), depth, kDirPair);
       if (!bsdf.sample(wo, uc, u_dir, TransportMode::Radiance, bs)) {
         rays.clear(i), --live;
         continue;

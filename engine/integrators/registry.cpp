@@ -117,7 +117,8 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // 10: power selection picks the light's group by u_point.x too, rescaled (LightSet::select).
 // 11: the Sobol kinds draw the first vertex's light point and direction (path) and the first
 // round of each strategy (direct) jointly with the filter offset (Sampler::get_2d_joint).
-constexpr int kEstimatorVersion = 11;
+// 12: the path tracer's second vertex draws them jointly with the first vertex's direction.
+constexpr int kEstimatorVersion = 12;
 
 std::string settings_text(const Scene& s) {
   const IntegratorSettings& i = s.render.integrator;
