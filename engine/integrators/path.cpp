@@ -63,18 +63,20 @@ void occluded(const Accel& accel, SingleRay& p, int, int* blocked) {
 enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
 // The first vertex's light point and direction are stratified jointly with the camera sample's
 // filter offset (Sampler::get_2d_joint, pairs 0 and 1), the second vertex's with the first
-// vertex's direction (pairs 2 and 3; the Cornell box's one-bounce light, 8.6% less variance at 256
-// spp); later vertices' draws are padded. On
-// veach-mis, whose error sits in the small light's image in the smoothest plate, that is 2.2x less
-// MSE at 256 spp, and in those pixels 1.8x less variance at 256 spp and 3.15x at 1024
-// (docs/performance.md).
+// vertex's direction (pairs 2 and 3); later vertices' draws are padded. veach-mis, whose error sits
+// in the small light's image in the smoothest plate: 2.2x less MSE at 256 spp; the Cornell box's
+// one-bounce light: 8.6% less variance (docs/performance.md).
 constexpr int kPointPair = 0, kDirPair = 1, kJointDepths = 2;
-// The lockstep draw code of a vertex's light point or direction (kPointPair or kDirPair).
+// The joint pair of a vertex's light point or direction (kPointPair or kDirPair), or -1 (padded).
+inline int joint_pair(int depth, int pair) { return depth < kJointDepths ? pair + 2 * depth : -1; }
+// Its lockstep draw code (Sampler::get_lanes).
 inline uint8_t vertex_draw(int depth, int pair) {
-  return depth < kJointDepths ? uint8_t(Sampler::kJointDraw + pair + 2 * depth) : 2;
+  const int k = joint_pair(depth, pair);
+  return k >= 0 ? uint8_t(Sampler::kJointDraw + k) : 2;
 }
 inline Vec2 vertex_2d(Sampler& s, bool needed, int depth, int pair) {
-  return depth < kJointDepths ? s.get_2d_joint_if(needed, pair + 2 * depth) : s.get_2d_if(needed);
+  const int k = joint_pair(depth, pair);
+  return k >= 0 ? s.get_2d_joint_if(needed, k) : s.get_2d_if(needed);
 }
 
 struct SurfaceLanes : LaneSlots<Accel::kPacket> {
