@@ -19,6 +19,12 @@ Mitsuba's copy of the XML is rewritten only in its sampler and filter.
    user would see it). MSE over pixels and RGB against the reference.
 3. Efficiency ratio = (MSE x time) of Mitsuba's best sampler / (MSE x time) of rayfarm's best.
    Above 1, rayfarm reaches a given error sooner.
+4. Interleaved times. Step 2 runs one renderer's configurations after the other's, so a slow spell
+   of a shared machine lands on one renderer only (the same render's time moves by about +-10%
+   between runs). Each renderer's best configuration is then timed again, the two alternating,
+   --rounds times each (rayfarm, Mitsuba, Mitsuba, rayfarm, ...: with an even count a steady drift
+   of the machine's speed cancels in the medians), and the ratio is given a second time with the
+   median times and step 2's MSEs.
 
 The BDPT row (veach-bidir) renders rayfarm's bdpt for the same wall time Mitsuba's path tracer took
 and reports MSE_Mitsuba / MSE_rayfarm. Its scene check compares the two path tracers (like with
@@ -206,6 +212,15 @@ def agreement(a, b, block=16):
     return rep
 
 
+def best_configs(results):
+    """Each renderer's configuration of least MSE x time: renderer -> (label, time, MSE, config)."""
+    best = {}
+    for r, s, t, e, c in results:
+        if r not in best or e * t < best[r][2] * best[r][1]:
+            best[r] = (s, t, e, c)
+    return best
+
+
 def mse(img, ref, var):
     return float(((img - ref) ** 2).mean() - var.mean())
 
@@ -216,7 +231,10 @@ def main():
     ap.add_argument('--work', default=os.path.expanduser('~/.cache/rayfarm-bench'))
     ap.add_argument('--build', default='build')
     ap.add_argument('--seeds', type=int, default=None,
-                    help='benchmark renders per configuration (default: the scene\'s, 1 or 4)')
+                    help='benchmark renders per configuration (default: the scene\'s, 1 or 16)')
+    ap.add_argument('--rounds', type=int, default=4,
+                    help='interleaved timing rounds of each renderer\'s best configuration '
+                    '(0: none; an even count cancels a steady drift)')
     ap.add_argument('--scale', type=float, default=1.0,
                     help='multiply every spp (0.25 for a quick look; the table uses 1)')
     args = ap.parse_args()
@@ -259,40 +277,66 @@ def main():
             t, e, each = averaged(lambda seed: b.run_rayfarm(xml, out, cfg['res'], spp, s, seed,
                                                              passes=passes), out)
             name_s = s + ('' if passes is None else ', %d passes' % passes)
-            results.append(('rayfarm', name_s, t, e))
+            results.append(('rayfarm', name_s, t, e, (s, passes)))
             log('  rayfarm %s: %.2f s, MSE %.4g (per seed: %s)' %
                 (name_s, t, e, ', '.join('%.4g' % x for x in each)))
         for s in MITSUBA_SAMPLERS:
             out = os.path.join(args.work, 'bench-mi.exr')
             t, e, each = averaged(lambda seed: b.run_mitsuba(xml, out, cfg['res'], spp, s, seed),
                                   out)
-            results.append(('mitsuba', s, t, e))
+            results.append(('mitsuba', s, t, e, (s, None)))
             log('  mitsuba %s: %.2f s, MSE %.4g (per seed: %s)' %
                 (s, t, e, ', '.join('%.4g' % x for x in each)))
-        rows.append((name, cfg['res'], spp, report, results))
+        # Step 4: each renderer's best configuration timed again, the two alternating.
+        best = best_configs(results)
+        medians = {}
+        if args.rounds > 0:
+            times = {'rayfarm': [], 'mitsuba': []}
+            sr, pr = best['rayfarm'][3]
+            run = {
+                'rayfarm': lambda seed: b.run_rayfarm(xml, os.path.join(args.work, 'bench-rf.exr'),
+                                                      cfg['res'], spp, sr, seed, passes=pr),
+                'mitsuba': lambda seed: b.run_mitsuba(xml, os.path.join(args.work, 'bench-mi.exr'),
+                                                      cfg['res'], spp, best['mitsuba'][3][0], seed),
+            }
+            for k in range(args.rounds):  # ABBA: a drift in the machine's speed cancels
+                order = ('rayfarm', 'mitsuba') if k % 2 == 0 else ('mitsuba', 'rayfarm')
+                for r in order:
+                    times[r].append(run[r](seeds[k % len(seeds)]))
+            for r, ts in times.items():
+                medians[r] = float(np.median(ts))
+                log('  %s %s, interleaved: %s s (median %.2f)' %
+                    (r, best[r][0], ', '.join('%.2f' % t for t in ts), medians[r]))
+        rows.append((name, cfg['res'], spp, report, results, medians))
 
     px = lambda res: res[0] * res[1]
     print('| scene | renderer | sampler | time (s) | Msamples/s | MSE | MSE x time |')
     print('|---|---|---|---:|---:|---:|---:|')
-    for name, res, spp, report, results in rows:
-        for r, s, t, e in results:
+    for name, res, spp, report, results, _ in rows:
+        for r, s, t, e, _ in results:
             print('| %s %dx%d %d spp | %s | %s | %.2f | %.2f | %.4g | %.4g |' %
                   (name, res[0], res[1], spp, r, s, t, px(res) * spp / t / 1e6, e, e * t))
     print()
     print('| scene | references agree | image-mean z (R, G, B) | blocks beyond 3.29 SE | '
-          'best rayfarm | best Mitsuba | efficiency ratio |')
-    print('|---|---|---|---|---|---|---:|')
-    for name, res, spp, report, results in rows:
-        best = {}
-        for r, s, t, e in results:
-            if r not in best or e * t < best[r][2] * best[r][1]:
-                best[r] = (s, t, e)
+          'best rayfarm | best Mitsuba | efficiency ratio | interleaved times (s): rayfarm, '
+          'Mitsuba | ratio with them |')
+    print('|---|---|---|---|---|---|---:|---|---:|')
+    for name, res, spp, report, results, medians in rows:
+        best = best_configs(results)
         ratio = (best['mitsuba'][1] * best['mitsuba'][2]) / (best['rayfarm'][1] * best['rayfarm'][2])
-        print('| %s | %s | %s | %d of %d | %s | %s | %s |' % (
-            name, 'yes' if report['agree'] else 'NO (DIFFERENT)',
+        agree = report['agree']
+        if medians:
+            inter = '%.2f, %.2f' % (medians['rayfarm'], medians['mitsuba'])
+            ratio_i = (medians['mitsuba'] * best['mitsuba'][2]) / (medians['rayfarm'] *
+                                                                  best['rayfarm'][2])
+            ratio_i = '%.2f' % ratio_i if agree else 'n/a'
+        else:
+            inter, ratio_i = '-', '-'
+        print('| %s | %s | %s | %d of %d | %s | %s | %s | %s | %s |' % (
+            name, 'yes' if agree else 'NO (DIFFERENT)',
             ', '.join('%.1f' % z for z in report['image_mean_z']),
             report['blocks_over_3.29'], report['blocks'], best['rayfarm'][0], best['mitsuba'][0],
-            '%.2f' % ratio if report['agree'] else 'n/a'))
+            '%.2f' % ratio if agree else 'n/a', inter, ratio_i))
     for r in bdpt_rows:
         print()
         print('| veach-bidir %dx%d | references agree | Mitsuba path | rayfarm bdpt (same time) | '
