@@ -299,7 +299,7 @@ def main():
                 'mitsuba': lambda seed: b.run_mitsuba(xml, os.path.join(args.work, 'bench-mi.exr'),
                                                       cfg['res'], spp, best['mitsuba'][3][0], seed),
             }
-            for k in range(args.rounds):  # ABBA: a drift in the machine's speed cancels
+            for k in range(args.rounds):  # ABBA: with an even count a steady drift cancels
                 order = ('rayfarm', 'mitsuba') if k % 2 == 0 else ('mitsuba', 'rayfarm')
                 for r in order:
                     times[r].append(run[r](seeds[k % len(seeds)]))
