@@ -13,8 +13,9 @@ Mitsuba's copy of the XML is rewritten only in its sampler and filter.
    as DIFFERENT and its ratio is not computed. The common reference is the mean of all 2R renders;
    its own noise (the variance of that mean, estimated per pixel from the replicates) is
    subtracted from every MSE below, so MSE estimates the render's error alone.
-2. Benchmark. Each renderer renders once per sampler it offers at the benchmark spp (several
-   seeds on veach-mis, or --seeds N; times and MSEs averaged), each render a whole process timed
+2. Benchmark. Each renderer renders once per sampler it offers at the benchmark spp (4 seeds on
+   the Cornell box and the million scene, 16 on veach-mis, or --seeds N; times and MSEs
+   averaged), each render a whole process timed
    by wall clock (Mitsuba's includes Python start-up and its JIT compilation, as a
    user would see it). MSE over pixels and RGB against the reference.
 3. Efficiency ratio = (MSE x time) of Mitsuba's best sampler / (MSE x time) of rayfarm's best.
@@ -24,7 +25,8 @@ Mitsuba's copy of the XML is rewritten only in its sampler and filter.
    between runs). Each renderer's best configuration is then timed again, the two alternating,
    --rounds times each (rayfarm, Mitsuba, Mitsuba, rayfarm, ...: with an even count a steady drift
    of the machine's speed cancels in the medians), and the ratio is given a second time with the
-   median times and step 2's MSEs.
+   median times and step 2's MSEs, with its standard error from the spread of the best
+   configurations' per-seed MSEs and of the interleaved times.
 
 The BDPT row (veach-bidir) renders rayfarm's bdpt for the same wall time Mitsuba's path tracer took
 and reports MSE_Mitsuba / MSE_rayfarm. Its scene check compares the two path tracers (like with
@@ -49,15 +51,17 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # name, XML (relative to the repository, or generated), resolution, benchmark spp, reference
 # replicates x spp per renderer, rayfarm integrator, Mitsuba integrator
 SCENES = {
-    'cornell-box': dict(xml='scenes/cornell-box/scene_v3.xml', res=(256, 256), spp=1024,
-                        ref=(8, 1024)),
-    # seeds: benchmark renders per configuration, their times and MSEs averaged. veach-mis needs
+    # seeds: benchmark renders per configuration, their times and MSEs averaged. The Cornell box
+    # and the million scene take four: one seed's MSE was 0.94x Mitsuba's on the Cornell box where
+    # eight gave 0.99x (per-seed spread about 7% there, 2-3% on the million scene). veach-mis needs
     # many: one render's squared error sits mostly in ~20 pixels at the edge of its smallest light
     # and that light's image in the smoothest plate, so single renders' MSEs spread 4x from seed
     # to seed; four seeds left the ratio within about +-30% (0.84 against 0.71 with sixteen).
+    'cornell-box': dict(xml='scenes/cornell-box/scene_v3.xml', res=(256, 256), spp=1024,
+                        ref=(8, 1024), seeds=4),
     'veach-mis': dict(xml='scenes/veach-mis/scene.xml', res=(320, 180), spp=1024, ref=(8, 1024),
                       seeds=16),
-    'million': dict(xml=None, res=(256, 256), spp=256, ref=(8, 512)),
+    'million': dict(xml=None, res=(256, 256), spp=256, ref=(8, 512), seeds=4),
 }
 BDPT = dict(xml='scenes/veach-bidir/scene.xml', res=(256, 256), mitsuba_spp=256, ref=(8, 1024))
 
@@ -213,12 +217,29 @@ def agreement(a, b, block=16):
 
 
 def best_configs(results):
-    """Each renderer's configuration of least MSE x time: renderer -> (label, time, MSE, config)."""
+    """Each renderer's configuration of least MSE x time: renderer -> (label, time, MSE, config,
+    per-seed MSEs)."""
     best = {}
-    for r, s, t, e, c in results:
+    for r, s, t, e, c, each in results:
         if r not in best or e * t < best[r][2] * best[r][1]:
-            best[r] = (s, t, e, c)
+            best[r] = (s, t, e, c, each)
     return best
+
+
+def rel_se_mean(xs):
+    """The relative standard error of the mean of xs (0 with fewer than two values)."""
+    if len(xs) < 2:
+        return 0.0
+    return float(np.std(xs, ddof=1) / np.mean(xs) / np.sqrt(len(xs)))
+
+
+def ratio_rel_se(best, times):
+    """The relative standard error of the interleaved efficiency ratio, from the spread of each
+    best configuration's per-seed MSEs and of its interleaved times (a median's standard error
+    taken as 1.25 times the mean's, its value for normal samples); the four taken as independent."""
+    terms = [rel_se_mean(best[r][4]) for r in ('rayfarm', 'mitsuba')]
+    terms += [1.25 * rel_se_mean(times[r]) for r in ('rayfarm', 'mitsuba')]
+    return float(np.sqrt(sum(x * x for x in terms)))
 
 
 def mse(img, ref, var):
@@ -231,7 +252,7 @@ def main():
     ap.add_argument('--work', default=os.path.expanduser('~/.cache/rayfarm-bench'))
     ap.add_argument('--build', default='build')
     ap.add_argument('--seeds', type=int, default=None,
-                    help='benchmark renders per configuration (default: the scene\'s, 1 or 16)')
+                    help='benchmark renders per configuration (default: the scene\'s, 4 or 16)')
     ap.add_argument('--rounds', type=int, default=4,
                     help='interleaved timing rounds of each renderer\'s best configuration '
                     '(0: none; an even count cancels a steady drift)')
@@ -277,19 +298,19 @@ def main():
             t, e, each = averaged(lambda seed: b.run_rayfarm(xml, out, cfg['res'], spp, s, seed,
                                                              passes=passes), out)
             name_s = s + ('' if passes is None else ', %d passes' % passes)
-            results.append(('rayfarm', name_s, t, e, (s, passes)))
+            results.append(('rayfarm', name_s, t, e, (s, passes), each))
             log('  rayfarm %s: %.2f s, MSE %.4g (per seed: %s)' %
                 (name_s, t, e, ', '.join('%.4g' % x for x in each)))
         for s in MITSUBA_SAMPLERS:
             out = os.path.join(args.work, 'bench-mi.exr')
             t, e, each = averaged(lambda seed: b.run_mitsuba(xml, out, cfg['res'], spp, s, seed),
                                   out)
-            results.append(('mitsuba', s, t, e, (s, None)))
+            results.append(('mitsuba', s, t, e, (s, None), each))
             log('  mitsuba %s: %.2f s, MSE %.4g (per seed: %s)' %
                 (s, t, e, ', '.join('%.4g' % x for x in each)))
         # Step 4: each renderer's best configuration timed again, the two alternating.
         best = best_configs(results)
-        medians = {}
+        medians, times = {}, {}
         if args.rounds > 0:
             times = {'rayfarm': [], 'mitsuba': []}
             sr, pr = best['rayfarm'][3]
@@ -307,21 +328,21 @@ def main():
                 medians[r] = float(np.median(ts))
                 log('  %s %s, interleaved: %s s (median %.2f)' %
                     (r, best[r][0], ', '.join('%.2f' % t for t in ts), medians[r]))
-        rows.append((name, cfg['res'], spp, report, results, medians))
+        rows.append((name, cfg['res'], spp, report, results, medians, times))
 
     px = lambda res: res[0] * res[1]
     print('| scene | renderer | sampler | time (s) | Msamples/s | MSE | MSE x time |')
     print('|---|---|---|---:|---:|---:|---:|')
-    for name, res, spp, report, results, _ in rows:
-        for r, s, t, e, _ in results:
+    for name, res, spp, report, results, _, _ in rows:
+        for r, s, t, e, _, _ in results:
             print('| %s %dx%d %d spp | %s | %s | %.2f | %.2f | %.4g | %.4g |' %
                   (name, res[0], res[1], spp, r, s, t, px(res) * spp / t / 1e6, e, e * t))
     print()
     print('| scene | references agree | image-mean z (R, G, B) | blocks beyond 3.29 SE | '
           'best rayfarm | best Mitsuba | efficiency ratio | interleaved times (s): rayfarm, '
-          'Mitsuba | ratio with them |')
+          'Mitsuba | ratio with them, +- its standard error |')
     print('|---|---|---|---|---|---|---:|---|---:|')
-    for name, res, spp, report, results, medians in rows:
+    for name, res, spp, report, results, medians, times in rows:
         best = best_configs(results)
         ratio = (best['mitsuba'][1] * best['mitsuba'][2]) / (best['rayfarm'][1] * best['rayfarm'][2])
         agree = report['agree']
@@ -329,7 +350,8 @@ def main():
             inter = '%.2f, %.2f' % (medians['rayfarm'], medians['mitsuba'])
             ratio_i = (medians['mitsuba'] * best['mitsuba'][2]) / (medians['rayfarm'] *
                                                                   best['rayfarm'][2])
-            ratio_i = '%.2f' % ratio_i if agree else 'n/a'
+            ratio_i = ('%.2f +- %.2f' % (ratio_i, ratio_i * ratio_rel_se(best, times))
+                       if agree else 'n/a')
         else:
             inter, ratio_i = '-', '-'
         print('| %s | %s | %s | %d of %d | %s | %s | %s | %s | %s |' % (
