@@ -15,9 +15,9 @@ Mitsuba's copy of the XML is rewritten only in its sampler and filter.
    subtracted from every MSE below, so MSE estimates the render's error alone.
 2. Benchmark. Each renderer renders once per sampler it offers at the benchmark spp (4 seeds on
    the Cornell box and the million scene, 16 on veach-mis, or --seeds N; times and MSEs
-   averaged), each render a whole process timed
-   by wall clock (Mitsuba's includes Python start-up and its JIT compilation, as a
-   user would see it). MSE over pixels and RGB against the reference.
+   averaged), each render a whole process timed by wall clock (Mitsuba's includes Python
+   start-up and its JIT compilation, as a user would see it). MSE over pixels and RGB against
+   the reference.
 3. Efficiency ratio = (MSE x time) of Mitsuba's best sampler / (MSE x time) of rayfarm's best.
    Above 1, rayfarm reaches a given error sooner.
 4. Interleaved times. Step 2 runs one renderer's configurations after the other's, so a slow spell
@@ -227,16 +227,18 @@ def best_configs(results):
 
 
 def rel_se_mean(xs):
-    """The relative standard error of the mean of xs (0 with fewer than two values)."""
+    """The relative standard error of the mean of xs (NaN with fewer than two values: no spread
+    measured)."""
     if len(xs) < 2:
-        return 0.0
+        return float('nan')
     return float(np.std(xs, ddof=1) / np.mean(xs) / np.sqrt(len(xs)))
 
 
 def ratio_rel_se(best, times):
     """The relative standard error of the interleaved efficiency ratio, from the spread of each
     best configuration's per-seed MSEs and of its interleaved times (a median's standard error
-    taken as 1.25 times the mean's, its value for normal samples); the four taken as independent."""
+    taken as 1.25 times the mean's, its large-sample value for normal samples, conservative for a
+    few rounds); the four taken as independent. NaN where a list has fewer than two values."""
     terms = [rel_se_mean(best[r][4]) for r in ('rayfarm', 'mitsuba')]
     terms += [1.25 * rel_se_mean(times[r]) for r in ('rayfarm', 'mitsuba')]
     return float(np.sqrt(sum(x * x for x in terms)))
@@ -350,8 +352,9 @@ def main():
             inter = '%.2f, %.2f' % (medians['rayfarm'], medians['mitsuba'])
             ratio_i = (medians['mitsuba'] * best['mitsuba'][2]) / (medians['rayfarm'] *
                                                                   best['rayfarm'][2])
-            ratio_i = ('%.2f +- %.2f' % (ratio_i, ratio_i * ratio_rel_se(best, times))
-                       if agree else 'n/a')
+            se = ratio_rel_se(best, times)
+            ratio_i = (('%.2f +- %.2f' % (ratio_i, ratio_i * se) if se == se else
+                        '%.2f +- n/a' % ratio_i) if agree else 'n/a')
         else:
             inter, ratio_i = '-', '-'
         print('| %s | %s | %s | %d of %d | %s | %s | %s | %s | %s |' % (

@@ -464,10 +464,10 @@ struct PathResume {
 // lanes do (light sample, BSDF sample, roulette; its shadow test is known only after all three),
 // and its NEE term is added after the test and before its next vertex, so each lane's radiance is
 // the one it would get traced alone: bit-identical with K = 1 (tests/integrators_test.cpp), given
-// the same hits. A ray that meets two triangles at one distance (exactly on their shared edge) is
-// the exception: Embree's packet and single-ray kernels may report different ones (docs/
-// performance.md, "What a ratio of 1.25 would take"); packets depend on the pixel and pass alone,
-// so a tile and the frame still trace the same packets.
+// the same hits. A ray that meets two triangles at one distance (e.g. exactly on a shared edge) is
+// the exception: Embree's packet and single-ray kernels may report different ones
+// (docs/performance.md, "What a ratio of 1.25 would take"); packets depend on the pixel and pass
+// alone, so a tile and the frame still trace the same packets.
 // Every vertex consumes the same dimensions whether or not it reads them (skipped ones cost
 // nothing), so a material change does not reshuffle the random numbers of later bounces.
 template <int K, class Packet>
