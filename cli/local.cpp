@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <regex>
 
 #include <spdlog/spdlog.h>
 #include "bench/bench.h"
@@ -19,13 +20,11 @@ namespace rf::cli {
 namespace {
 
 std::pair<uint32_t, uint32_t> parse_pass_range(const std::string& s, uint32_t passes) {
-  unsigned a = 0, b = 0;
-  char dash = 0, extra = 0;
-  int n = std::sscanf(s.c_str(), "%u%c%u%c", &a, &dash, &b, &extra);
-  if (n == 1)
-    b = a;
-  else if (n != 3 || dash != '-')
+  // Digits only: sscanf's %u would read "-1" as 4294967295.
+  std::smatch m;
+  if (!std::regex_match(s, m, std::regex("([0-9]{1,9})(?:-([0-9]{1,9}))?")))
     throw UsageError("--pass-range: expected FIRST-LAST (inclusive, e.g. 0-7), got '" + s + "'");
+  uint32_t a = uint32_t(std::stoul(m[1])), b = m[2].matched ? uint32_t(std::stoul(m[2])) : a;
   if (a > b)
     throw UsageError("--pass-range: first pass " + std::to_string(a) + " is after last " +
                      std::to_string(b));
@@ -151,6 +150,12 @@ int cmd_render(const RenderArgs& a) {
                   scene.film.width, scene.film.height, gib);
     throw std::runtime_error(a.scene + ": " + buf);
   }
+  if (res.passes_merged == 0 && res.stopped_on_time)
+    throw std::runtime_error(
+        a.scene + ": the time budget of " + std::to_string(a.time_budget) +
+        " s ran out before the first pass completed (a pass here is " +
+        std::to_string(scene.render.spp_per_pass()) +
+        " samples per pixel); nothing is written. Give more --passes, fewer --spp or more time");
   warn_nonfinite(res.frame);
   if (!a.partial.empty()) {
     write_buffer_file(a.partial, res.frame);
@@ -178,8 +183,18 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
   bool rfb = std::filesystem::path(output).extension() == ".rfb";
   std::vector<std::pair<std::string, std::string>> paths = {
       {"-o", output}, {"the PNG preview", rfb ? "" : png_path_for(output)}};
-  for (const std::string& in : inputs) paths.push_back({"input " + in, in});
-  check_outputs(paths);
+  for (const std::string& in : inputs) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(in, ec))
+      throw UsageError("merge: " + in + " is a directory, not a sample buffer (.rfb)");
+    if (!std::filesystem::is_regular_file(in, ec))
+      throw UsageError("merge: " + in +
+                       (std::filesystem::exists(in, ec)
+                            ? " is not a regular file (a device or FIFO)"
+                            : " does not exist"));
+    paths.push_back({"input " + in, in});
+  }
+  check_outputs(paths);  // also: -o names none of the inputs
   // A buffer with non-finite sums or counts its header does not explain is refused: merged, it
   // would make the image and its noise figure nonsense.
   auto read_checked = [](const std::string& path) {
@@ -216,6 +231,22 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
 // a region, e.g. the caustic that one integrator finds and another does not.
 int cmd_compare(const std::string& image, const std::string& reference,
                 const std::vector<int>& window) {
+  // A PNG preview holds tone-mapped 8-bit display values, an EXR linear radiance: their
+  // difference measures the tone mapping, not the render.
+  auto display = [](const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext == ".png" || ext == ".jpg" || ext == ".jpeg";
+  };
+  if (display(image) != display(reference))
+    throw UsageError("compare: " + (display(image) ? image : reference) +
+                     " holds 8-bit display values (a tone-mapped preview) and " +
+                     (display(image) ? reference : image) +
+                     " linear radiance: compare the EXRs (or two previews)");
+  if (display(image))
+    std::fprintf(stderr,
+                 "note: comparing 8-bit display values (tone-mapped previews), not "
+                 "radiance\n");
   RgbImage a = read_rgb(image), b = read_rgb(reference);
   PixelWindow win{0, 0, a.width, a.height};
   if (!window.empty()) {

@@ -16,8 +16,9 @@ std::pair<int, int> parse_resolution(const std::string& s) {
   char x = 0, extra = 0;
   if (std::sscanf(s.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
     throw UsageError("--res: expected WIDTHxHEIGHT (e.g. 640x480), got '" + s + "'");
-  if (w < 1 || h < 1 || w > 65536 || h > 65536)
-    throw UsageError("--res: " + s + ": width and height must be in 1..65536");
+  if (w < 1 || h < 1 || w > kMaxResolution || h > kMaxResolution)
+    throw UsageError("--res: " + s + ": width and height must be in 1.." +
+                     std::to_string(kMaxResolution));
   return {w, h};
 }
 
@@ -105,6 +106,11 @@ SceneOverrides overrides_of(const OverrideArgs& a) {
   if (!a.light_selection.empty()) ov.light_selection = a.light_selection;
   if (a.aovs) ov.aovs = *a.aovs;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
+  try {
+    check_overrides(ov);  // a bad flag is a usage error (exit 2), before any scene is read
+  } catch (const SceneError& e) {
+    throw UsageError(e.what());
+  }
   return ov;
 }
 

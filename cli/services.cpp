@@ -1,19 +1,45 @@
 // The farm's long-running processes: `rayfarm coordinator` and `rayfarm worker`.
 #include "cli/commands.h"
 #include "client/commands.h"
+#include "coordinator/scene_check.h"
 #include "coordinator/service.h"
 #include "farm/auth.h"
 #include "worker/worker.h"
 
 #include <cctype>
 #include <cstdio>
+#include <ctime>
 
 namespace rf::cli {
+
+namespace {
+
+// HOST:PORT with a port in 0..65535 (0 picks one), [IPv6]:PORT, or unix:PATH; gRPC would take
+// "127.0.0.1:99999" as port 34463 (99999 mod 65536).
+CLI::Validator listen_address() {
+  return CLI::Validator(
+      [](std::string& s) -> std::string {
+        if (s.rfind("unix:", 0) == 0 && s.size() > 5) return "";
+        size_t colon = s.rfind(':');
+        std::string host = colon == std::string::npos ? "" : s.substr(0, colon);
+        std::string port = colon == std::string::npos ? "" : s.substr(colon + 1);
+        bool digits = !port.empty() && port.size() <= 5 &&
+                      port.find_first_not_of("0123456789") == std::string::npos;
+        if (host.empty() || !digits)
+          return "'" + s + "' is not an address (HOST:PORT, e.g. 127.0.0.1:7070 or 0.0.0.0:0)";
+        if (std::stoul(port) > 65535) return "port " + port + " is outside 0..65535";
+        return "";
+      },
+      "HOST:PORT");
+}
+
+}  // namespace
 
 void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
   auto co = std::make_shared<CoordinatorOptions>();
   auto* coord = app.add_subcommand("coordinator", "serve jobs to workers (gRPC)");
-  coord->add_option("--listen", co->listen, "address to listen on (HOST:PORT; port 0 picks one)");
+  coord->add_option("--listen", co->listen, "address to listen on (HOST:PORT; port 0 picks one)")
+      ->check(listen_address());
   coord->add_option("--state-dir", co->state_dir, "durable state: database, checkpoints, blobs")
       ->required();
   coord->add_option("--lease-seconds", co->lease_seconds, "lease time of a task")
@@ -33,7 +59,12 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
           } catch (const std::exception&) {
             ok = false;
           }
-          if (!ok || !co->limits.set(item.substr(0, eq), value)) {
+          try {
+            ok = ok && co->limits.set(item.substr(0, eq), value);
+          } catch (const std::invalid_argument& e) {
+            throw CLI::ValidationError("--limit", "'" + item + "': " + e.what());
+          }
+          if (!ok) {
             std::string names;
             for (const std::string& n : JobLimits::names()) names += " " + n;
             throw CLI::ValidationError("--limit",
@@ -52,16 +83,56 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   coord->add_option("--tls-client-ca", co->tls_client_ca,
                     "mutual TLS: verify client certificates against this CA (PEM); the worker "
                     "methods then require one");
-  coord->add_option("--health-listen", co->health_listen,
-                    "also serve the health service alone, in plaintext, here (HOST:PORT; for "
-                    "probes that cannot speak TLS)");
-  coord->add_option("--metrics-listen", co->metrics_listen,
-                    "serve Prometheus metrics over HTTP at /metrics here (IP:PORT, e.g. "
-                    "0.0.0.0:9464; docs/deploy.md)");
+  coord
+      ->add_option("--health-listen", co->health_listen,
+                   "also serve the health service alone, in plaintext, here (HOST:PORT; for "
+                   "probes that cannot speak TLS)")
+      ->check(listen_address());
+  coord
+      ->add_option("--metrics-listen", co->metrics_listen,
+                   "serve Prometheus metrics over HTTP at /metrics here (IP:PORT, e.g. "
+                   "0.0.0.0:9464; docs/deploy.md)")
+      ->check(listen_address());
   coord->add_option("--token-file", co->token_file,
                     "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
                     "on SIGHUP (without it: loopback only, no authentication)");
-  out.push_back({coord, [co] { return run_coordinator(*co); }, true});
+  out.push_back({coord,
+                 [co] {
+                   if (co->tls_cert.empty() != co->tls_key.empty())
+                     throw UsageError(co->tls_cert.empty() ? "--tls-key needs --tls-cert"
+                                                           : "--tls-cert needs --tls-key");
+                   if (!co->tls_client_ca.empty() && co->tls_cert.empty())
+                     throw UsageError("--tls-client-ca needs --tls-cert and --tls-key");
+                   return run_coordinator(*co);
+                 },
+                 true});
+
+  // The coordinator's scene check (coordinator/scene_check.h): a child it starts itself, hidden
+  // from --help.
+  struct CheckArgs {
+    std::string bundle;
+    SceneCheckLimits limits;
+  };
+  auto ca = std::make_shared<CheckArgs>();
+  auto* check = app.add_subcommand("check-scenes", "(internal) the coordinator's scene check");
+  check->group("");
+  check->add_option("--bundle", ca->bundle, "the materialised bundle")->required();
+  check->add_option("--memory-mb", ca->limits.memory_mb)->check(finite_in(64, 1e12));
+  check->add_option("--cpu-seconds", ca->limits.cpu_seconds)->check(finite_in(1, 1e9));
+  check->add_option_function<std::vector<std::string>>(
+      "--import-limit", [ca](const std::vector<std::string>& items) {
+        for (const std::string& item : items) {
+          size_t eq = item.find('=');
+          bool ok = eq != std::string::npos;
+          try {
+            ok = ok && ca->limits.import.set(item.substr(0, eq), std::stoull(item.substr(eq + 1)));
+          } catch (const std::exception&) {
+            ok = false;
+          }
+          if (!ok) throw CLI::ValidationError("--import-limit", "'" + item + "' is not NAME=VALUE");
+        }
+      });
+  out.push_back({check, [ca] { return run_scene_check_child(ca->bundle, ca->limits); }});
 
   auto wo = std::make_shared<WorkerOptions>();
   auto* worker = app.add_subcommand("worker", "lease and render tasks from a coordinator");
@@ -117,6 +188,9 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                      if (!expires)
                        throw UsageError("--expires '" + ta->expires +
                                         "' is not YYYY-MM-DD or YYYY-MM-DDTHH:MM:SSZ");
+                     if (*expires <= int64_t(std::time(nullptr)))
+                       throw UsageError("--expires " + ta->expires +
+                                        " is in the past: the token would never be accepted");
                    }
                    std::string t = new_token(), line;
                    try {

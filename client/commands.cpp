@@ -26,6 +26,7 @@
 #include "farm/chunking.h"
 #include "farm/convert.h"
 #include "farm/frame_range.h"
+#include "farm/job.h"
 #include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
 
@@ -134,12 +135,12 @@ const char* code_name(grpc::StatusCode c) {
   }
 }
 
-void check(const grpc::Status& s, const std::string& what, const std::string& addr,
+void check(const grpc::Status& s, const std::string& what, const Endpoint& ep,
            const Retry* retry = nullptr) {
   if (s.ok()) return;
   std::string msg = what + ": " + code_name(s.error_code()) + ": " + s.error_message();
   if (s.error_code() == grpc::StatusCode::UNAVAILABLE)
-    msg += " (is a coordinator running at " + addr + "?)";
+    msg += unavailable_hint(s, ep.address, !ep.creds.tls_ca.empty());
   if (retry && retry->retries() > 0)
     msg += " (after " + std::to_string(retry->retries()) + " retries; --timeout)";
   throw FarmError(msg, s.error_code() == grpc::StatusCode::INVALID_ARGUMENT ||
@@ -254,7 +255,7 @@ int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
                     [&](grpc::ClientContext& ctx) {
                       return stub->MissingBlobs(&ctx, missing_req, &missing);
                     }),
-          "submit", addr, &retry);
+          "submit", ep, &retry);
     std::string id;
     grpc::Status s =
         upload_job(*stub, spec, fs::path(a.scene).parent_path(),
@@ -263,7 +264,7 @@ int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
       std::printf("%s\n", id.c_str());
       return 0;
     }
-    if (!retry.retry_after(s, attempt)) check(s, "submit", addr, &retry);
+    if (!retry.retry_after(s, attempt)) check(s, "submit", ep, &retry);
   }
 }
 
@@ -309,9 +310,9 @@ std::string job_line(const pb::JobStatus& j) {
   std::snprintf(
       buf, sizeof buf,
       "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  ETA %s",
-      j.job_id().c_str(), j.name().c_str(), state_name(j.state()), done, j.frames_size(),
-      (unsigned long long)merged, (unsigned long long)total, worst, j.core_seconds(),
-      eta_known ? duration_text(eta).c_str() : "?");
+      printable(j.job_id()).c_str(), printable(j.name()).c_str(), state_name(j.state()), done,
+      j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
+      j.core_seconds(), eta_known ? duration_text(eta).c_str() : "?");
   return buf;
 }
 
@@ -331,7 +332,7 @@ int cmd_status(const Endpoint& ep, const std::string& job, bool json, const Stat
       pb::ListJobsResponse resp;
       check(
           retry.run(30, [&](grpc::ClientContext& ctx) { return stub->ListJobs(&ctx, req, &resp); }),
-          "status", addr, &retry);
+          "status", ep, &retry);
       jobs.insert(jobs.end(), resp.jobs().begin(), resp.jobs().end());
       next = after = resp.next_after();
     } while (!after.empty() && (page.limit == 0 || jobs.size() < page.limit));
@@ -341,7 +342,7 @@ int cmd_status(const Endpoint& ep, const std::string& job, bool json, const Stat
     ref.set_job_id(job);
     pb::JobStatus s;
     check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->GetJob(&ctx, ref, &s); }),
-          "status", addr, &retry);
+          "status", ep, &retry);
     jobs.push_back(s);
   }
   if (json) {
@@ -359,11 +360,23 @@ int cmd_status(const Endpoint& ep, const std::string& job, bool json, const Stat
 
 int cmd_watch(const Endpoint& ep, const std::string& job) {
   const std::string& addr = ep.address;
-  auto stub = job_stub(ep);
+  std::shared_ptr<grpc::Channel> channel = coordinator_channel(ep.address, ep.creds);
+  auto stub = pb::JobService::NewStub(channel);
   std::map<uint32_t, std::string> last;
   std::mt19937 rng(std::random_device{}());
   Clock::time_point lost = Clock::now();  // since when no update came (the start counts)
+  auto left = [&] {
+    return ep.timeout - std::chrono::duration<double>(Clock::now() - lost).count();
+  };
   for (int attempt = 0;; ++attempt) {
+    // The stream has no deadline (a watch lasts as long as its job); the connection must come
+    // within what is left of --timeout, or a silent address would hold it for TCP's own timeout.
+    if (!channel->WaitForConnected(
+            std::chrono::system_clock::now() +
+            std::chrono::milliseconds(int64_t(std::max(0.0, left()) * 1000))))
+      throw FarmError("watch: no answer from the coordinator at " + addr + " for " +
+                          std::to_string(int(ep.timeout - left())) + " s (--timeout)",
+                      1);
     grpc::ClientContext ctx;
     pb::JobRef ref;
     ref.set_job_id(job);
@@ -406,7 +419,7 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
     if (!st.ok() && st.error_code() != grpc::StatusCode::UNAVAILABLE &&
         st.error_code() != grpc::StatusCode::DEADLINE_EXCEEDED &&
         st.error_code() != grpc::StatusCode::CANCELLED)
-      check(st, "watch", addr);
+      check(st, "watch", ep);
     double gone = std::chrono::duration<double>(Clock::now() - lost).count();
     if (gone >= ep.timeout)
       throw FarmError("watch: no answer from the coordinator at " + addr + " for " +
@@ -415,8 +428,8 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
     if (attempt == 0)
       std::fprintf(stderr, "watch: connection lost (%s); reconnecting\n",
                    st.error_message().c_str());
-    std::this_thread::sleep_for(
-        std::chrono::duration<double>(backoff_seconds(attempt, 0.25, 10, rng)));
+    std::this_thread::sleep_for(std::chrono::duration<double>(
+        std::min(backoff_seconds(attempt, 0.25, 10, rng), std::max(0.0, left()))));
   }
 }
 
@@ -430,7 +443,7 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     pb::JobRef ref;
     ref.set_job_id(job);
     check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->GetJob(&ctx, ref, &status); }),
-          "fetch", addr, &retry);
+          "fetch", ep, &retry);
   }
   fs::create_directories(out_dir);
   int written = 0;
@@ -455,7 +468,7 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
           problem = chunks.error();
       return reader->Finish();
     });
-    check(fs, "fetch frame " + std::to_string(f.frame()), addr, &retry);
+    check(fs, "fetch frame " + std::to_string(f.frame()), ep, &retry);
     if (problem.empty() && chunks.finish() != ChunkAssembler::Status::Ok) problem = chunks.error();
     if (!problem.empty())
       throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
@@ -473,6 +486,12 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
   }
   if (only_frame && written == 0)
     throw FarmError("job " + job + " has no fetchable frame " + std::to_string(*only_frame), 2);
+  if (written == 0)  // nothing to write is not a success: say why, and exit 1
+    throw FarmError("fetch: job " + job + " has no frame with a complete pass to write" +
+                        (status.error().empty() ? std::string()
+                                                : " (" + std::string(state_name(status.state())) +
+                                                      ": " + status.error() + ")"),
+                    1);
   return 0;
 }
 
@@ -485,11 +504,9 @@ int cmd_cancel(const Endpoint& ep, const std::string& job) {
   pb::CancelResponse resp;
   grpc::Status s =
       retry.run(30, [&](grpc::ClientContext& ctx) { return stub->CancelJob(&ctx, ref, &resp); });
-  // A retried cancel whose first attempt got through finds the job cancelled already.
-  bool done_before = retry.retries() > 0 &&
-                     s.error_code() == grpc::StatusCode::FAILED_PRECONDITION &&
-                     s.error_message().find("(cancelled)") != std::string::npos;
-  if (!done_before) check(s, "cancel", addr, &retry);
+  // Cancelling a cancelled job succeeds (the coordinator's cancel is idempotent), so a retried
+  // cancel whose first attempt got through succeeds too.
+  check(s, "cancel", ep, &retry);
   std::fprintf(stderr, "job %s cancelled\n", job.c_str());
   return 0;
 }

@@ -8,9 +8,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "coordinator/checkpoint.h"
 #include "engine/buffer_file.h"
+#include "engine/build_info.h"
 #include "engine/digest.h"
 #include "engine/frame_accumulator.h"
 #include "engine/render.h"
@@ -28,8 +30,8 @@ constexpr int kDefaultTileSize = 128;  // big enough that per-task costs stay sm
 
 // A client-supplied string as it may appear in a message or a log line: at most 64 bytes.
 std::string clip(const std::string& s) {
-  if (s.size() <= 64) return s;
-  return s.substr(0, 48) + "...(" + std::to_string(s.size()) + " bytes)";
+  if (s.size() <= 64) return printable(s);
+  return printable(s.substr(0, 48)) + "...(" + std::to_string(s.size()) + " bytes)";
 }
 
 [[noreturn]] void refuse(ErrorCode code, const std::string& message) {
@@ -41,6 +43,8 @@ double unix_now() {
 }
 
 CoreOptions with_defaults(CoreOptions o) {
+  if (!o.scene_checker)
+    throw std::invalid_argument("CoreOptions::scene_checker is required (scene_check.h)");
   if (o.instance.empty())
     o.instance = sha256_hex(std::to_string(unix_now()) + std::to_string(::getpid())).substr(0, 8);
   if (!o.clock) {
@@ -63,64 +67,50 @@ struct FramePlan {
   uint64_t spp_per_pass = 0;
 };
 
-FramePlan plan_frame(const Scene& scene, uint32_t frame, int tile_size) {
-  try {
-    check_renderable(scene);
-  } catch (const std::exception& e) {
-    refuse(ErrorCode::InvalidArgument, e.what());
-  }
+FramePlan plan_frame(const SceneSummary& scene, uint32_t frame, int tile_size) {
   return {frame_header(scene, frame, PassSet{}),
           work_units(scene, tile_size),
-          integrator_splats(scene.render.integrator.method),
-          scene.render.passes,
-          scene.render.noise_target,
-          scene.render.spp_per_pass()};
+          scene.splats,
+          scene.passes,
+          scene.noise_target,
+          scene.spp_per_pass};
 }
 
-// Every file of the spec's bundle has a safe path and a digest whose content was uploaded.
-void check_bundle(const JobSpec& spec, const std::function<bool(const std::string&)>& uploaded) {
+// Every file of the spec's bundle has a safe path, listed once and not also a folder of another
+// file, and a digest whose content was uploaded.
+void check_bundle(const JobSpec& spec, const std::function<bool(const std::string&)>& uploaded,
+                  bool restoring) {
+  std::set<std::string> files, folders;
   for (const BundleEntry& f : spec.files) {
     try {
       check_bundle_path(f.path);
     } catch (const BlobError& e) {
       refuse(ErrorCode::InvalidArgument, std::string("files: ") + e.what());
     }
+    std::string path = fs::path(f.path).lexically_normal().generic_string();
+    if (!files.insert(path).second)
+      refuse(ErrorCode::InvalidArgument, "files: '" + clip(f.path) + "' is listed twice");
+    for (size_t slash = path.find('/'); slash != std::string::npos;
+         slash = path.find('/', slash + 1))
+      folders.insert(path.substr(0, slash));
+  }
+  for (const std::string& p : files)
+    if (folders.count(p))
+      refuse(ErrorCode::InvalidArgument,
+             "files: '" + clip(p) + "' is both a file and the folder of another file");
+  for (const BundleEntry& f : spec.files) {
     if (!is_sha256_hex(f.sha256))
       refuse(ErrorCode::InvalidArgument,
              "files: '" + f.path + "' has no valid SHA-256 (64 lower-case hex digits)");
     if (!uploaded(f.sha256))
       refuse(ErrorCode::InvalidArgument,
-             "files: the content of '" + f.path + "' (" + f.sha256 + ") was not uploaded");
+             restoring ? "files: the content of '" + clip(f.path) + "' (" + f.sha256 +
+                             ") is missing from the coordinator's blob store (STATE/blobs: "
+                             "deleted or damaged while the job was stored)"
+                       : "files: the content of '" + clip(f.path) + "' (" + f.sha256 +
+                             ") was not uploaded");
   }
 }
-
-// The scenes of a job's bundle, each file parsed once with the job's overrides.
-class BundleScenes {
- public:
-  BundleScenes(std::string dir, const std::vector<BundleEntry>& bundle, SceneOverrides overrides)
-      : dir_(std::move(dir)), bundle_(bundle), overrides_(std::move(overrides)) {}
-
-  const Scene& operator()(const std::string& path) {
-    auto it = parsed_.find(path);
-    if (it != parsed_.end()) return it->second;
-    bool in_bundle = false;
-    for (const BundleEntry& e : bundle_) in_bundle |= e.path == path;
-    if (!in_bundle)
-      refuse(ErrorCode::InvalidArgument,
-             "scene file '" + path + "' is not in the submitted bundle");
-    try {
-      return parsed_.emplace(path, load_scene(dir_ + "/" + path, overrides_)).first->second;
-    } catch (const std::exception& e) {
-      refuse(ErrorCode::InvalidArgument, e.what());
-    }
-  }
-
- private:
-  std::string dir_;
-  const std::vector<BundleEntry>& bundle_;
-  SceneOverrides overrides_;
-  std::map<std::string, Scene> parsed_;
-};
 
 }  // namespace
 
@@ -169,6 +159,7 @@ struct JobRecord {
   double core_seconds = 0;
   std::string tenant;
   std::string build_id;  // results of this build only; empty: the first merged result's
+  std::string bundle_problem;  // restored without its bundle (its blobs are gone): why
   std::vector<Rect> tiles;
   bool splats = false;
   uint32_t passes = 0;
@@ -193,16 +184,41 @@ bool JobLimits::set(const std::string& name, uint64_t value) {
                                              {"spp", &spp},
                                              {"name_bytes", &name_bytes},
                                              {"path_bytes", &path_bytes},
-                                             {"bundle_files", &bundle_files}};
+                                             {"bundle_files", &bundle_files},
+                                             {"parse_memory_mb", &scene_check.memory_mb},
+                                             {"parse_cpu_seconds", &scene_check.cpu_seconds},
+                                             {"parse_wall_seconds", &scene_check.wall_seconds},
+                                             {"parse_children", &scene_check.children}};
   auto it = fields.find(name);
-  if (it == fields.end()) return false;
-  *it->second = value;
-  return true;
+  if (it != fields.end()) {
+    if (name.rfind("parse_", 0) == 0 && value == 0)
+      throw std::invalid_argument(name + " must be at least 1");
+    if (name == "parse_memory_mb" && (value < 1024 || value > (uint64_t(1) << 40)))
+      throw std::invalid_argument(name +
+                                  " must be between 1024 and 2^40 MiB (the binary maps about 440 "
+                                  "MiB before it reads a scene)");
+    *it->second = value;
+    return true;
+  }
+  if (name.rfind("import_", 0) == 0 && scene_check.import.set(name.substr(7), value)) return true;
+  return false;
 }
 
 std::vector<std::string> JobLimits::names() {
-  return {"pixels_per_frame", "tiles_per_frame", "tasks_per_job", "frames_per_job", "spp",
-          "name_bytes",       "path_bytes",      "bundle_files"};
+  std::vector<std::string> out = {"pixels_per_frame",
+                                  "tiles_per_frame",
+                                  "tasks_per_job",
+                                  "frames_per_job",
+                                  "spp",
+                                  "name_bytes",
+                                  "path_bytes",
+                                  "bundle_files",
+                                  "parse_memory_mb",
+                                  "parse_cpu_seconds",
+                                  "parse_wall_seconds",
+                                  "parse_children"};
+  for (const std::string& n : ImportLimits::names()) out.push_back("import_" + n);
+  return out;
 }
 
 Coordinator::Coordinator(CoreOptions o)
@@ -221,7 +237,8 @@ Coordinator::Coordinator(CoreOptions o)
   counters_.lease_buckets.assign(std::size(CoordinatorMetrics::kLeaseBuckets), 0);
   next_seq_ = store_.next_seq();
   for (const JobStore::StoredWorker& w : store_.workers()) {
-    workers_[w.id] = {w.principal, w.build_id};
+    // A worker of before the restart has the sweep's time from now to call.
+    workers_[w.id] = {w.principal, w.build_id, now()};
     if (!w.refused.empty()) outvoted_[w.id] = w.refused;
   }
   for (const StoredJob& j : store_.jobs()) restore(j);
@@ -245,11 +262,36 @@ void Coordinator::write_folder_state(const JobRecord& job) const {
   }
 }
 
+// Temporary files of atomic writes (write_file_atomic: NAME.tmp.PID.N) that a process killed
+// mid-write left behind: never renamed into place, so nothing reads them.
+static void remove_stale_temporaries(const std::string& dir) {
+  std::error_code ec;
+  std::vector<fs::path> stale;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    size_t at = name.rfind(".tmp.");
+    if (at != std::string::npos && it->is_regular_file(ec) &&
+        name.find_first_not_of("0123456789.", at + 5) == std::string::npos)
+      stale.push_back(it->path());
+  }
+  for (const fs::path& p : stale) fs::remove(p, ec);
+  if (!stale.empty())
+    spdlog::info("removed {} temporary files of writes a stopped process left in {}", stale.size(),
+                 dir);
+}
+
 void Coordinator::recover_folders() {
+  remove_stale_temporaries(options_.state_dir + "/jobs");
+  remove_stale_temporaries(options_.state_dir + "/blobs");
   std::error_code ec;
   std::vector<std::string> lost;
   for (const auto& entry : fs::directory_iterator(options_.state_dir + "/jobs", ec)) {
     std::string id = entry.path().filename().string();
+    if (id.rfind(".submit-", 0) == 0) {  // a submit being checked when the process ended
+      fs::remove_all(entry.path(), ec);
+      continue;
+    }
     unsigned long long n = 0;
     char extra = 0;
     if (!entry.is_directory() || std::sscanf(id.c_str(), "j%llu%c", &n, &extra) != 1) continue;
@@ -316,7 +358,8 @@ Coordinator::~Coordinator() = default;
 
 // Validates a spec against the stored blobs and makes the job's record.
 std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_t seq,
-                                                  const JobSpec& spec, const Caller& caller) {
+                                                  const JobSpec& spec, const Caller& caller,
+                                                  bool restoring) {
   auto job = std::make_shared<JobRecord>();
   job->id = id;
   job->seq = seq;
@@ -324,19 +367,74 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
   check_limits(spec);
   job->build_id = spec.build_id;
-  check_bundle(spec, [&](const std::string& d) { return blob_visible(d, caller); });
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
   try {
-    blobs_.materialize(spec.files, bundle_dir);
-  } catch (const BlobError& e) {
-    refuse(ErrorCode::InvalidArgument, e.what());
+    check_bundle(
+        spec, [&](const std::string& d) { return blob_visible(d, caller); }, restoring);
+    try {
+      blobs_.materialize(spec.files, bundle_dir);
+    } catch (const BlobError& e) {
+      refuse(ErrorCode::InvalidArgument, e.what());
+    } catch (const fs::filesystem_error& e) {  // its message would name the state directory
+      refuse(ErrorCode::Unavailable, "cannot lay out the bundle: " + e.code().message());
+    }
+  } catch (const CoordinatorError& e) {
+    // A stored job whose blobs are gone (the blob store deleted or damaged under a stopped
+    // coordinator) keeps its frames when its scene summaries are in its folder: restore() fails
+    // it with the reason, and fetch still serves the passes its checkpoints hold.
+    if (!restoring) throw;
+    job->bundle_problem = e.what();
   }
-  add_frames(*job, bundle_dir);
+  add_frames(*job, bundle_dir, restoring);
   return job;
 }
 
+// The summary of each scene file of the job: from the scene check (a child process, never this
+// one), or when restoring from the job folder's copy of its answer if this build wrote it.
+std::map<std::string, SceneSummary> Coordinator::scene_summaries(const JobRecord& job,
+                                                                 const std::string& bundle_dir,
+                                                                 bool restoring) const {
+  std::vector<std::string> paths = job_scene_paths(job.spec);
+  for (const std::string& path : paths) {
+    bool in_bundle = false;
+    for (const BundleEntry& e : job.spec.files) in_bundle |= e.path == path;
+    if (!in_bundle)
+      refuse(ErrorCode::InvalidArgument,
+             "scene file '" + clip(path) + "' is not in the submitted bundle");
+  }
+  const std::string cache = options_.state_dir + "/jobs/" + job.id + "/scenes.json";
+  std::vector<SceneSummary> summaries;
+  if (restoring && fs::exists(cache)) {
+    try {
+      nlohmann::json j = nlohmann::json::parse(read_file_bytes(cache));
+      if (j.at("build").get<std::string>() == build_id() && j.at("scenes").size() == paths.size())
+        for (const nlohmann::json& s : j.at("scenes")) summaries.push_back(summary_from_json(s));
+    } catch (const std::exception& e) {
+      spdlog::warn("job {}: {} not used ({}); checking its scenes again", job.id, cache, e.what());
+      summaries.clear();
+    }
+  }
+  if (summaries.empty()) {
+    if (!job.bundle_problem.empty()) refuse(ErrorCode::InvalidArgument, job.bundle_problem);
+    summaries = options_.scene_checker(bundle_dir, job.spec);
+    if (summaries.size() != paths.size())
+      refuse(ErrorCode::Internal, "the scene check answered " + std::to_string(summaries.size()) +
+                                      " scenes for " + std::to_string(paths.size()));
+    nlohmann::json j = {{"build", build_id()}, {"scenes", nlohmann::json::array()}};
+    for (const SceneSummary& s : summaries) j["scenes"].push_back(to_json(s));
+    try {
+      write_file_atomic(cache, j.dump() + "\n");
+    } catch (const std::exception& e) {  // only a restart's shortcut is lost
+      spdlog::warn("job {}: {}", job.id, e.what());
+    }
+  }
+  std::map<std::string, SceneSummary> out;
+  for (size_t i = 0; i < paths.size(); ++i) out.emplace(paths[i], summaries[i]);
+  return out;
+}
+
 // Splits every frame of the job; all must agree on resolution and passes.
-void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
+void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir, bool restoring) {
   const JobSpec& spec = job.spec;
   std::vector<uint32_t> frames;
   if (!spec.frames.empty()) {
@@ -355,23 +453,23 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir) {
   if (tile_size < 8 || tile_size > 4096)
     refuse(ErrorCode::InvalidArgument,
            "tile_size: " + std::to_string(tile_size) + " is outside 8..4096");
-  BundleScenes scene_for(bundle_dir, spec.files, spec.overrides);
   if (frames.empty()) frames.push_back(0);  // a job without a frame range renders frame 0
+  std::map<std::string, SceneSummary> scene_of = scene_summaries(job, bundle_dir, restoring);
   for (uint32_t number : frames) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
     f->scene_path = expand_frame_pattern(spec.scene_path, number);
-    const Scene& scene = scene_for(f->scene_path);
-    uint64_t pixels = uint64_t(scene.film.width) * uint64_t(scene.film.height);
+    const SceneSummary& scene = scene_of.at(f->scene_path);
+    uint64_t pixels = uint64_t(scene.width) * uint64_t(scene.height);
     if (pixels > limits.pixels_per_frame)
       refuse(ErrorCode::ResourceExhausted,
-             "frame " + std::to_string(number) + ": " + std::to_string(scene.film.width) + "x" +
-                 std::to_string(scene.film.height) + " is " + std::to_string(pixels) +
+             "frame " + std::to_string(number) + ": " + std::to_string(scene.width) + "x" +
+                 std::to_string(scene.height) + " is " + std::to_string(pixels) +
                  " pixels; the limit pixels_per_frame is " +
                  std::to_string(limits.pixels_per_frame));
-    if (scene.render.spp > limits.spp)
+    if (scene.spp > limits.spp)
       refuse(ErrorCode::ResourceExhausted,
-             "spp " + std::to_string(scene.render.spp) +
+             "spp " + std::to_string(scene.spp) +
                  " is over the limit spp = " + std::to_string(limits.spp));
     FramePlan plan = plan_frame(scene, number, tile_size);
     if (plan.tiles.size() > limits.tiles_per_frame)
@@ -445,13 +543,17 @@ void Coordinator::restore(const StoredJob& stored) {
   if (!spec->request_id.empty()) requests_[{stored.tenant, spec->request_id}] = stored.id;
   std::shared_ptr<JobRecord> job;
   try {
-    job = build_job(stored.id, stored.seq, *spec);
+    job = build_job(stored.id, stored.seq, *spec, Caller{}, true);
     job->state = JobState(stored.state);
     job->error = stored.error;
     job->submitted_unix = stored.submitted_unix;
     job->core_seconds = stored.core_seconds;
     job->tenant = stored.tenant;
     if (job->build_id.empty()) job->build_id = stored.build_id;
+    if (!job->bundle_problem.empty() && !terminal(job->state))
+      set_state(*job, JobState::Failed,
+                "the coordinator could not restore its scene bundle: " + job->bundle_problem +
+                    "; the passes merged before are kept (fetch)");
     scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
                        spec->priority);
     if (terminal(job->state)) {
@@ -512,6 +614,16 @@ void Coordinator::check_limits(const JobSpec& spec) const {
   too_long("frames", spec.frames, l.path_bytes, "path_bytes");
   too_long("build_id", spec.build_id, l.name_bytes, "name_bytes");
   too_long("request_id", spec.request_id, l.name_bytes, "name_bytes");
+  for (const auto& [what, text] : {std::pair<const char*, const std::string*>{"name", &spec.name},
+                                   {"scene_path", &spec.scene_path},
+                                   {"frames", &spec.frames},
+                                   {"build_id", &spec.build_id},
+                                   {"request_id", &spec.request_id}})
+    if (std::string why = text_problem(*text); !why.empty())
+      refuse(ErrorCode::InvalidArgument,
+             std::string(what) + ": " + why +
+                 " (names and paths are printed in terminals and logs: control characters and "
+                 "bytes that are not UTF-8 are refused)");
   if (spec.files.size() > l.bundle_files)
     refuse(ErrorCode::ResourceExhausted, "the bundle has " + std::to_string(spec.files.size()) +
                                              " files; the limit bundle_files is " +
@@ -567,7 +679,7 @@ std::string Coordinator::submitted_before(const JobSpec& spec, const Caller& cal
 }
 
 std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
-  uint64_t seq;
+  std::string staging;
   {
     std::lock_guard lock(mu_);
     if (std::string id = submitted_before(spec, caller); !id.empty()) {
@@ -575,17 +687,20 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
                    clip(spec.request_id), id);
       return id;
     }
-    seq = next_seq_++;
+    // Checked in a folder of its own: the job takes its id once it is accepted, so a refused
+    // submit leaves no gap in the ids (recover_folders removes such folders after a crash).
+    staging = ".submit-" + options_.instance + "-" + std::to_string(next_staging_++);
   }
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "j%06llu", (unsigned long long)seq);
-  std::string id = buf;
+  const std::string jobs_dir = options_.state_dir + "/jobs/";
+  auto remove = [&](const std::string& name) {
+    std::error_code ec;  // a refused job leaves nothing behind
+    fs::remove_all(jobs_dir + name, ec);
+  };
   std::shared_ptr<JobRecord> job;
   try {
-    job = build_job(id, seq, spec, caller);
+    job = build_job(staging, 0, spec, caller);
   } catch (...) {
-    std::error_code ec;  // a refused job leaves nothing behind
-    fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
+    remove(staging);
     throw;
   }
   job->submitted_unix = int64_t(unix_now());
@@ -593,10 +708,24 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   std::lock_guard lock(mu_);
   // The same request, retried while this one was being built: the first to get here wins.
   if (std::string first = submitted_before(spec, caller); !first.empty()) {
-    std::error_code ec;
-    fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
+    remove(staging);
     return first;
   }
+  uint64_t seq = next_seq_++;
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "j%06llu", (unsigned long long)seq);
+  std::string id = buf;
+  std::error_code ec;
+  fs::rename(jobs_dir + staging, jobs_dir + id, ec);
+  if (ec) {
+    remove(staging);
+    refuse(ErrorCode::Unavailable, "cannot store the job: " + ec.message());
+  }
+  job->id = id;
+  job->seq = seq;
+  for (auto& f : job->frames)
+    f->checkpoint =
+        std::make_unique<FrameCheckpoint>(jobs_dir + id + "/frame-" + std::to_string(f->number));
   StoredJob record{id,
                    seq,
                    encode_job_spec(spec),
@@ -610,8 +739,7 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
     write_folder_record(record);  // first: a folder without it is a submit that never finished
     store_.insert_job(record);
   } catch (const std::exception& e) {
-    std::error_code ec;
-    fs::remove_all(options_.state_dir + "/jobs/" + id, ec);
+    remove(id);
     refuse(ErrorCode::Unavailable, std::string("cannot store the job: ") + e.what());
   }
   if (!spec.request_id.empty()) requests_[{caller.tenant, spec.request_id}] = id;
@@ -639,9 +767,10 @@ std::shared_ptr<JobRecord> Coordinator::find_or_throw(const std::string& id) con
 
 std::shared_ptr<JobRecord> Coordinator::find_for(const std::string& id,
                                                  const Caller& caller) const {
-  std::shared_ptr<JobRecord> job = find_or_throw(id);
-  if (!caller.all_tenants && job->tenant != caller.tenant)
-    refuse(ErrorCode::PermissionDenied, "job " + id + " belongs to another tenant");
+  std::shared_ptr<JobRecord> job = find(id);
+  // Another tenant's job is refused as a missing one: the answer tells no tenant which ids exist.
+  if (!job || (!caller.all_tenants && job->tenant != caller.tenant))
+    refuse(ErrorCode::NotFound, "no job '" + clip(id) + "'");
   return job;
 }
 
@@ -746,9 +875,12 @@ void Coordinator::cancel(const std::string& id, const Caller& caller) {
   {
     std::lock_guard lock(mu_);
     job = find_for(id, caller);
+    if (job->state == JobState::Cancelled) return;  // idempotent: a second or retried cancel
     if (terminal(job->state))
       refuse(ErrorCode::FailedPrecondition,
-             "job " + id + " has already ended (" + job_state_name(job->state) + ")");
+             "job " + id + " has already " +
+                 (job->state == JobState::Completed ? "completed" : "failed") +
+                 "; there is nothing to cancel");
     scheduler_.cancel_job(id);
     set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
   }
@@ -789,6 +921,27 @@ FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame,
 // ---------------------------------------------------------------------------------------------
 // Workers
 
+// A registration no call has used for kUnusedWorkerSeconds (a worker that registered and died, or
+// a client registering in a loop) is forgotten, in memory and in the store; a live worker that
+// comes back is answered NOT_FOUND and registers again. Swept at most once a minute, at a
+// registration.
+void Coordinator::forget_unused_workers() {
+  const double expiry = std::max(kUnusedWorkerSeconds, 10 * options_.lease_seconds);
+  if (now() - last_worker_sweep_ < 60) return;
+  last_worker_sweep_ = now();
+  std::vector<std::string> gone;
+  for (const auto& [id, w] : workers_) {
+    if (!w.used && !outvoted_.count(id) && now() - w.registered_at > expiry) gone.push_back(id);
+  }
+  for (const std::string& id : gone) {
+    workers_.erase(id);
+    last_seen_.erase(id);
+    store_.delete_worker(id);
+  }
+  if (!gone.empty())
+    spdlog::info("forgot {} worker registrations unused for {:g} s", gone.size(), expiry);
+}
+
 Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& caller) {
   std::lock_guard lock(mu_);
   std::string host;
@@ -799,8 +952,9 @@ Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& cal
   r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
   r.lease_seconds = uint32_t(std::max(1.0, options_.lease_seconds));
   r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
+  forget_unused_workers();
   store_.insert_worker({r.worker_id, caller.principal, w.build_id.substr(0, 256)});
-  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256)};
+  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256), now()};
   last_seen_[r.worker_id] = now();
   spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
                w.cores, clip(w.build_id), clip(w.isa));
@@ -821,6 +975,7 @@ void Coordinator::check_worker(const std::string& worker_id, const Caller& calle
            "worker " + worker_id + " was registered with another token");
   }
   last_seen_[worker_id] = now();
+  it->second.used = true;
 }
 
 bool Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
@@ -916,12 +1071,28 @@ uint32_t Coordinator::renew(const std::string& worker_id, const std::string& lea
              "stopped)");
 }
 
-std::string Coordinator::blob(const std::string& sha256) const {
+std::string Coordinator::blob(const std::string& sha256, const Caller& caller) const {
   if (!is_sha256_hex(sha256))
     refuse(ErrorCode::InvalidArgument,
-           "'" + sha256 + "' is not a SHA-256 (64 lower-case hex digits)");
+           "'" + clip(sha256) + "' is not a SHA-256 (64 lower-case hex digits)");
+  if (!caller.all_tenants) {
+    std::lock_guard lock(mu_);
+    bool leased = false;
+    for (const std::string& id : scheduler_.leased_jobs([&](const std::string& w) {
+           auto it = workers_.find(w);
+           return it != workers_.end() && it->second.principal == caller.principal;
+         })) {
+      std::shared_ptr<JobRecord> job = find(id);
+      if (!job) continue;
+      for (const BundleEntry& f : job->spec.files) leased |= f.sha256 == sha256;
+    }
+    // The same answer as for a blob the store lacks: a digest query reveals nothing.
+    if (!leased)
+      refuse(ErrorCode::NotFound, "no blob " + sha256 + " in a job your workers hold a lease of");
+  }
   std::optional<std::string> bytes = blobs_.get(sha256);
-  if (!bytes) refuse(ErrorCode::NotFound, "no blob " + sha256);
+  if (!bytes)
+    refuse(ErrorCode::NotFound, "no blob " + sha256 + " in a job your workers hold a lease of");
   return std::move(*bytes);
 }
 
@@ -1019,6 +1190,16 @@ bool Coordinator::check_upload(const std::string& worker_id, const std::string& 
   return check_lease(worker_id, lease_id, &task) && !scheduler_.settled(task);
 }
 
+void Coordinator::refuse_upload(const std::string& worker_id, const std::string& lease_id,
+                                const TaskRef& task, const std::string& why) {
+  spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(task),
+               clip(worker_id), why);
+  std::lock_guard lock(mu_);
+  ++counters_.results_refused;
+  scheduler_.refuse_result(lease_id, now());  // counted against the worker, not the job
+  store_.result_refused(task.job_id, task.frame, task.pass, task.tile, worker_id, why);
+}
+
 bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   if (!check_upload(r.worker_id, r.lease_id, r.task, caller)) return false;  // not needed
   std::shared_ptr<JobRecord> job;
@@ -1037,13 +1218,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
                                                 job->build_id + "'; this one is from '" +
                                                 clip(buffer.header.build_id) + "'");
   } catch (const CoordinatorError& e) {
-    spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(r.task),
-                 r.worker_id, e.what());
-    std::lock_guard lock(mu_);
-    ++counters_.results_refused;
-    scheduler_.refuse_result(r.lease_id, now());  // counted against the worker, not the job
-    store_.result_refused(r.task.job_id, r.task.frame, r.task.pass, r.task.tile, r.worker_id,
-                          e.what());
+    refuse_upload(r.worker_id, r.lease_id, r.task, e.what());
     throw;
   }
   std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
@@ -1146,7 +1321,7 @@ void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
   check_worker(report.worker_id, caller);
   check_lease(report.worker_id, report.lease_id, nullptr);
   std::optional<TaskRef> task = scheduler_.lease_task(report.lease_id);
-  std::string message = report.message.substr(0, 4096);  // it becomes part of the job's error
+  std::string message = printable(report.message.substr(0, 4096));  // part of the job's error
   switch (scheduler_.fail(report.lease_id, message, report.handed_back, now())) {
     case LeaseOutcome::NotFound:
       refuse(ErrorCode::NotFound, "no lease '" + report.lease_id + "'");
@@ -1173,6 +1348,8 @@ CoordinatorMetrics Coordinator::metrics() const {
   std::lock_guard lock(mu_);
   CoordinatorMetrics m;
   m.counters = counters_;
+  m.counters.calls_refused = refused_calls_;
+  m.counters.refusal_lines_suppressed = suppressed_refusal_lines_;
   m.storage_ok = storage_problem_.empty();
   for (const auto& [id, w] : workers_) m.workers_registered += !outvoted_.count(id);
   for (const auto& [id, seen] : last_seen_)

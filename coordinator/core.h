@@ -12,6 +12,7 @@
 // its code; anything else thrown is an internal error.
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -24,7 +25,9 @@
 #include <string_view>
 #include <vector>
 
+#include "coordinator/errors.h"
 #include "coordinator/job_store.h"
+#include "coordinator/scene_check.h"
 #include "coordinator/scheduler.h"
 #include "engine/progress.h"
 #include "engine/sample_buffer.h"
@@ -32,24 +35,6 @@
 #include "farm/job.h"
 
 namespace rf {
-
-enum class ErrorCode {
-  InvalidArgument,     // malformed request, frame range, bundle, scene or sample buffer
-  NotFound,            // unknown job, frame, task, lease or blob
-  FailedPrecondition,  // a lease that has ended; a frame with no pass yet; a job that has ended
-  PermissionDenied,    // another tenant's job; another worker's lease or registration; a role
-  Unauthenticated,     // (the service's) a missing, unknown or expired token
-  ResourceExhausted,   // over a configured limit
-  DataLoss,            // a payload's checksum does not match
-  Unavailable,         // shutting down
-  Internal,            // the coordinator could not do what it should (e.g. a disk write failed)
-};
-
-struct CoordinatorError : std::runtime_error {
-  CoordinatorError(ErrorCode code, const std::string& message)
-      : std::runtime_error(message), code(code) {}
-  ErrorCode code;
-};
 
 // The numbers are rayfarm.v1.JobState's and are stored in jobs.sqlite: state directories
 // written by earlier versions read the same.
@@ -146,7 +131,11 @@ struct JobLimits {
   uint64_t name_bytes = 256;   // the job's name
   uint64_t path_bytes = 1024;  // the scene path and each bundle path
   uint64_t bundle_files = 10000;
-  // Sets the limit called `name` (the field's name); false if there is no such limit.
+  // The scene check's budget (scene_check.h), by the names parse_memory_mb, parse_cpu_seconds,
+  // parse_wall_seconds, parse_children, import_files, import_bytes, import_elements.
+  SceneCheckLimits scene_check;
+  // Sets the limit called `name` (the field's name); false if there is no such limit. Throws
+  // std::invalid_argument for a value the limit cannot take (0 for a scene check's budget).
   bool set(const std::string& name, uint64_t value);
   static std::vector<std::string> names();
 };
@@ -169,6 +158,8 @@ struct CoordinatorMetrics {
     uint64_t lease_calls = 0;             // lease() calls answered, with or without a task
     double lease_seconds = 0;             // their time in the core: lock wait, scheduling, the row
     std::vector<uint64_t> lease_buckets;  // per bound of kLeaseBuckets (not cumulative)
+    uint64_t calls_refused = 0;           // calls the service's gate refused (tokens, roles)
+    uint64_t refusal_lines_suppressed = 0;  // of those, not logged (the log's rate limit)
   };
   static constexpr double kLeaseBuckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
                                              0.05,   0.1,   0.25,   0.5,   1,    2.5};
@@ -203,6 +194,9 @@ struct CoreOptions {
   std::string instance;
   // Seconds on a monotonic clock (leases and ETAs use differences only); empty: steady_clock.
   std::function<double()> clock;
+  // Parses and summarises a submitted job's scenes (scene_check.h). Required: the server runs
+  // them in bounded child processes (child_scene_checker); tests may parse in-process.
+  SceneChecker scene_checker;
 };
 
 struct JobRecord;
@@ -249,7 +243,10 @@ class Coordinator {
   // The lease's length from now, in seconds.
   uint32_t renew(const std::string& worker_id, const std::string& lease_id,
                  const Caller& caller = {});
-  std::string blob(const std::string& sha256) const;
+  // A scene blob, for a worker: a caller without all_tenants gets only blobs of the bundles of
+  // jobs that one of its principal's workers holds a live lease in (NotFound otherwise, the same
+  // answer as for a blob the store lacks).
+  std::string blob(const std::string& sha256, const Caller& caller = {}) const;
   // Whether an upload may start: the job and task exist and the caller's worker holds the
   // task's lease (current, or expired with the task not yet done). Called on an upload's header,
   // before any of its bytes are buffered; complete() checks again.
@@ -263,6 +260,11 @@ class Coordinator {
   // holds a non-finite sum is refused with InvalidArgument and logged against its worker.
   bool complete(const TaskResult& result, const Caller& caller = {});
   void fail(const TaskFailureReport& report, const Caller& caller = {});
+  // An upload that check_upload let start was refused before it became a result (its chunks
+  // out of order, over the size limit, or failing their checksum): as a refused result, its lease
+  // ends, the task is queued again, and the refusal counts against the worker in the job.
+  void refuse_upload(const std::string& worker_id, const std::string& lease_id, const TaskRef& task,
+                     const std::string& why);
 
   // Refuses leases and ends watches from now on.
   void shut_down();
@@ -275,13 +277,22 @@ class Coordinator {
   void set_storage_listener(std::function<void(const std::string& problem)> listener);
 
   CoordinatorMetrics metrics() const;
+  // A call the service refused before it reached the core; `logged` false when the refusal
+  // log's rate limit left it out. Lock-free: a flood of refused calls never waits on mu_.
+  void note_refused_call(bool logged) {
+    ++refused_calls_;
+    if (!logged) ++suppressed_refusal_lines_;
+  }
 
  private:
   double now() const { return options_.clock(); }
   std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec,
-                                       const Caller& caller = {});
+                                       const Caller& caller = {}, bool restoring = false);
+  std::map<std::string, SceneSummary> scene_summaries(const JobRecord& job,
+                                                      const std::string& bundle_dir,
+                                                      bool restoring) const;
   bool blob_visible(const std::string& sha256, const Caller& caller) const;
-  void add_frames(JobRecord& job, const std::string& bundle_dir);
+  void add_frames(JobRecord& job, const std::string& bundle_dir, bool restoring);
   void restore(const StoredJob& stored);
   // A stored job that cannot be restored: kept, failed with the reason, with no frames.
   void restore_failed(const StoredJob& stored, const std::string& why);
@@ -335,9 +346,14 @@ class Coordinator {
   // The job a (tenant, request id) already made, checked against this spec; "" if none. Under mu_.
   std::string submitted_before(const JobSpec& spec, const Caller& caller) const;
   struct WorkerRecord {
-    std::string principal;  // the identity that registered it
-    std::string build_id;   // the build it said it runs
+    std::string principal;      // the identity that registered it
+    std::string build_id;       // the build it said it runs
+    double registered_at = 0;   // now() at its registration, or at this coordinator's start
+    mutable bool used = false;  // a call other than Register named it (check_worker)
   };
+  static constexpr double kUnusedWorkerSeconds = 600;
+  double last_worker_sweep_ = -1e300;
+  void forget_unused_workers();  // under mu_
   std::map<std::string, WorkerRecord> workers_;
   // Verification (CoreOptions::verify_fraction): each selected task's results so far, one per
   // worker, until two agree; and the workers outvoted, with why.
@@ -347,8 +363,9 @@ class Coordinator {
   std::function<void(const std::string&)> storage_listener_;
   void storage_failed(const std::string& why);  // under mu_
   void storage_ok();                            // under mu_
-  uint64_t next_seq_ = 1, next_worker_ = 1;
+  uint64_t next_seq_ = 1, next_worker_ = 1, next_staging_ = 1;
   CoordinatorMetrics::Counters counters_;            // under mu_
+  std::atomic<uint64_t> refused_calls_{0}, suppressed_refusal_lines_{0};
   mutable std::map<std::string, double> last_seen_;  // worker id -> now() of its last call
 };
 

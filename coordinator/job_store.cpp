@@ -67,6 +67,11 @@ StateDirLock::StateDirLock(const std::string& dir) {
   if (dir.empty()) throw StoreError("the coordinator's state directory is not set");
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
+  if (ec)
+    throw StoreError(dir + ": cannot create the state directory: " + ec.message() +
+                     (ec == std::errc::read_only_file_system || ec == std::errc::permission_denied
+                          ? " (the coordinator needs a writable --state-dir)"
+                          : ""));
   std::string path = dir + "/lock";
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) throw StoreError(path + ": cannot open: " + std::strerror(errno));
@@ -114,8 +119,19 @@ JobStore::JobStore(const std::string& path) : path_(path) {
     db_ = nullptr;
     throw;
   } catch (const StoreError& e) {
+    int code = db_ ? sqlite3_errcode(db_) : 0;
     sqlite3_close(db_);
     db_ = nullptr;
+    // Not damage: a full disk or a file that cannot be written. Moving the database aside, the
+    // advice for damage, would not help and would lose nothing but time.
+    if (code == SQLITE_FULL)
+      throw StoreError(std::string(e.what()) +
+                       ". The state directory's disk is full: free space there and start again "
+                       "(the job database is not damaged)");
+    if (code == SQLITE_READONLY || code == SQLITE_CANTOPEN || code == SQLITE_PERM)
+      throw StoreError(std::string(e.what()) +
+                       ". The job database cannot be written: give the coordinator a writable "
+                       "--state-dir");
     throw StoreDamaged(std::string(e.what()) + damage_advice());
   }
 }
@@ -260,6 +276,11 @@ std::vector<JobStore::StoredWorker> JobStore::workers() const {
   std::vector<StoredWorker> out;
   while (s.step()) out.push_back({s.text(0), s.text(1), s.text(2), s.text(3)});
   return out;
+}
+
+void JobStore::delete_worker(const std::string& id) {
+  Stmt s(db_, "DELETE FROM workers WHERE id = ?", path_);
+  s.bind(id).step();
 }
 
 void JobStore::refuse_worker(const std::string& id, const std::string& why) {

@@ -86,6 +86,7 @@ class JobStore {
   };
   void insert_worker(const StoredWorker& worker);
   void refuse_worker(const std::string& worker_id, const std::string& why);
+  void delete_worker(const std::string& worker_id);
   std::vector<StoredWorker> workers() const;
   void set_build(const std::string& job_id, const std::string& build_id);
 

@@ -71,6 +71,12 @@ std::vector<MetricFamily> metric_families(const CoordinatorMetrics& m) {
   out.push_back(single("rayfarm_results_refused_total",
                        "Task results refused by the checks (counted against their worker)", C,
                        double(c.results_refused)));
+  out.push_back(single("rayfarm_calls_refused_total",
+                       "Calls refused for their token or role (UNAUTHENTICATED, PERMISSION_DENIED)",
+                       C, double(c.calls_refused)));
+  out.push_back(single("rayfarm_refusal_log_lines_suppressed_total",
+                       "Refused calls left out of the log by its rate limit", C,
+                       double(c.refusal_lines_suppressed)));
   out.push_back(single("rayfarm_samples_merged_total", "Camera samples in merged task results", C,
                        double(c.samples_merged)));
   out.push_back(single("rayfarm_merged_bytes_total", "Encoded sample-buffer bytes merged", C,
@@ -150,7 +156,12 @@ class MetricsServer::Collector : public prometheus::Collectable {
 MetricsServer::MetricsServer(const std::string& listen, const Coordinator& core)
     : collector_(std::make_shared<Collector>(core)) {
   try {
-    exposer_ = std::make_unique<prometheus::Exposer>(listen, /*num_threads=*/2);
+    // civetweb serves a connection per thread: 16 threads, and a connection that sends no
+    // request within 500 ms is closed, so idle connections cannot hold the scrape off for long
+    // (docs/security.md, "Metrics").
+    exposer_ = std::make_unique<prometheus::Exposer>(
+        std::vector<std::string>{"listening_ports", listen, "num_threads", "16",
+                                 "request_timeout_ms", "500", "enable_keep_alive", "no"});
   } catch (const std::exception& e) {
     throw std::runtime_error("coordinator: cannot listen on --metrics-listen " + listen + " (" +
                              std::string(e.what()) + ")");

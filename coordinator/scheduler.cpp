@@ -397,6 +397,14 @@ std::string Scheduler::job_error(const std::string& job_id) const {
   return it == jobs_.end() ? "" : it->second.error;
 }
 
+std::set<std::string> Scheduler::leased_jobs(
+    const std::function<bool(const std::string& worker_id)>& whose) const {
+  std::set<std::string> out;
+  for (const auto& [id, l] : leases_)
+    if (l.live && whose(l.worker_id)) out.insert(l.task.job_id);
+  return out;
+}
+
 bool Scheduler::work_left_for(const std::string& worker_id, const JobFilter& may) const {
   for (const auto& [id, j] : jobs_) {
     if (j.failed || j.cancelled || (may && !may(id))) continue;

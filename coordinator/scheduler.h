@@ -108,6 +108,9 @@ class Scheduler {
 
   bool job_failed(const std::string& job_id) const;
   std::string job_error(const std::string& job_id) const;  // the failing workers' messages
+  // The jobs of the live leases held by workers for which `whose` is true.
+  std::set<std::string> leased_jobs(
+      const std::function<bool(const std::string& worker_id)>& whose) const;
   // Queued or leased tasks this worker could still get (for --exit-when-idle).
   bool work_left_for(const std::string& worker_id, const JobFilter& may = {}) const;
   size_t queued_tasks() const;

@@ -6,6 +6,9 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <openssl/err.h>
+#include <openssl/pem.h>
+#include <openssl/x509.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
 
@@ -65,6 +68,35 @@ enum class Access { Client, Worker };
 // goes through guarded(), which asks the gate first; gRPC C++ server interceptors cannot end a
 // call with a status of their choosing, so this is the interceptor. The gate serves plaintext
 // and TLS alike: the token travels as call metadata ("authorization: Bearer TOKEN").
+// The refusal log's rate limit: a token bucket of kBurst lines refilled at kPerSecond, so a client
+// hammering with a bad token costs the log at most that (the metric counts every refusal).
+class LogBudget {
+ public:
+  static constexpr double kPerSecond = 20, kBurst = 100;
+  // True when a line may be logged; *suppressed is how many were not since the last one.
+  bool take(uint64_t* suppressed) {
+    std::lock_guard lock(mu_);
+    auto now = std::chrono::steady_clock::now();
+    tokens_ =
+        std::min(kBurst, tokens_ + kPerSecond * std::chrono::duration<double>(now - last_).count());
+    last_ = now;
+    if (tokens_ < 1) {
+      ++suppressed_;
+      return false;
+    }
+    tokens_ -= 1;
+    *suppressed = suppressed_;
+    suppressed_ = 0;
+    return true;
+  }
+
+ private:
+  std::mutex mu_;
+  double tokens_ = kBurst;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+  uint64_t suppressed_ = 0;
+};
+
 class Gate {
  public:
   Gate(std::string token_file, bool worker_certs)
@@ -82,9 +114,20 @@ class Gate {
   // The caller of this call, or a refusal: UNAUTHENTICATED without an accepted token,
   // PERMISSION_DENIED for a token of the wrong role. Refusals are logged with the peer and
   // the token's id (a digest prefix), never the token.
+  // Counts refusals in the core's metrics from now on.
+  void count_in(Coordinator* core) { core_ = core; }
+
   Caller admit(ServerContext* ctx, Access need, const char* method) const {
     auto deny = [&](ErrorCode code, const std::string& why) {
-      spdlog::warn("refused {} from {}: {}", method, ctx->peer(), why);
+      uint64_t suppressed = 0;
+      bool log = log_budget_.take(&suppressed);
+      if (core_) core_->note_refused_call(log);
+      if (log)
+        spdlog::warn("refused {} from {}: {}{}", method, ctx->peer(), why,
+                     suppressed ? " (" + std::to_string(suppressed) +
+                                      " refusals before this one not logged: over " +
+                                      std::to_string(LogBudget::kPerSecond) + " a second)"
+                                : std::string());
       throw CoordinatorError(code, why);
     };
     if (need == Access::Worker && worker_certs_) {
@@ -133,9 +176,52 @@ class Gate {
  private:
   std::string file_;
   bool worker_certs_;  // mutual TLS: worker methods need a verified client certificate
+  Coordinator* core_ = nullptr;
+  mutable LogBudget log_budget_;
   mutable std::mutex mu_;
   std::shared_ptr<const TokenTable> table_;
 };
+
+// The PEM files of --tls-cert, --tls-key and --tls-client-ca checked with OpenSSL before gRPC
+// sees them (gRPC says only "cannot listen"): certificates, a private key, and the key the
+// certificate's. Throws naming the flag, the file and what is wrong.
+void check_tls_files(const CoordinatorOptions& o, const std::string& cert, const std::string& key,
+                     const std::string& ca) {
+  auto parse_cert = [](const std::string& pem) {
+    BIO* b = BIO_new_mem_buf(pem.data(), int(pem.size()));
+    X509* x = b ? PEM_read_bio_X509(b, nullptr, nullptr, nullptr) : nullptr;
+    BIO_free(b);
+    return x;
+  };
+  auto looks_like_key = [](const std::string& pem) {
+    return pem.find("PRIVATE KEY-----") != std::string::npos;
+  };
+  X509* x = parse_cert(cert);
+  if (!x)
+    throw std::runtime_error(
+        "coordinator: --tls-cert " + o.tls_cert + " holds no PEM certificate" +
+        (looks_like_key(cert) ? " but a private key: are --tls-cert and --tls-key swapped?" : ""));
+  BIO* b = BIO_new_mem_buf(key.data(), int(key.size()));
+  EVP_PKEY* k = b ? PEM_read_bio_PrivateKey(b, nullptr, nullptr, nullptr) : nullptr;
+  BIO_free(b);
+  bool matches = k && X509_check_private_key(x, k) == 1;
+  X509_free(x);
+  EVP_PKEY_free(k);
+  ERR_clear_error();
+  if (!k)
+    throw std::runtime_error("coordinator: --tls-key " + o.tls_key +
+                             " holds no PEM private key (an encrypted key is not read either)");
+  if (!matches)
+    throw std::runtime_error("coordinator: --tls-key " + o.tls_key +
+                             " is not the key of the certificate in --tls-cert " + o.tls_cert);
+  if (!ca.empty()) {
+    X509* c = parse_cert(ca);
+    if (!c)
+      throw std::runtime_error("coordinator: --tls-client-ca " + o.tls_client_ca +
+                               " holds no PEM certificate");
+    X509_free(c);
+  }
+}
 
 // TLS server credentials from the options' PEM files, or plaintext when none is given.
 std::shared_ptr<grpc::ServerCredentials> server_credentials(const CoordinatorOptions& o) {
@@ -143,6 +229,8 @@ std::shared_ptr<grpc::ServerCredentials> server_credentials(const CoordinatorOpt
     return grpc::InsecureServerCredentials();
   if (o.tls_cert.empty() || o.tls_key.empty())
     throw std::runtime_error("coordinator: TLS needs both --tls-cert and --tls-key");
+  check_tls_files(o, read_file_bytes(o.tls_cert), read_file_bytes(o.tls_key),
+                  o.tls_client_ca.empty() ? "" : read_file_bytes(o.tls_client_ca));
   // Client certificates: verified when sent; the gate requires one for the worker methods.
   grpc::SslServerCredentialsOptions ssl(o.tls_client_ca.empty()
                                             ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
@@ -385,8 +473,9 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
   }
   Status FetchBlob(ServerContext* ctx, const pb::BlobRequest* r,
                    grpc::ServerWriter<pb::Chunk>* w) override {
-    return guarded(g_, ctx, Access::Worker, "FetchBlob", [&](const Caller&) {
-      write_chunks(w, c_.blob(r->sha256()), [](pb::Chunk&& c, bool) { return std::move(c); });
+    return guarded(g_, ctx, Access::Worker, "FetchBlob", [&](const Caller& caller) {
+      write_chunks(w, c_.blob(r->sha256(), caller),
+                   [](pb::Chunk&& c, bool) { return std::move(c); });
     });
   }
   // A header, then the sample buffer in chunks. The header is checked (job, task, lease held
@@ -406,11 +495,16 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
       }
       UploadSlot slot(*this, header.worker_id());
       ChunkAssembler chunks(o_.max_buffer_bytes);
-      while (r->Read(&msg)) {
-        if (!msg.has_chunk()) bad_request("only chunks may follow the header");
-        check_chunks(chunks.add(msg.chunk()), "sample buffer", chunks);
+      try {
+        while (r->Read(&msg)) {
+          if (!msg.has_chunk()) bad_request("only chunks may follow the header");
+          check_chunks(chunks.add(msg.chunk()), "sample buffer", chunks);
+        }
+        check_chunks(chunks.finish(), "sample buffer", chunks);
+      } catch (const CoordinatorError& e) {
+        c_.refuse_upload(header.worker_id(), header.lease_id(), *task, e.what());
+        throw;
       }
-      check_chunks(chunks.finish(), "sample buffer", chunks);
       o->set_accepted(c_.complete(
           {header.worker_id(), header.lease_id(), std::move(*task), chunks.take()}, caller));
     });
@@ -493,7 +587,9 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   core.window_frames = o.window_frames;
   core.limits = o.limits;
   core.verify_fraction = o.verify_fraction;
+  core.scene_checker = child_scene_checker(o.scene_check_binary, o.limits.scene_check);
   impl_->core = std::make_unique<Coordinator>(core);
+  impl_->gate->count_in(impl_->core.get());
   impl_->jobs = std::make_unique<JobServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
   impl_->workers = std::make_unique<WorkerServiceImpl>(*impl_->core, impl_->options, *impl_->gate);
   grpc::EnableDefaultHealthCheckService(true);
@@ -508,6 +604,12 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   b.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
   // A second coordinator on the same port must fail to bind, not share the port's clients.
   b.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  // Connections that never finish their handshake, that sit idle, or whose peer is gone (a
+  // half-open TCP connection): closed, so they cannot pile up (docs/security.md).
+  b.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, 10 * 1000);
+  b.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, 5 * 60 * 1000);
+  b.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 60 * 1000);
+  b.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 20 * 1000);
   impl_->server = b.BuildAndStart();
   if (!impl_->server || impl_->port == 0)
     throw std::runtime_error("coordinator: cannot listen on " + o.listen);

@@ -15,9 +15,12 @@
 #     minimal schemas in deploy/k8s/schemas/).
 # (The Slurm coordinator-less mode runs for real in tests/deploy_test.cpp; the metrics and the
 # dashboard's queries in tests/metrics_test.cpp.)
-# Installs what it needs: Debian packages, and pinned PyPI tools in a venv under
-# ${RAYFARM_DEPLOY_VENV:-~/.cache/rayfarm-deploy/venv}. Budget on the 2-core CI machine: about a
-# minute once the packages are there (the first run fetches about 60 MB).
+# With --install (CI passes it) it installs the Debian packages it needs with apt-get (as root, or
+# through sudo); without, it names the missing ones and exits 1. It always puts pinned PyPI tools
+# in a venv under ${RAYFARM_DEPLOY_VENV:-~/.cache/rayfarm-deploy/venv}. Budget on the 2-core CI
+# machine: about a minute once the packages are there (the first run fetches about 60 MB).
+#
+#   deploy/check.sh [--install]
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${RAYFARM_BUILD_DIR:-$ROOT/build}"
@@ -27,7 +30,10 @@ log() { printf 'deploy-check: %s\n' "$*" >&2; }
 status=0
 fail() { log "$*"; status=1; }
 
-"$ROOT/tools/install-debian-packages.sh" shellcheck docker-compose python3-venv binutils
+install=(--check)
+[ "${1:-}" = "--install" ] && install=()
+"$ROOT/tools/install-debian-packages.sh" "${install[@]}" shellcheck docker-compose python3-venv \
+  binutils
 
 if [ ! -x "$VENV/bin/kubernetes-validate" ]; then
   python3 -m venv "$VENV"
@@ -38,7 +44,7 @@ export PATH="$VENV/bin:$PATH"
 # ---- shell scripts
 for f in "$ROOT"/deploy/slurm/*.sbatch "$ROOT"/deploy/*.sh "$ROOT"/tools/*.sh; do
   shell=bash
-  head -1 "$f" | grep -q '^#!/bin/sh' && shell="sh"
+  [[ "$(head -1 "$f")" == '#!/bin/sh'* ]] && shell="sh"
   "$shell" -n "$f" || fail "$f does not parse"
   shellcheck "$f" || fail "$f: shellcheck findings above"
 done
@@ -58,7 +64,13 @@ binary="$BUILD/bin/rayfarm"
 # writes them to load_order.txt) come with another NEEDED library's package: each must be in the
 # ldd closure of a NEEDED library not named there.
 mapfile -t order_only < <(cat "$BUILD/load_order.txt" 2>/dev/null || true)
-is_order_only() { printf '%s\n' "${order_only[@]}" | grep -qxF "$1"; }
+# A loop, not `printf | grep -q`: under pipefail, grep's early exit killed printf with SIGPIPE and
+# failed the check about one run in four.
+is_order_only() {
+  local o
+  for o in "${order_only[@]}"; do [ "$o" = "$1" ] && return 0; done
+  return 1
+}
 others=()
 while read -r lib; do
   is_order_only "$lib" && continue

@@ -73,6 +73,18 @@ EnvironmentMap::EnvironmentMap(const Environment& env) : map_to_world_(env.to_wo
     power_integral_ = 4.0 * double(kPi) * double(selection_weight(scale));
     return;
   }
+  try {
+    build(env, scale);
+  } catch (const std::bad_alloc&) {
+    // The decoded image, its texels and the sampling distribution: about 40 bytes a pixel.
+    throw std::runtime_error(
+        "environment map '" + env.file + "': out of memory building its " + std::to_string(width_) +
+        "x" + std::to_string(height_) + " pixels (about " +
+        std::to_string((uint64_t(width_) * uint64_t(height_) * 40) >> 20) + " MiB)");
+  }
+}
+
+void EnvironmentMap::build(const Environment& env, RGB scale) {
   texels_ = read_rgb(env, width_, height_);
   std::vector<float> weights(texels_.size());
   const double dtheta = double(kPi) / height_;

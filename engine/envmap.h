@@ -58,6 +58,7 @@ class EnvironmentMap {
   static Vec3 uv_to_direction(Vec2 uv);
 
  private:
+  void build(const Environment& env, RGB scale);  // the image's texels and distribution
   Vec3 to_map(Vec3 dir_world) const { return normalize(world_to_map_.vector(dir_world)); }
   const RGB& texel(Vec2 uv) const;
 

@@ -68,9 +68,35 @@ std::string line_column(std::string_view text, size_t byte) {
   return "line " + std::to_string(line) + ", column " + std::to_string(col);
 }
 
+// Refuses arrays and objects nested deeper than kMaxNesting before a parser sees them: nlohmann
+// parses such text, but recursive readers of the result (tinygltf's) run out of stack.
+void check_json_nesting(std::string_view text, const std::string& file) {
+  int depth = 0;
+  bool in_string = false;
+  for (size_t i = 0; i < text.size(); ++i) {
+    char c = text[i];
+    if (in_string) {
+      if (c == '\\')
+        ++i;
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxNesting)
+        throw SceneError(file + ": " + line_column(text, i) + ": arrays and objects nested more " +
+                         "than " + std::to_string(kMaxNesting) + " deep (the import limit on " +
+                         "nesting)");
+    } else if (c == ']' || c == '}') {
+      --depth;
+    }
+  }
+}
+
 }  // namespace
 
 Json parse_json_text(const std::string& text, const std::string& file) {
+  check_json_nesting(text, file);
   std::vector<JsonFrame> frames;
   auto callback = [&](int, Json::parse_event_t ev, Json& parsed) {
     using E = Json::parse_event_t;

@@ -9,6 +9,7 @@
 #include <string_view>
 #include <vector>
 
+#include "engine/import_limits.h"
 #include "engine/math.h"
 #include "engine/scene_error.h"
 
@@ -26,8 +27,8 @@ std::string join_names(const std::vector<std::string>& names);  // "a, b, c"
 bool contains_name(const std::vector<std::string>& names, const std::string& n);
 
 // JSON text -> Json, with positions for syntax errors and a check for duplicate keys (nlohmann
-// silently keeps the last one, which would hide e.g. two materials of the same name). Throws
-// SceneError naming the file, line and column.
+// silently keeps the last one, which would hide e.g. two materials of the same name), and a bound
+// on nesting (kMaxNesting). Throws SceneError naming the file, line and column.
 Json parse_json_text(const std::string& text, const std::string& file);
 
 // Typed access to JSON values, each failing with the value's path.

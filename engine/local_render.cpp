@@ -46,12 +46,19 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
     p.seconds = std::chrono::duration<double>(clock::now() - start).count();
     if (opt.progress) opt.progress(p);
   };
+  // Over the time budget, the tasks in flight are stopped where they are (a pass may be long),
+  // and their window of passes is dropped: the image is the prefix completed before.
+  auto over_budget = [&] {
+    return opt.time_budget_s > 0 &&
+           std::chrono::duration<double>(clock::now() - start).count() >= opt.time_budget_s;
+  };
   std::thread monitor([&] {
     std::unique_lock<std::mutex> lock(mu);
     while (!finished) {
       cv.wait_for(lock, std::chrono::milliseconds(200));
       if (finished) break;
       lock.unlock();
+      if (over_budget()) renderer.request_stop();
       report();
       lock.lock();
     }
@@ -61,19 +68,24 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   bool stopped_on_time = false;
   try {
     for (uint32_t p0 = opt.first_pass; p0 < opt.first_pass + count && !acc.done(); p0 += window) {
-      if (opt.time_budget_s > 0 && p0 > opt.first_pass &&
-          std::chrono::duration<double>(clock::now() - start).count() >= opt.time_budget_s) {
+      if (over_budget()) {
         stopped_on_time = true;
         break;
       }
       uint32_t p1 = std::min(opt.first_pass + count, p0 + window);
       size_t n = size_t(p1 - p0) * tiles.size();
       std::vector<SampleBuffer> results(n);
-      tbb::parallel_for(size_t(0), n, [&](size_t i) {
-        TaskKey task{opt.frame, tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size())};
-        results[i] = renderer.render(task, /*parallel=*/true);  // nested: TBB balances
-        ++tasks_done;
-      });
+      try {
+        tbb::parallel_for(size_t(0), n, [&](size_t i) {
+          TaskKey task{opt.frame, tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size())};
+          results[i] = renderer.render(task, /*parallel=*/true);  // nested: TBB balances
+          ++tasks_done;
+        });
+      } catch (const RenderStopped&) {
+        renderer.resume();
+        stopped_on_time = true;
+        break;
+      }
       for (auto& r : results) {
         uint64_t r_rays = r.rays;
         if (acc.add(std::move(r)) != FrameAccumulator::AddResult::Dropped) rays += r_rays;

@@ -23,9 +23,10 @@ struct LocalRenderOptions {
   uint32_t first_pass = 0;
   uint32_t pass_count = 0;   // 0: all passes of the scene from first_pass on
   double noise_target = 0;   // relMSE; 0 = none
-  // Wall-clock budget in seconds (0 = none): no new window of passes starts after it. Unlike the
-  // other stops this depends on the machine's speed, so the image is a prefix of the job's passes
-  // but not a reproducible one; meant for equal-time comparisons.
+  // Wall-clock budget in seconds (0 = none): at it, the tasks in flight are stopped (within a
+  // pass: within 200 ms and one sample) and the image is the prefix of passes completed before.
+  // Unlike the other stops this depends on the machine's speed, so the prefix is not a
+  // reproducible one; meant for equal-time comparisons. No pass completed: passes_merged is 0.
   double time_budget_s = 0;
   int tile_size = 32;
   // Called from a monitor thread about every 200 ms and once at the end.

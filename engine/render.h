@@ -46,6 +46,12 @@ class Renderer {
   // are the same either way.
   SampleBuffer render(const TaskKey& task, bool parallel) const;
 
+  // Stops the tasks rendering now: each throws RenderStopped at its next sample (a pass of 10^12
+  // samples per pixel is stopped too, not only the next one), and so does every render() until
+  // resume(). Any thread may call it.
+  void request_stop() const { context_->stop.store(true, std::memory_order_relaxed); }
+  void resume() const { context_->stop.store(false, std::memory_order_relaxed); }
+
  private:
   const Scene& scene_;
   std::unique_ptr<Accel> accel_;

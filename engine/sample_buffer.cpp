@@ -237,6 +237,11 @@ std::string samples_problem(const SampleBuffer& b, uint64_t spp_per_pass, double
   if (!finite(b.sum, false) || !finite(b.batch_sum, false) || !finite(b.splat, false) ||
       !finite(b.aov, false))
     return "a sum is not finite";
+  // Radiance is never negative, nor are the filter weights (importance-sampled filters carry
+  // their sign in the sample's weight, and every filter here is non-negative): an honest sum of
+  // radiance is >= 0. AOVs (normals) may be negative.
+  if (!finite(b.sum, true) || !finite(b.batch_sum, true) || !finite(b.splat, true))
+    return "a sum of radiance is negative";
   if (!finite(b.sum_sq, true) || !finite(b.batch_sum_sq, true))
     return "a sum of squares is negative or not finite";
   return "";
@@ -256,7 +261,8 @@ std::string buffer_problem(const SampleBuffer& b) {
   uint64_t passes = b.header.passes.count();
   if (spp == 0 || passes == 0)
     return "its header holds no samples (passes " + b.header.passes.to_string() + ")";
-  std::string why = samples_problem(b, spp * passes, std::numeric_limits<double>::max());
+  // 1e12 core-seconds is 31,700 core-years: more is no honest render's.
+  std::string why = samples_problem(b, spp * passes, 1e12);
   if (why.empty()) return "";
   return why + " (passes " + b.header.passes.to_string() + " of " + std::to_string(spp) +
          " samples each)";

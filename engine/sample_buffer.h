@@ -159,11 +159,12 @@ void splat_to_film(SplatTarget& target, Vec2 raster, RGB value);
 // ("" when it could): sample counts other than the pass's (spp_per_pass in every pixel, and
 // spp_per_pass light paths per pixel of its rect with splats; a light tracer's pass leaves the
 // camera plane empty and traces spp_per_pass light paths per pixel of the frame), a non-finite
-// sum or a negative sum of squares, or diagnostics out of range. The coordinator refuses such
-// uploads before they are merged.
+// sum, a negative sum of radiance or of squares, or diagnostics out of range (core_seconds over
+// 1e7 for one task). The coordinator refuses such uploads before they are merged.
 std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass);
 // The same for a buffer of any number of passes (a partial result, a merged frame): the samples
-// per pass come from its header's settings, and every pixel must hold passes x that many.
+// per pass come from its header's settings, and every pixel must hold passes x that many;
+// core_seconds at most 1e12. `rayfarm merge` refuses inputs that fail it.
 std::string buffer_problem(const SampleBuffer& b);
 
 // Whether two buffers hold the same samples, bit for bit: every plane and count, ignoring the

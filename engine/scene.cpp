@@ -81,8 +81,6 @@ void check_resolution(const std::optional<int>& v, const char* what) {
 // spp and passes together: an explicit --passes must divide the spp; a new --spp alone keeps the
 // scene's passes if they divide it, else passes become gcd(spp, 16).
 void override_passes(RenderSettings& rs, const SceneOverrides& o) {
-  if (o.spp && *o.spp < 1) flag_fail("--spp", "must be at least 1, got 0");
-  if (o.passes && *o.passes < 1) flag_fail("--passes", "must be at least 1, got 0");
   if (o.spp) rs.spp = *o.spp;
   if (o.passes) {
     rs.passes = *o.passes;
@@ -99,39 +97,27 @@ void override_passes(RenderSettings& rs, const SceneOverrides& o) {
 
 }  // namespace
 
-void apply_overrides(Scene& scene, const SceneOverrides& o) {
-  // Work on copies so a rejected override leaves the scene untouched.
-  FilmSettings film = scene.film;
-  RenderSettings rs = scene.render;
+void check_overrides(const SceneOverrides& o) {
   if (o.integrator && !contains_name(known_integrators(), *o.integrator))
     flag_fail("--integrator", "unknown integrator '" + *o.integrator +
                                   "' (known: " + join_names(known_integrators()) + ")");
   if (o.max_depth && *o.max_depth < 0)
     flag_fail("--max-depth", "must be at least 0, got " + std::to_string(*o.max_depth));
-  if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
-  if (o.integrator) set_integrator(rs.integrator, *o.integrator);
-  apply_fixed_max_depth(rs.integrator);  // direct lighting: one bounce by definition
   check_resolution(o.width, "width");
   check_resolution(o.height, "height");
-  if (o.width) film.width = *o.width;
-  if (o.height) film.height = *o.height;
   if (o.filter && !contains_name(known_filters(), *o.filter))
-    flag_fail("--filter", "unknown filter '" + *o.filter + "' (known: " + join_names(known_filters()) + ")");
-  if (o.filter && *o.filter != "" && filter_type(*o.filter) != film.filter.type) {
-    film.filter.type = filter_type(*o.filter);
-    film.filter.radius = default_filter_radius(film.filter.type);
-  }
+    flag_fail("--filter",
+              "unknown filter '" + *o.filter + "' (known: " + join_names(known_filters()) + ")");
   if (o.sampler && !contains_name(known_samplers(), *o.sampler))
-    flag_fail("--sampler", "unknown sampler '" + *o.sampler + "' (known: " + join_names(known_samplers()) + ")");
-  if (o.sampler) rs.sampler = *o.sampler;
+    flag_fail("--sampler",
+              "unknown sampler '" + *o.sampler + "' (known: " + join_names(known_samplers()) + ")");
   if (o.light_selection && *o.light_selection != "auto" && *o.light_selection != "power" &&
       *o.light_selection != "bvh")
-    flag_fail("--light-selection", "unknown light selection '" + *o.light_selection +
-                                       "' (known: auto, power, bvh)");
-  if (o.light_selection) rs.light_selection = *o.light_selection;
+    flag_fail("--light-selection",
+              "unknown light selection '" + *o.light_selection + "' (known: auto, power, bvh)");
   if (o.aovs) {
     try {
-      rs.aovs = parse_aovs(*o.aovs);
+      parse_aovs(*o.aovs);
     } catch (const std::invalid_argument& e) {
       flag_fail("--aov", e.what());
     }
@@ -139,6 +125,30 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   if (o.noise_target && !(*o.noise_target >= 0 && std::isfinite(*o.noise_target)))
     flag_fail("--noise-target",
               "must be a finite number >= 0, got " + format_number(*o.noise_target));
+  if (o.spp && *o.spp < 1) flag_fail("--spp", "must be at least 1, got 0");
+  if (o.passes && *o.passes < 1) flag_fail("--passes", "must be at least 1, got 0");
+  if (o.spp && o.passes && *o.spp % *o.passes != 0)
+    flag_fail("--spp", "must be a multiple of --passes (" + std::to_string(*o.passes) + "), got " +
+                           std::to_string(*o.spp));
+}
+
+void apply_overrides(Scene& scene, const SceneOverrides& o) {
+  check_overrides(o);
+  // Work on copies so a rejected override leaves the scene untouched.
+  FilmSettings film = scene.film;
+  RenderSettings rs = scene.render;
+  if (o.max_depth) rs.integrator.max_depth = *o.max_depth;
+  if (o.integrator) set_integrator(rs.integrator, *o.integrator);
+  apply_fixed_max_depth(rs.integrator);  // direct lighting: one bounce by definition
+  if (o.width) film.width = *o.width;
+  if (o.height) film.height = *o.height;
+  if (o.filter && *o.filter != "" && filter_type(*o.filter) != film.filter.type) {
+    film.filter.type = filter_type(*o.filter);
+    film.filter.radius = default_filter_radius(film.filter.type);
+  }
+  if (o.sampler) rs.sampler = *o.sampler;
+  if (o.light_selection) rs.light_selection = *o.light_selection;
+  if (o.aovs) rs.aovs = parse_aovs(*o.aovs);
   if (o.noise_target) rs.noise_target = *o.noise_target;
   if (o.seed) rs.seed = *o.seed;
   override_passes(rs, o);
@@ -178,7 +188,22 @@ Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::st
 
 }  // namespace
 
-void prepare_instances(Scene& scene) {
+uint64_t scene_elements(const Scene& scene) {
+  uint64_t n = scene.meshes.size() + scene.objects.size() + scene.instances.size() +
+               scene.lights.size() + scene.materials.size() + scene.textures.size();
+  for (const SceneObject& o : scene.objects) n += o.meshes.size();
+  return n;
+}
+
+void prepare_instances(Scene& scene, uint64_t max_elements) {
+  uint64_t elements = scene_elements(scene);
+  auto over = [&](const std::string& what) {
+    return SceneError(scene.path + ": " + what + "; the import limit elements is " +
+                      std::to_string(max_elements) +
+                      " (shapes, instances, lights, materials, textures, and the triangles of "
+                      "instanced emitters copied to world space)");
+  };
+  if (elements > max_elements) throw over(std::to_string(elements) + " elements");
   for (size_t i = 0; i < scene.instances.size(); ++i) {
     const Instance& inst = scene.instances[i];
     const std::string where = "instance " + std::to_string(i);
@@ -193,6 +218,15 @@ void prepare_instances(Scene& scene) {
     SceneObject& obj = scene.objects[o];
     auto emissive = [](const Mesh& m) { return m.emission && !is_black(m.emission->radiance); };
     if (std::none_of(obj.meshes.begin(), obj.meshes.end(), emissive)) continue;
+    uint64_t triangles = 0, placements = 0;
+    for (const Mesh& m : obj.meshes)
+      if (emissive(m)) triangles += m.primitive_count();
+    for (const Instance& inst : scene.instances) placements += inst.object == o;
+    if (placements && triangles > (max_elements - elements) / placements)
+      throw over("object '" + obj.name + "' holds " + std::to_string(triangles) +
+                 " emissive triangles, placed " + std::to_string(placements) +
+                 " times: that many world-space copies (area lights are sampled per triangle)");
+    elements += triangles * placements;
     for (size_t i = 0; i < scene.instances.size(); ++i)
       if (scene.instances[i].object == o)
         for (const Mesh& m : obj.meshes)

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "engine/aov.h"
+#include "engine/import_limits.h"
 #include "engine/integrators/registry.h"
 #include "engine/math.h"
 #include "engine/scene_error.h"
@@ -229,10 +230,16 @@ struct SceneOverrides {
 // result; the format is the file's extension: .json (docs/scene-format.md), .pbrt (pbrt-v4),
 // .xml (Mitsuba 3), .gltf and .glb (glTF 2.0). Throws SceneError before any rendering can start.
 // The importers are in engine/formats/ (one folder per format); nothing else knows the formats.
-Scene load_scene(const std::string& path, const SceneOverrides& overrides = {});
+// The import's work is bounded by `limits` (files and bytes read, elements).
+Scene load_scene(const std::string& path, const SceneOverrides& overrides = {},
+                 const ImportLimits& limits = {});
 
 // Applies and validates overrides on an already loaded scene (throws SceneError naming the flag).
 void apply_overrides(Scene& scene, const SceneOverrides& overrides);
+// The checks of apply_overrides that need no scene (names, ranges, spp a multiple of passes when
+// both are given): the command line runs them before it reads a scene, so a bad flag is a usage
+// error. Throws SceneError naming the flag.
+void check_overrides(const SceneOverrides& overrides);
 
 // Prepares instancing for rendering (load_scene calls it after the importer): checks every
 // instance (object index, finite invertible transform) and moves lights out of objects: each
@@ -240,8 +247,12 @@ void apply_overrides(Scene& scene, const SceneOverrides& overrides);
 // Scene::meshes, because area lights are sampled per world-space triangle (lights.h). Everything
 // else stays instanced: the accelerator (accel.h) places one copy of each object's geometry with
 // Embree instances, however many times it is placed. Objects placed by no instance are dropped
-// from rendering (they cost nothing); throws SceneError naming the instance.
-void prepare_instances(Scene& scene);
+// from rendering (they cost nothing); throws SceneError naming the instance. The scene's elements
+// and the triangles those copies add may be at most `max_elements` (ImportLimits::elements).
+void prepare_instances(Scene& scene, uint64_t max_elements = ImportLimits{}.elements);
+// The scene's shapes, objects, instances, lights, materials and textures (what ImportLimits::
+// elements counts before instanced emitters are copied).
+uint64_t scene_elements(const Scene& scene);
 
 // Expands every instance into world-space copies of its object's meshes (Scene::meshes) and
 // clears objects and instances: the flattened equivalent of an instanced scene (tests compare

@@ -4,6 +4,7 @@
 
 #include "engine/digest.h"
 #include "engine/scene.h"
+#include "farm/job.h"
 
 namespace rf {
 
@@ -18,6 +19,8 @@ bool is_sha256_hex(std::string_view s) {
 
 void check_bundle_path(const std::string& path) {
   if (path.empty()) throw BlobError("bundle path is empty");
+  if (std::string why = text_problem(path); !why.empty())
+    throw BlobError("bundle path '" + printable(path) + "': " + why);
   if (path.front() == '/' || fs::path(path).is_absolute())
     throw BlobError("bundle path '" + path + "' is absolute");
   if (path.find('\\') != std::string::npos)
@@ -37,7 +40,11 @@ std::vector<BundleEntry> bundle_of_scene(const std::string& scene_path) {
   return out;
 }
 
-BlobStore::BlobStore(std::string dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }
+BlobStore::BlobStore(std::string dir) : dir_(std::move(dir)) {
+  std::error_code ec;
+  fs::create_directories(dir_, ec);
+  if (ec) throw BlobError(dir_ + ": cannot create the blob store: " + ec.message());
+}
 
 std::string BlobStore::path_of(const std::string& sha256) const {
   return dir_ + "/" + sha256.substr(0, 2) + "/" + sha256;

@@ -105,6 +105,22 @@ void set_deadline(grpc::ClientContext& ctx, double seconds, bool wait_for_ready)
   if (wait_for_ready) ctx.set_wait_for_ready(true);
 }
 
+std::string unavailable_hint(const grpc::Status& s, const std::string& address, bool tls) {
+  std::string m = s.error_message();
+  for (char& c : m) c = char(std::tolower(static_cast<unsigned char>(c)));
+  auto has = [&](const char* part) { return m.find(part) != std::string::npos; };
+  // A server that refuses the client's certificate closes the socket mid-handshake.
+  if (tls && (has("handshake") || has("ssl") || has("certificate") || has("socket closed") ||
+              has("connection reset")))
+    return " (the TLS handshake with " + address +
+           " failed: does --tls-ca sign the coordinator's certificate, and does it name the host "
+           "dialled? A coordinator without TLS, or one that wants a client certificate from "
+           "another CA, fails the same way)";
+  if (!tls && (has("socket closed") || has("connection reset")))
+    return " (is the coordinator at " + address + " serving TLS? then give --tls-ca)";
+  return " (is a coordinator running at " + address + "?)";
+}
+
 bool transient(const grpc::Status& s) {
   return s.error_code() == grpc::StatusCode::UNAVAILABLE ||
          s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;

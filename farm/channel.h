@@ -41,6 +41,11 @@ std::shared_ptr<grpc::Channel> coordinator_channel(const std::string& address,
 // within it, instead of failing at once while the coordinator restarts.
 void set_deadline(grpc::ClientContext& ctx, double seconds, bool wait_for_ready = false);
 
+// What an UNAVAILABLE answer most likely means, as " (...)" to append to its message: a TLS
+// handshake that failed (gRPC says only "tcp handshaker shutdown" or "Ssl handshake failed"), a
+// TLS coordinator dialled in plaintext, or no coordinator at `address`.
+std::string unavailable_hint(const grpc::Status& status, const std::string& address, bool tls);
+
 // A failure worth retrying: the coordinator is unreachable or slow, not refusing the request.
 bool transient(const grpc::Status& status);
 

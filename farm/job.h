@@ -38,6 +38,14 @@ struct TaskRef {
   bool operator==(const TaskRef&) const = default;
 };
 
+// Why a client's text (a job name, a request id, a bundle path) cannot be stored and printed, or ""
+// when it can: control characters (a newline or an ANSI escape would write into an operator's
+// terminal or forge a log line) or bytes that are not UTF-8.
+std::string text_problem(std::string_view text);
+// The text with control characters and bytes that are not UTF-8 written as \xHH: safe to print
+// in a terminal or a log line, whatever a client sent.
+std::string printable(std::string_view text);
+
 // "job/frame/pass/tile": a task's id on the wire and in logs.
 std::string task_id_text(const TaskRef& task);
 // The task an id names; nothing for text that is not such an id.

@@ -171,6 +171,7 @@ class Farm {
     core_.reset();
     CoreOptions o;
     o.state_dir = dir_;
+    o.scene_checker = in_process_scene_checker();
     o.lease_seconds = 10;
     o.instance = "i" + std::to_string(starts_++);
     o.clock = [this] { return now_; };

@@ -1,5 +1,11 @@
 // The command line end to end: render, partial renders + merge, refusals, repeatability.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
 
 #include <cmath>
 #include <cstdio>
@@ -194,6 +200,144 @@ TEST(Cli, ExitCodesRangesOutputsAndMergeRefusals) {
       test::run_command(cli("render " + dir + "/dark.json -o " + dir + "/dark.exr --res 8x8 -q"));
   EXPECT_EQ(d.exit_code, 0) << d.output;
   EXPECT_NE(d.output.find("dark.json: the scene has no lights"), std::string::npos) << d.output;
+}
+
+// What a probe found lenient or unclear on the command line, each now a usage error (exit 2)
+// naming the flag, or a run-time error (exit 1) that says what is wrong: names the engine does
+// not know, spp not a multiple of passes and a resolution over the engine's bound (were exit 1
+// from the engine), a pass range with a minus sign (was "first pass 4294967295"), an address
+// that is not one or a port past 65535 (gRPC bound 99999 as 34463), TLS half given, a directory
+// as the scene (was "syntax error while parsing value"), merge of a directory or a device (was
+// "refusing to replace an input"), compare of a PNG preview with an EXR (exited 0), and merge of
+// a re-signed buffer with a negative sum or core_seconds of 1e308 (were merged).
+TEST(Cli, ProbeFindingsAreUsageErrorsOrSayWhatIsWrong) {
+  std::string dir = test::make_temp_dir("cli-probe");
+  const std::string render = "render " + kScene + " -o " + dir + "/x.exr -q ";
+  for (const auto& [bad, flag] : std::vector<std::pair<std::string, std::string>>{
+           {"--integrator magic", "unknown integrator 'magic'"},
+           {"--filter lanczos", "unknown filter 'lanczos'"},
+           {"--sampler halton", "unknown sampler 'halton'"},
+           {"--aov bogus", "--aov"},
+           {"--spp 4 --passes 3", "must be a multiple of --passes"},
+           {"--res 20000x20000", "1..16384"},
+           {"--partial " + dir + "/p.rfb --pass-range -1-2", "expected FIRST-LAST"}}) {
+    auto r = test::run_command(cli(render + bad));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(flag), std::string::npos) << bad << ": " << r.output;
+  }
+  const std::string coord = "coordinator --state-dir " + dir + "/state ";
+  for (const auto& [bad, says] : std::vector<std::pair<std::string, std::string>>{
+           {"--listen 127.0.0.1:99999", "outside 0..65535"},
+           {"--listen nonsense", "is not an address"},
+           {"--metrics-listen 1.2.3.4", "is not an address"},
+           {"--tls-key " + dir + "/k.pem", "--tls-key needs --tls-cert"}}) {
+    auto r = test::run_command(cli(coord + bad));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(says), std::string::npos) << bad << ": " << r.output;
+  }
+  auto d = test::run_command(cli("render " + dir + " -o " + dir + "/y.exr -q"));
+  EXPECT_EQ(d.exit_code, 1) << d.output;
+  EXPECT_NE(d.output.find("is a directory, not a scene file"), std::string::npos) << d.output;
+  for (const auto& [input, says] : std::vector<std::pair<std::string, std::string>>{
+           {"/dev/null", "is not a regular file"}, {dir, "is a directory"}}) {
+    auto r = test::run_command(cli("merge " + input + " -o " + dir + "/m.exr"));
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+    EXPECT_NE(r.output.find(says), std::string::npos) << r.output;
+  }
+  ASSERT_EQ(test::run_command(cli(render + "--res 8x8 --spp 2 --passes 2")).exit_code, 0);
+  auto cmp = test::run_command(cli("compare " + dir + "/x.png " + dir + "/x.exr"));
+  EXPECT_EQ(cmp.exit_code, 2) << cmp.output;
+  EXPECT_NE(cmp.output.find("8-bit display values"), std::string::npos) << cmp.output;
+
+  // --time-budget stops a pass in flight: a pass of 10^12 samples per pixel (before: rendered
+  // until killed, since the budget was checked between passes only).
+  auto t0 = std::chrono::steady_clock::now();
+  auto huge =
+      test::run_command(cli(render + "--res 8x8 --spp 1000000000000 --passes 1 --time-budget 1"));
+  double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(huge.exit_code, 1) << huge.output;
+  EXPECT_NE(huge.output.find("ran out before the first pass completed"), std::string::npos)
+      << huge.output;
+  EXPECT_LT(took, 10) << "the budget is 1 s";
+
+  // Buffers re-signed (written by the encoder, so their checksums are right) with values no
+  // honest render makes.
+  ASSERT_EQ(test::run_command(cli("render " + kScene +
+                                  " --res 8x8 --spp 4 --passes 2 -q "
+                                  "--pass-range 0-0 --partial " +
+                                  dir + "/a.rfb"))
+                .exit_code,
+            0);
+  SampleBuffer a = read_buffer_file(dir + "/a.rfb");
+  SampleBuffer negative = a, forever = a;
+  negative.sum[4] = -1e300;
+  forever.header.core_seconds = 1e308;
+  write_buffer_file(dir + "/negative.rfb", negative);
+  write_buffer_file(dir + "/forever.rfb", forever);
+  for (const auto& [name, says] : std::vector<std::pair<std::string, std::string>>{
+           {"negative", "a sum of radiance is negative"}, {"forever", "core_seconds"}}) {
+    auto r = test::run_command(cli("merge " + dir + "/" + name + ".rfb -o " + dir + "/m.exr"));
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find(name + ".rfb: refused: " + says), std::string::npos) << r.output;
+  }
+}
+
+// Against a silent coordinator (a port that completes TCP handshakes and never says a word),
+// `worker --give-up-after 2` and `watch --timeout 3` give up on time, within a second (before:
+// 10 s and 6.7 s).
+TEST(Cli, ClientsGiveUpOnASilentCoordinatorOnTime) {
+  int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  ASSERT_EQ(::listen(fd, 64), 0);  // never accepted: the kernel answers the handshake, no one else
+  socklen_t len = sizeof addr;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  const std::string at = " --coordinator 127.0.0.1:" + std::to_string(ntohs(addr.sin_port));
+  std::string dir = test::make_temp_dir("cli-silent");
+  auto timed = [&](const std::string& args, double* seconds) {
+    auto t0 = std::chrono::steady_clock::now();
+    test::CommandResult r = test::run_command(cli(args + at));
+    *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return r;
+  };
+  double took = 0;
+  auto worker = timed("worker --give-up-after 2 --cache-dir " + dir, &took);
+  EXPECT_EQ(worker.exit_code, 1) << worker.output;
+  EXPECT_NE(worker.output.find("--give-up-after"), std::string::npos) << worker.output;
+  EXPECT_LT(took, 3.5) << worker.output;
+  auto watch = timed("watch j000001 --timeout 3", &took);
+  EXPECT_EQ(watch.exit_code, 1) << watch.output;
+  EXPECT_NE(watch.output.find("--timeout"), std::string::npos) << watch.output;
+  EXPECT_LT(took, 4.5) << watch.output;
+  ::close(fd);
+}
+
+// A coordinator whose state directory is on a full disk, or on a read-only one, says so and how
+// to go on (before: the advice for a damaged database, exit 4; and "No such file or directory").
+// Each runs in a mount namespace of its own on a small tmpfs; skipped where that is not allowed.
+TEST(Cli, ACoordinatorOnAFullOrReadOnlyDiskSaysSo) {
+  std::string dir = test::make_temp_dir("cli-disk");
+  auto in_tmpfs = [&](const std::string& options, const std::string& then) {
+    return test::run_command("unshare -m sh -c 'mount -t tmpfs -o " + options + " tmpfs " + dir +
+                             " && " + then + "' 2>&1");
+  };
+  if (in_tmpfs("size=1m", "true").exit_code != 0)
+    GTEST_SKIP() << "no mount namespace here (needs root or CAP_SYS_ADMIN)";
+  const std::string start = test::rayfarm_binary() + " coordinator --listen 127.0.0.1:0 " +
+                            "--state-dir " + dir + "/state";
+  auto full = in_tmpfs("size=256k",
+                       "dd if=/dev/zero of=" + dir + "/fill bs=4k count=100 2>/dev/null; " + start);
+  EXPECT_EQ(full.exit_code, 1) << full.output;
+  EXPECT_TRUE(full.output.find("disk is full") != std::string::npos ||
+              full.output.find("No space left on device") != std::string::npos)
+      << full.output;
+  EXPECT_EQ(full.output.find("To recover"), std::string::npos) << "not a damaged database";
+  auto ro = in_tmpfs("ro", start);
+  EXPECT_EQ(ro.exit_code, 1) << ro.output;
+  EXPECT_NE(ro.output.find("Read-only file system"), std::string::npos) << ro.output;
+  EXPECT_NE(ro.output.find("writable --state-dir"), std::string::npos) << ro.output;
 }
 
 // `compare`: an image against itself has no error; against a differently seeded render of the

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <set>
 
 #include "engine/buffer_file.h"
@@ -49,6 +50,10 @@ class CoreBench {
     core_.reset();
     CoreOptions o;
     o.state_dir = state_;
+    o.scene_checker = [this](const std::string& dir, const JobSpec& spec) {
+      ++scene_checks;
+      return in_process_scene_checker()(dir, spec);
+    };
     o.lease_seconds = 10;
     o.instance = instance;
     o.clock = [this] { return now; };
@@ -118,6 +123,7 @@ class CoreBench {
   }
 
   double now = 0;
+  int scene_checks = 0;  // calls of the scene checker, over every start
   JobLimits limits;  // for the next start()
   double verify_fraction = 0;
 
@@ -345,7 +351,8 @@ TEST(CoordinatorCore, RefusalsCarryTheirCodes) {
             }),
             ErrorCode::NotFound);
   core.cancel(job);
-  EXPECT_EQ(refusal([&] { core.cancel(job); }), ErrorCode::FailedPrecondition);
+  EXPECT_EQ(refusal([&] { core.cancel(job); }), std::nullopt) << "a second cancel succeeds";
+  EXPECT_EQ(core.status(job).state, JobState::Cancelled);
   core.shut_down();
   EXPECT_EQ(refusal([&] { core.lease(bench.worker("w")); }), ErrorCode::Unavailable);
 }
@@ -468,8 +475,10 @@ TEST(CoordinatorCore, AWorkerWhoseResultsAreRefusedGetsNoMoreOfTheJob) {
   EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
 }
 
-// A client token sees its tenant's jobs only: another tenant's job is refused (status, watch,
-// cancel, fetch) and left out of the list; an admin sees all. The tenant survives a restart.
+// A client token sees its tenant's jobs only: another tenant's job is refused as a missing one
+// (status, watch, cancel, fetch: NotFound, the same message as for an id that was never made, so
+// a tenant cannot tell which ids exist) and left out of the list; an admin sees all. The tenant
+// survives a restart.
 TEST(CoordinatorCore, ClientsSeeOnlyTheirTenantsJobs) {
   CoreBench bench("core-tenants");
   const Caller shot1{"t:a", "shot1", false}, shot2{"t:b", "shot2", false},
@@ -477,11 +486,13 @@ TEST(CoordinatorCore, ClientsSeeOnlyTheirTenantsJobs) {
   std::string job = bench.submit(1, shot1);
   Coordinator& core = bench.core();
   EXPECT_EQ(core.status(job, shot1).tenant, "shot1");
-  EXPECT_EQ(refusal([&] { core.status(job, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] { core.status(job, shot2); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal_message([&] { core.status(job, shot2); }), "no job '" + job + "'");
+  EXPECT_EQ(refusal_message([&] { core.status("j999999", shot2); }), "no job 'j999999'");
   uint64_t seen = 0;
-  EXPECT_EQ(refusal([&] { core.next_status(job, seen, 0.0, shot2); }), ErrorCode::PermissionDenied);
-  EXPECT_EQ(refusal([&] { core.fetch(job, 1, shot2); }), ErrorCode::PermissionDenied);
-  EXPECT_EQ(refusal([&] { core.cancel(job, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] { core.next_status(job, seen, 0.0, shot2); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.fetch(job, 1, shot2); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.cancel(job, shot2); }), ErrorCode::NotFound);
   EXPECT_TRUE(core.list(shot2).empty());
   EXPECT_EQ(core.list(shot1).size(), 1u);
   EXPECT_EQ(core.list(admin).size(), 1u);
@@ -498,7 +509,7 @@ TEST(CoordinatorCore, ClientsSeeOnlyTheirTenantsJobs) {
   EXPECT_EQ(refusal([&] { core.submit(borrowed, shot2); }), ErrorCode::InvalidArgument);
   EXPECT_NO_THROW(bench.submit(1, shot2)) << "once shot2 uploads them itself";
   bench.start("B");
-  EXPECT_EQ(refusal([&] { bench.core().status(job, shot2); }), ErrorCode::PermissionDenied);
+  EXPECT_EQ(refusal([&] { bench.core().status(job, shot2); }), ErrorCode::NotFound);
   EXPECT_EQ(bench.core().status(job, admin).tenant, "shot1");
   bench.core().cancel(job, shot1);
   EXPECT_EQ(bench.core().status(job, shot1).state, JobState::Cancelled);
@@ -509,6 +520,7 @@ TEST(CoordinatorCore, ASecondCoordinatorOnTheSameStateDirectoryIsRefused) {
   CoreBench bench("core-lock");
   CoreOptions o;
   o.state_dir = bench.state_dir();
+  o.scene_checker = in_process_scene_checker();
   try {
     Coordinator second(o);
     ADD_FAILURE() << "a second coordinator opened the same state directory";
@@ -575,6 +587,92 @@ TEST(CoordinatorCore, AJobThatCannotBeRestoredIsFailedAndTheOthersAreServed) {
   bench.start("C");
   EXPECT_EQ(bench.core().status(big).state, JobState::Failed);
   EXPECT_EQ(bench.core().status(small).state, JobState::Completed);
+}
+
+// A registration that no call uses for 10 minutes (10 lease times if longer) is forgotten at a
+// later registration, in memory and in the store: registrations of a client that never leases
+// do not pile up. A worker that leased stays; a forgotten one that comes back is NotFound
+// (and registers again).
+TEST(CoordinatorCore, RegistrationsThatAreNeverUsedExpire) {
+  CoreBench bench("core-registrations");
+  Coordinator& core = bench.core();
+  std::vector<std::string> idle;
+  for (int i = 0; i < 200; ++i)
+    idle.push_back(core.register_worker({"idle", 1, "b", "i"}).worker_id);
+  std::string busy = core.register_worker({"busy", 1, build_id(), "i"}).worker_id;
+  bench.submit(1);
+  EXPECT_TRUE(core.lease(busy).task);
+  EXPECT_EQ(core.metrics().workers_registered, 201u);
+  bench.now += 599;
+  core.register_worker({"late", 1, "b", "i"});
+  EXPECT_EQ(core.metrics().workers_registered, 202u) << "not yet ten minutes";
+  bench.now += 62;
+  core.register_worker({"later", 1, "b", "i"});
+  EXPECT_EQ(core.metrics().workers_registered, 3u) << "busy, late and later";
+  EXPECT_EQ(refusal([&] { core.lease(idle[7]); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.lease(busy); }), std::nullopt);
+  bench.start("B");
+  EXPECT_EQ(bench.core().metrics().workers_registered, 3u) << "the store forgot them too";
+}
+
+// The blob store deleted while the coordinator was stopped: the job fails at the restart, saying
+// its blobs are missing from the store (it said "was not uploaded"), and keeps its frames, so the
+// pass merged before is still fetched.
+TEST(CoordinatorCore, AJobWhoseBlobsWentKeepsItsMergedPasses) {
+  CoreBench bench("core-blobs-gone");
+  std::string job = bench.submit(2);
+  for (int i = 0; i < 4; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 1.0f));  // pass 0
+  bench.stop();
+  fs::remove_all(bench.state_dir() + "/blobs");
+  bench.start("B");
+  JobStatus s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Failed);
+  EXPECT_NE(s.error.find("is missing from the coordinator's blob store"), std::string::npos)
+      << s.error;
+  ASSERT_EQ(s.frames.size(), 1u);
+  EXPECT_EQ(s.frames[0].progress.passes_merged, 1u);
+  EXPECT_EQ(bench.image(job).header.passes.count(), 1u);
+}
+
+// A process killed during an atomic write leaves NAME.tmp.PID.N behind (a checkpoint, a blob):
+// the next start removes such files, and only those.
+TEST(CoordinatorCore, TemporariesOfInterruptedWritesAreRemovedAtStart) {
+  CoreBench bench("core-temporaries");
+  std::string job = bench.submit(1);
+  bench.stop();
+  const std::string frame = bench.state_dir() + "/jobs/" + job + "/frame-1";
+  test::write_text(frame + "/prefix.rfb.tmp.4242.0", "half a checkpoint");
+  test::write_text(bench.state_dir() + "/blobs/ab/abcd.tmp.99.3", "half a blob");
+  test::write_text(frame + "/notes.tmp.txt", "not ours");
+  bench.start("B");
+  EXPECT_FALSE(fs::exists(frame + "/prefix.rfb.tmp.4242.0"));
+  EXPECT_FALSE(fs::exists(bench.state_dir() + "/blobs/ab/abcd.tmp.99.3"));
+  EXPECT_TRUE(fs::exists(frame + "/notes.tmp.txt"));
+  EXPECT_EQ(bench.core().status(job).state, JobState::Queued);
+}
+
+// A restart plans each stored job from the scene summaries its submit's check left in the job's
+// folder (scenes.json, with the build that made them), starting no scene check; a copy that is
+// damaged, or of another build, is replaced by a new check.
+TEST(CoordinatorCore, ARestartTakesSceneSummariesFromTheJobFolder) {
+  CoreBench bench("core-scene-cache");
+  std::string a = bench.submit(2), b = bench.submit(1);
+  EXPECT_EQ(bench.scene_checks, 2);
+  const std::string cache = bench.state_dir() + "/jobs/" + a + "/scenes.json";
+  nlohmann::json j = nlohmann::json::parse(read_file_bytes(cache));
+  EXPECT_EQ(j.at("build"), build_id());
+  EXPECT_EQ(j.at("scenes").size(), 1u);
+  bench.start("B");
+  EXPECT_EQ(bench.scene_checks, 2) << "no check at a restart";
+  EXPECT_EQ(bench.core().status(a).frames.size(), 1u);
+  test::write_text(cache, "{\"build\": \"another\", \"scenes\": []}");
+  test::write_text(bench.state_dir() + "/jobs/" + b + "/scenes.json", "not json");
+  bench.start("C");
+  EXPECT_EQ(bench.scene_checks, 4);
+  for (int i = 0; i < 12; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 1.0f));
+  EXPECT_EQ(bench.core().status(a).state, JobState::Completed);
+  EXPECT_EQ(bench.core().status(b).state, JobState::Completed);
+  EXPECT_EQ(nlohmann::json::parse(read_file_bytes(cache)).at("build"), build_id());
 }
 
 // A job merges results of one build: the first merged result's, or the one its submitter pins.

@@ -3,12 +3,8 @@
 // with the job and end where the job's own figures say, the job's series vanish when it ends,
 // and every query of the shipped Grafana dashboard and Kubernetes autoscalers names a metric
 // the coordinator serves.
-#include <arpa/inet.h>
 #include <gtest/gtest.h>
-#include <netinet/in.h>
 #include <prometheus/metric_family.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
@@ -21,37 +17,13 @@
 
 #include "coordinator/metrics.h"
 #include "tests/support/farm.h"
+#include "tests/support/net.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
 namespace {
 
-// GET http://127.0.0.1:port/path with plain sockets (HTTP/1.0: the server closes when done);
-// the body of a 200 answer, else "" with the reason in `error`.
-std::string http_get(int port, const std::string& path, std::string& error) {
-  int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(uint16_t(port));
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (fd < 0 || connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
-    error = "cannot connect to port " + std::to_string(port);
-    if (fd >= 0) close(fd);
-    return "";
-  }
-  std::string request = "GET " + path + " HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n";
-  if (send(fd, request.data(), request.size(), 0) != ssize_t(request.size())) error = "send";
-  std::string answer;
-  char buf[8192];
-  for (ssize_t n; (n = recv(fd, buf, sizeof buf, 0)) > 0;) answer.append(buf, size_t(n));
-  close(fd);
-  size_t body = answer.find("\r\n\r\n");
-  if (answer.rfind("HTTP/1.1 200", 0) != 0 && answer.rfind("HTTP/1.0 200", 0) != 0) {
-    error = "answer: " + answer.substr(0, 200);
-    return "";
-  }
-  return body == std::string::npos ? "" : answer.substr(body + 4);
-}
+using test::http_get;
 
 // A text exposition: each sample "name{labels}" -> value, and the families' names and types.
 struct Scrape {

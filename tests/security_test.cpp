@@ -148,9 +148,16 @@ TEST(Security, TokensRolesAndTenantsAreCheckedOnEveryMethod) {
   Token shot2 = make_token(dir, "shot2", "--role client --tenant shot2");
   Token worker = make_token(dir, "worker", "--role worker --tenant farm");
   Token admin = make_token(dir, "admin", "--role admin --tenant ops");
-  Token expired = make_token(dir, "expired", "--role admin --tenant ops --expires 2020-01-01");
+  // `token new` refuses a date in the past; a token file can still hold one (written by hand,
+  // or a token that has since run out).
+  Token expired = make_token(dir, "expired", "--role admin --tenant ops --expires 2099-01-01");
+  EXPECT_NE(expired.line.find("expires=2099-01-01T00:00:00Z"), std::string::npos) << expired.line;
+  expired.line.replace(expired.line.find("2099"), 4, "2020");
   Token later = make_token(dir, "later", "--role client --tenant shot3");
-  EXPECT_NE(expired.line.find("expires=2020-01-01T00:00:00Z"), std::string::npos) << expired.line;
+  test::CommandResult past =
+      test::run_command(test::rayfarm_binary() + " token new --role client --expires 2000-01-01");
+  EXPECT_EQ(past.exit_code, 2) << past.output;
+  EXPECT_NE(past.output.find("is in the past"), std::string::npos) << past.output;
   std::string tokens = dir + "/tokens";
   write_token_file(tokens, {&shot1, &shot2, &worker, &admin, &expired});
   Farm farm("security-farm", 30, tokens);
@@ -197,7 +204,7 @@ TEST(Security, TokensRolesAndTenantsAreCheckedOnEveryMethod) {
   };
   test::CommandResult other = as(shot2, "status " + job);
   EXPECT_NE(other.exit_code, 0);
-  EXPECT_NE(other.output.find("PERMISSION_DENIED"), std::string::npos) << other.output;
+  EXPECT_NE(other.output.find("NOT_FOUND"), std::string::npos) << other.output;  // as a missing id
   EXPECT_NE(as(shot2, "fetch " + job + " -o " + dir + "/stolen").exit_code, 0);
   EXPECT_NE(as(shot2, "watch " + job).exit_code, 0);
   EXPECT_EQ(as(shot2, "status").output.find(job), std::string::npos) << "listed to another tenant";
@@ -225,12 +232,7 @@ TEST(Security, TokensRolesAndTenantsAreCheckedOnEveryMethod) {
   EXPECT_NE(log.find("refused"), std::string::npos) << "refusals are logged";
 }
 
-long rss_kib(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  return -1;
-}
+long rss_kib(pid_t pid) { return test::proc_status_kib(pid, "VmRSS"); }
 
 // A second worker token cannot change a job it does not hold the leases of: uploads with an
 // empty, invented or another task's lease, or under another token's worker id, are refused
@@ -568,6 +570,29 @@ TEST(Security, TlsWithClientCertificatesForWorkersAndAPlaintextHealthPort) {
   test::CommandResult probe = test::run_command(test::rayfarm_binary() + " health " +
                                                 farm.address() + " --tls-ca " + pki.ca);
   EXPECT_EQ(probe.exit_code, 0) << probe.output;
+
+  // The TLS failures are named (before: "tcp handshaker shutdown (is a coordinator running at
+  // ...?)"; a worker retried past --give-up-after; swapped files: "cannot listen").
+  test::CommandResult wrong_ca = test::run_command(
+      test::rayfarm_binary() + " status --timeout 2 --coordinator " + farm.address() +
+      " --token-file " + client.file + " --tls-ca " + dir + "/other.pem");
+  EXPECT_EQ(wrong_ca.exit_code, 1) << wrong_ca.output;
+  EXPECT_NE(wrong_ca.output.find("the TLS handshake with"), std::string::npos) << wrong_ca.output;
+  auto t0 = std::chrono::steady_clock::now();
+  test::CommandResult rogue = test::run_command(
+      test::rayfarm_binary() + " worker --give-up-after 3 --cache-dir " + dir + "/cache" +
+      " --coordinator " + farm.address() + " --token-file " + worker.file + " --tls-ca " + pki.ca +
+      " --tls-cert " + pki.rogue_cert + " --tls-key " + pki.rogue_key);
+  double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(rogue.exit_code, 1) << rogue.output;
+  EXPECT_LT(took, 5) << rogue.output;
+  EXPECT_NE(rogue.output.find("TLS handshake"), std::string::npos) << rogue.output;
+  test::CommandResult swapped = test::run_command(
+      test::rayfarm_binary() + " coordinator --listen 127.0.0.1:0 --state-dir " + dir +
+      "/swapped --tls-cert " + pki.server_key + " --tls-key " + pki.server_cert);
+  EXPECT_EQ(swapped.exit_code, 1) << swapped.output;
+  EXPECT_NE(swapped.output.find("are --tls-cert and --tls-key swapped?"), std::string::npos)
+      << swapped.output;
 }
 
 // --verify-fraction with real workers: about half the tasks are rendered by both workers, the

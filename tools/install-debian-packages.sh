@@ -4,12 +4,27 @@
 # (tests/sanitize.sh, fuzz/run.sh, deploy/check.sh), so each lists only its packages.
 #
 #   tools/install-debian-packages.sh PACKAGE...
+#   tools/install-debian-packages.sh --check PACKAGE...   only says which are missing (exit 1)
 set -euo pipefail
+check_only=0
+if [ "${1:-}" = "--check" ]; then
+  check_only=1
+  shift
+fi
 missing=()
 for p in "$@"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q 'install ok installed' || missing+=("$p")
+  # No pipe into `grep -q`: under pipefail, grep exiting early would fail dpkg-query (SIGPIPE).
+  status=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
+  [[ "$status" == *"install ok installed"* ]] || missing+=("$p")
 done
 [ ${#missing[@]} -eq 0 ] && exit 0
+if [ "$check_only" -eq 1 ]; then
+  printf 'missing Debian packages: %s
+install them with: sudo apt-get install %s
+' \
+    "${missing[*]}" "${missing[*]}" >&2
+  exit 1
+fi
 printf 'installing Debian packages: %s\n' "${missing[*]}" >&2
 sudo=()
 [ "$(id -u)" -ne 0 ] && sudo=(sudo)

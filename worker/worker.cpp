@@ -4,8 +4,10 @@
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -121,6 +123,9 @@ class Worker {
   }
   // Throws once give_up_after seconds have passed without an answer from the coordinator.
   void check_give_up(const grpc::Status& last);
+  // A call's deadline of `seconds`, cut to what is left of give_up_after (so the worker gives up
+  // on time, not at the end of a call that waits for the coordinator).
+  double within_give_up(double seconds) const;
   // With --give-up-after: a thread that counts the time the channel is not connected (calls
   // waiting for the coordinator to come back count as without it) and exits the process 1 once
   // it reaches give_up_after. The task in flight is lost to this worker only: its lease expires
@@ -178,13 +183,21 @@ void Worker::connect(int keepalive_seconds) {
   stub_ = pb::WorkerService::NewStub(channel_);
 }
 
+double Worker::within_give_up(double seconds) const {
+  if (o_.give_up_after <= 0) return seconds;
+  return std::clamp(o_.give_up_after - seconds_without_coordinator(), 0.1, seconds);
+}
+
 void Worker::check_give_up(const grpc::Status& last) {
   if (o_.give_up_after <= 0) return;
   double silent = seconds_without_coordinator();
   if (silent < o_.give_up_after) return;
   throw std::runtime_error("no answer from the coordinator at " + o_.coordinator + " for " +
                            std::to_string(int(silent)) +
-                           " s (--give-up-after); last: " + last.error_message());
+                           " s (--give-up-after); last: " + last.error_message() +
+                           (last.error_code() == grpc::StatusCode::UNAVAILABLE
+                                ? unavailable_hint(last, o_.coordinator, !o_.creds.tls_ca.empty())
+                                : std::string()));
 }
 
 void Worker::start_give_up_watch() {
@@ -239,26 +252,43 @@ bool Worker::register_self() {
   char host[256] = {};
   ::gethostname(host, sizeof host - 1);
   req.set_hostname(host);
-  req.set_cores(std::max(1u, std::thread::hardware_concurrency()));
+  // The threads it renders with: `--threads` (tbb's global limit), else every core.
+  size_t threads = std::min<size_t>(
+      std::max(1u, std::thread::hardware_concurrency()),
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  req.set_cores(uint32_t(std::max<size_t>(1, threads)));
   req.set_build_id(build_id());
   req.set_isa(cpu_isa());
+  pb::RegisterResponse resp;
+  auto registered = [&] {
+    heard_from_coordinator();
+    worker_id_ = resp.worker_id();
+    lease_seconds_ = std::max(1u, resp.lease_seconds());
+    keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
+    return true;
+  };
   for (int attempt = 0;; ++attempt) {
     grpc::ClientContext ctx;
-    set_deadline(ctx, 10, kWaitForReady);
-    pb::RegisterResponse resp;
+    set_deadline(ctx, within_give_up(10), kWaitForReady);
     grpc::Status s = stub_->Register(&ctx, req, &resp);
-    if (s.ok()) {
-      heard_from_coordinator();
-      worker_id_ = resp.worker_id();
-      lease_seconds_ = std::max(1u, resp.lease_seconds());
-      keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
-      return true;
-    }
+    if (s.ok()) return registered();
     if (refused(s) || !coordinator_away(s))
       throw std::runtime_error("register with " + o_.coordinator + ": " + s.error_message());
+    if (attempt == 0 && s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED) {
+      // A call that waits for the connection says only "Deadline Exceeded"; one that does not
+      // fails at once with gRPC's reason (a refused connection, a failed TLS handshake).
+      grpc::ClientContext probe;
+      set_deadline(probe, within_give_up(2));
+      grpc::Status why = stub_->Register(&probe, req, &resp);
+      if (why.ok()) return registered();
+      if (why.error_code() == grpc::StatusCode::UNAVAILABLE) s = why;
+    }
     check_give_up(s);
     if (attempt == 0)
-      spdlog::warn("coordinator {} unreachable ({}); retrying", o_.coordinator, s.error_message());
+      spdlog::warn("coordinator {} unreachable ({}){}; retrying", o_.coordinator, s.error_message(),
+                   s.error_code() == grpc::StatusCode::UNAVAILABLE
+                       ? unavailable_hint(s, o_.coordinator, !o_.creds.tls_ca.empty())
+                       : std::string());
     if (!backoff(attempt)) return false;
   }
 }
@@ -350,7 +380,7 @@ void Worker::fail_task(const pb::Task& task, const std::string& message, bool ha
   req.set_message(message);
   req.set_handed_back(handed_back);
   grpc::ClientContext ctx;
-  set_deadline(ctx, 10, kWaitForReady);
+  set_deadline(ctx, within_give_up(10), kWaitForReady);
   pb::FailResponse resp;
   grpc::Status s = stub_->FailTask(&ctx, req, &resp);
   if (!s.ok())
@@ -446,7 +476,7 @@ void Worker::run_task(const pb::Task& task) {
       req.set_worker_id(worker_id_);
       req.set_lease_id(task.lease_id());
       grpc::ClientContext ctx;
-      set_deadline(ctx, 10, kWaitForReady);
+      set_deadline(ctx, within_give_up(10), kWaitForReady);
       pb::RenewResponse resp;
       grpc::Status s = stub_->RenewLease(&ctx, req, &resp);
       if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
@@ -527,7 +557,7 @@ int Worker::serve() {
     pb::LeaseRequest req;
     req.set_worker_id(worker_id_);
     grpc::ClientContext ctx;
-    set_deadline(ctx, 5, kWaitForReady);
+    set_deadline(ctx, within_give_up(5), kWaitForReady);
     pb::LeaseResponse resp;
     grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
     if (s.error_code() == grpc::StatusCode::NOT_FOUND) {

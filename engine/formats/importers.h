@@ -16,9 +16,12 @@
 
 namespace rf {
 
-Scene load_json_scene(const std::string& path);     // docs/scene-format.md (engine/formats/json)
-Scene load_pbrt_scene(const std::string& path);     // pbrt-v4 (engine/formats/pbrt)
-Scene load_mitsuba_scene(const std::string& path);  // Mitsuba 3 XML (engine/formats/mitsuba)
-Scene load_gltf_scene(const std::string& path);     // glTF 2.0, .gltf and .glb (engine/formats/gltf)
+// Each counts what it reads against `limits` (engine/import_limits.h).
+Scene load_json_scene(const std::string& path,
+                      const ImportLimits& limits = {});  // docs/scene-format.md
+Scene load_pbrt_scene(const std::string& path, const ImportLimits& limits = {});  // pbrt-v4
+Scene load_mitsuba_scene(const std::string& path,
+                         const ImportLimits& limits = {});                        // Mitsuba 3 XML
+Scene load_gltf_scene(const std::string& path, const ImportLimits& limits = {});  // .gltf and .glb
 
 }  // namespace rf

@@ -20,14 +20,15 @@ std::string extension_of(const std::string& path) {
 
 }  // namespace
 
-Scene load_scene(const std::string& path, const SceneOverrides& overrides) {
+Scene load_scene(const std::string& path, const SceneOverrides& overrides,
+                 const ImportLimits& limits) {
   const std::string ext = extension_of(path);
-  Scene scene = ext == ".pbrt"                    ? load_pbrt_scene(path)
-                : ext == ".xml"                   ? load_mitsuba_scene(path)
-                : ext == ".gltf" || ext == ".glb" ? load_gltf_scene(path)
-                                                  : load_json_scene(path);  // .json and the rest
+  Scene scene = ext == ".pbrt"                    ? load_pbrt_scene(path, limits)
+                : ext == ".xml"                   ? load_mitsuba_scene(path, limits)
+                : ext == ".gltf" || ext == ".glb" ? load_gltf_scene(path, limits)
+                                                  : load_json_scene(path, limits);  // the rest
   for (const std::string& w : scene.warnings) spdlog::warn("{}", w);
-  prepare_instances(scene);
+  prepare_instances(scene, limits.elements);
   apply_overrides(scene, overrides);
   return scene;
 }

@@ -1,6 +1,8 @@
 #include "engine/formats/scene_files.h"
 
 #include <filesystem>
+#include <new>
+#include <system_error>
 
 #include "engine/digest.h"
 
@@ -15,6 +17,7 @@ namespace {
 bool inside(const fs::path& root, const fs::path& p) {
   std::error_code ec;
   fs::path r = fs::weakly_canonical(root, ec), c = fs::weakly_canonical(p, ec);
+  if (ec == std::errc::not_enough_memory) throw std::bad_alloc();  // not "outside the root"
   if (ec) return false;
   auto rel = c.lexically_relative(r);
   return !rel.empty() && *rel.begin() != "..";
@@ -22,8 +25,38 @@ bool inside(const fs::path& root, const fs::path& p) {
 
 }  // namespace
 
-SceneFiles::SceneFiles(const std::string& scene_path)
-    : scene_path_(scene_path), root_(fs::path(scene_path).parent_path().string()) {}
+SceneFiles::SceneFiles(const std::string& scene_path, const ImportLimits& limits)
+    : scene_path_(scene_path),
+      root_(fs::path(scene_path).parent_path().string()),
+      limits_(limits) {}
+
+std::string SceneFiles::read_main() {
+  std::error_code ec;
+  if (fs::is_directory(scene_path_, ec))
+    throw SceneError(scene_path_ + ": is a directory, not a scene file");
+  uintmax_t size = fs::file_size(scene_path_, ec);
+  if (!ec) {
+    if (size > limits_.bytes)
+      throw SceneError(scene_path_ + ": " + std::to_string(size) +
+                       " bytes; the import limit bytes is " + std::to_string(limits_.bytes));
+    bytes_read_ += size;
+  }
+  ++files_read_;
+  return read_scene_file(scene_path_);
+}
+
+void SceneFiles::count_read(const std::string& where, const std::string& name, uint64_t bytes) {
+  if (files_read_ + 1 > limits_.files)
+    fail(where, "reading '" + name + "' would make more than " + std::to_string(limits_.files) +
+                    " file reads (the import limit files; every include counts, so includes "
+                    "that include the same files many times exceed it)");
+  if (bytes > limits_.bytes || bytes_read_ + bytes > limits_.bytes)
+    fail(where, "reading '" + name + "' (" + std::to_string(bytes) +
+                    " bytes) would make more than " + std::to_string(limits_.bytes) +
+                    " bytes read (the import limit bytes)");
+  ++files_read_;
+  bytes_read_ += bytes;
+}
 
 void SceneFiles::fail(const std::string& where, const std::string& what) const {
   throw SceneError(scene_path_ + ": " + where + ": " + what);
@@ -86,6 +119,8 @@ std::string SceneFiles::register_file(const std::string& file, const std::string
     fail(where, noun + " '" + n + "' not found (looked for " + full.string() + ")");
   if (!inside(root_.empty() ? fs::path(".") : fs::path(root_), full))
     fail(where, "'" + n + "' leads outside the scene file's directory (a symbolic link?)");
+  uintmax_t size = fs::file_size(full, ec);
+  count_read(where, n, ec ? 0 : uint64_t(size));
   std::string bytes;
   try {
     bytes = read_file_bytes(full.string());

@@ -3,7 +3,8 @@
 // importer registers what it reads here: meshes, images, included scene files. Names are
 // relative to the main scene file's directory (the bundle root), '/'-separated, without ".." or
 // an absolute path, and must not lead outside the root through a symbolic link. The scene's digest
-// covers the main file's bytes and every registered file's name and SHA-256.
+// covers the main file's bytes and every registered file's name and SHA-256. Every read is counted
+// against the scene's ImportLimits (files and bytes, engine/import_limits.h).
 #pragma once
 
 #include <map>
@@ -11,6 +12,7 @@
 #include <string_view>
 #include <vector>
 
+#include "engine/import_limits.h"
 #include "engine/mesh_io.h"
 #include "engine/scene.h"
 
@@ -18,8 +20,10 @@ namespace rf {
 
 class SceneFiles {
  public:
-  explicit SceneFiles(const std::string& scene_path);
+  explicit SceneFiles(const std::string& scene_path, const ImportLimits& limits = {});
 
+  // The main scene file's bytes (the first read counted); throws SceneError naming the path.
+  std::string read_main();
   const std::string& root() const { return root_; }  // the main file's directory
   // Checks a referenced file name (relative to the root) and returns it normalised
   // ("./a//b.obj" -> "a/b.obj"). Errors are SceneErrors "<scene file>: <where>: <why>".
@@ -44,8 +48,12 @@ class SceneFiles {
   [[noreturn]] void fail(const std::string& where, const std::string& what) const;
   std::string register_file(const std::string& file, const std::string& where,
                             const std::string& noun, std::string* bytes_out);
+  // Counts a read of `bytes` bytes against the limits before it is made.
+  void count_read(const std::string& where, const std::string& name, uint64_t bytes);
 
   std::string scene_path_, root_;
+  ImportLimits limits_;
+  uint64_t files_read_ = 0, bytes_read_ = 0;
   std::vector<std::string> names_;  // in order of first use
   std::map<std::string, std::string> digests_;
   std::map<std::string, MeshData> meshes_;

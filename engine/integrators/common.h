@@ -3,6 +3,9 @@
 // the few pieces several estimators use (the BSDF at a hit, shadow tests, next-event estimation).
 #pragma once
 
+#include <atomic>
+#include <stdexcept>
+
 #include <tbb/collaborative_call_once.h>
 
 #include <cstdint>
@@ -63,6 +66,11 @@ class PassCache {
 enum class LaneKind : uint8_t { OneByOne, Diffuse, RoughConductor };
 LaneKind lane_kind(const Material& m);
 
+// Thrown by a task that Renderer::request_stop() stopped; its buffer is discarded.
+struct RenderStopped : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 struct RenderContext {
   RenderContext(const Scene& scene_, const Accel& accel_, const LightSet& lights_,
                 const TextureEvaluator& textures_, const PerspectiveCamera& camera_,
@@ -87,6 +95,11 @@ struct RenderContext {
   // lane_kind of each of the scene's materials, and whether none is OneByOne.
   std::vector<LaneKind> lane_kinds;
   bool all_in_lanes = true;
+  // Renderer::request_stop(): the drivers check it at every camera sample and light path.
+  mutable std::atomic<bool> stop{false};
+  void throw_if_stopped() const {
+    if (stop.load(std::memory_order_relaxed)) throw RenderStopped("the render was stopped");
+  }
 };
 
 // Per-thread counters an integrator updates; summed into the task's buffer.

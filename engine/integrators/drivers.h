@@ -232,6 +232,7 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
       for (int y = y_begin; y < y_end; ++y)
         for (int x = rect.x0; x < rect.x1(); ++x)
           for (uint64_t s0 = 0; s0 < spp; s0 += K) {
+            ctx.throw_if_stopped();
             const int n = int(std::min<uint64_t>(K, spp - s0));
             start_camera_samples(ctx, samplers.data(), n, task, x, y, s0, rays, filter_weight);
             if (aovs)
@@ -246,6 +247,7 @@ SampleBuffer render_camera_paths(const RenderContext& ctx, const TaskKey& task, 
       for (int y = y_begin; y < y_end; ++y)
         for (int x = rect.x0; x < rect.x1(); ++x)
           for (uint64_t s = 0; s < spp; ++s) {
+            ctx.throw_if_stopped();
             float filter_weight;
             Ray ray = start_camera_sample(ctx, sampler, task, x, y, s, filter_weight);
             if (aovs) buf.add_aov_sample(x, y, aov_sample(ctx, ray, counters));
@@ -324,6 +326,7 @@ SampleBuffer render_light_paths(const RenderContext& ctx, const TaskKey& task, b
         Sampler sampler(Sampler::Kind::Independent);
         SplatTarget target{&out, w, h, &ctx.scene.film.filter};
         for (uint64_t i = chunk * kChunk; i < std::min(paths, (chunk + 1) * kChunk); ++i) {
+          ctx.throw_if_stopped();
           sampler.start_light_path(ctx.scene.render.seed, task.frame, task.pass, i);
           trace(sampler, target, counters);
         }

@@ -236,4 +236,33 @@ std::vector<pb::Chunk> chunks_of(const std::string& bytes) {
   return out;
 }
 
+grpc::Status submit_files(pb::JobService::Stub& stub, const std::string& scene_path,
+                          const std::vector<BundleFile>& files, const std::string& frames,
+                          std::string* job_id, const std::function<void(pb::JobSpec&)>& edit) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  pb::SubmitResponse resp;
+  auto w = stub.Submit(&ctx, &resp);
+  pb::SubmitRequest head;
+  head.mutable_spec()->set_scene_path(scene_path);
+  head.mutable_spec()->set_frames(frames);
+  for (const BundleFile& f : files) {
+    pb::BundleFile* e = head.mutable_spec()->add_files();
+    e->set_path(f.path);
+    e->set_sha256(sha256_hex(f.bytes));
+  }
+  if (edit) edit(*head.mutable_spec());
+  w->Write(head);
+  for (const BundleFile& f : files)
+    for (pb::Chunk& c : chunks_of(f.bytes)) {
+      pb::SubmitRequest m;
+      *m.mutable_blob_chunk() = c;
+      if (!w->Write(m)) break;
+    }
+  w->WritesDone();
+  grpc::Status st = w->Finish();
+  if (st.ok() && job_id) *job_id = resp.job_id();
+  return st;
+}
+
 }  // namespace rf::test

@@ -6,6 +6,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include <csignal>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -109,5 +110,17 @@ grpc::Status complete_with(rayfarm::v1::WorkerService::Stub& stub, const std::st
                            const rayfarm::v1::Task& task,
                            const std::vector<rayfarm::v1::Chunk>& chunks);
 std::vector<rayfarm::v1::Chunk> chunks_of(const std::string& bytes);
+
+// A file of a bundle sent by submit_files: its path in the bundle and its bytes.
+struct BundleFile {
+  std::string path, bytes;
+};
+// Submits, through a raw stub, a job of scene_path over these files (each uploaded; none parsed
+// here, as a hostile client would send them), with `frames` as its range and `edit` applied to
+// the spec last; the call's status, and the job id in *job_id when it was accepted.
+grpc::Status submit_files(rayfarm::v1::JobService::Stub& stub, const std::string& scene_path,
+                          const std::vector<BundleFile>& files, const std::string& frames = "",
+                          std::string* job_id = nullptr,
+                          const std::function<void(rayfarm::v1::JobSpec&)>& edit = {});
 
 }  // namespace rf::test

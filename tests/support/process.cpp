@@ -78,4 +78,11 @@ bool Process::wait_for_log(const std::string& text, double timeout_s) const {
   return false;
 }
 
+long proc_status_kib(pid_t pid, const std::string& field) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind(field + ":", 0) == 0) return std::stol(line.substr(field.size() + 1));
+  return -1;
+}
+
 }  // namespace rf::test

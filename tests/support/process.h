@@ -33,4 +33,7 @@ class Process {
   std::string log_path_;
 };
 
+// A field of /proc/PID/status in KiB ("VmRSS", "VmHWM"), or -1.
+long proc_status_kib(pid_t pid, const std::string& field);
+
 }  // namespace rf::test

@@ -687,11 +687,11 @@ const json* Context::extension(const std::string& pointer, const std::string& na
 
 }  // namespace gltf
 
-Scene load_gltf_scene(const std::string& path) {
-  std::string bytes = read_scene_file(path);
+Scene load_gltf_scene(const std::string& path, const ImportLimits& limits) {
+  SceneFiles files(path, limits);
+  std::string bytes = files.read_main();
   Scene scene;
   scene.path = path;
-  SceneFiles files(path);
   gltf::Context c;
   c.file = path;
   c.files = &files;

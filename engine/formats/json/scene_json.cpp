@@ -624,6 +624,12 @@ class SceneParser {
       r_.array(*v, p + ".tessellation", 2);
       nt = int(r_.integer((*v)[0], p + ".tessellation[0]", 3, 1 << 14));
       np = int(r_.integer((*v)[1], p + ".tessellation[1]", 3, 1 << 14));
+      constexpr uint64_t kMaxVertices = uint64_t(1) << 24;  // 16.8 million, 0.8 GB of mesh
+      if (uint64_t(nt + 1) * uint64_t(np + 1) > kMaxVertices)
+        r_.fail(p + ".tessellation", std::to_string(nt) + " x " + std::to_string(np) + " makes " +
+                                         std::to_string(uint64_t(nt + 1) * uint64_t(np + 1)) +
+                                         " vertices; a tessellated sphere has at most " +
+                                         std::to_string(kMaxVertices));
     } else {
       static const Vec3 kAxes[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
       SphereShape sphere;
@@ -675,12 +681,12 @@ class SceneParser {
 
 }  // namespace
 
-Scene load_json_scene(const std::string& path) {
-  std::string bytes = read_scene_file(path);
+Scene load_json_scene(const std::string& path, const ImportLimits& limits) {
+  SceneFiles files(path, limits);
+  std::string bytes = files.read_main();
   Scene scene;
   scene.path = path;
   json root = parse_json_text(bytes, path);
-  SceneFiles files(path);
   SceneParser parser(path, scene, files);
   parser.parse(root);
   files.finish(scene, bytes);

@@ -944,12 +944,15 @@ class MitsubaParser {
       Vec3 c = get_point(p, "center", Vec3(0.0f));
       float r = get_float(p, "radius", 1.0f);
       if (!(r > 0)) fail(*p.find("radius"), "@value: the radius must be > 0");
-      data = mitsuba_sphere();
       // Mitsuba's parametrisation (mitsuba_sphere) as make_sphere's axes; exact under a
-      // similarity, a mesh otherwise.
+      // similarity, a mesh otherwise (tessellated only then: a scene of 500,000 exact spheres
+      // imports in time linear in their number, with no mesh per sphere).
       static const Vec3 kAxes[3] = {{1, 0, 0}, {0, 0, -1}, {0, -1, 0}};  // v = theta / pi
       SphereShape sphere;
-      if (place_sphere(c, r, kAxes, to_world, sphere)) mesh.sphere = sphere;
+      if (place_sphere(c, r, kAxes, to_world, sphere))
+        mesh.sphere = sphere;
+      else
+        data = mitsuba_sphere();
       to_world = to_world * Mat4::translate(c) * Mat4::scale(Vec3(r));
     } else {
       fail(n, "unsupported shape '" + type +
@@ -1015,12 +1018,15 @@ class MitsubaParser {
   // Mitsuba's sphere: pole on +z, uv = (phi / 2pi, theta / pi) with phi from +x towards +y. The
   // engine's UV sphere (pole +y, 64 x 128) turned by +90 degrees about x has exactly that frame.
   static MeshData mitsuba_sphere() {
-    MeshData d = make_sphere(Vec3(0.0f), 1.0f, 64, 128);
-    auto turn = [](Vec3 v) { return Vec3(v.x, -v.z, v.y); };
-    for (Vec3& v : d.positions) v = turn(v);
-    for (Vec3& v : d.normals) v = turn(v);
-    for (Vec2& uv : d.uvs) uv.y = 1 - uv.y;
-    return d;
+    static const MeshData sphere = [] {
+      MeshData d = make_sphere(Vec3(0.0f), 1.0f, 64, 128);
+      auto turn = [](Vec3 v) { return Vec3(v.x, -v.z, v.y); };
+      for (Vec3& v : d.positions) v = turn(v);
+      for (Vec3& v : d.normals) v = turn(v);
+      for (Vec2& uv : d.uvs) uv.y = 1 - uv.y;
+      return d;
+    }();
+    return sphere;
   }
 
   std::optional<Emission> area_emission(const Node& n) {
@@ -1127,11 +1133,11 @@ class MitsubaParser {
 
 }  // namespace
 
-Scene load_mitsuba_scene(const std::string& path) {
-  std::string bytes = read_scene_file(path);
+Scene load_mitsuba_scene(const std::string& path, const ImportLimits& limits) {
+  SceneFiles files(path, limits);
+  std::string bytes = files.read_main();
   Scene scene;
   scene.path = path;
-  SceneFiles files(path);
   mitsuba::Document doc(path, bytes, files, scene.warnings);
   MitsubaParser parser(doc, scene, files);
   parser.parse();

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cctype>
+#include <map>
+#include <new>
 
 #include "engine/scene_error.h"
 
@@ -37,17 +39,50 @@ std::string camel_to_snake(const std::string& s) {
   return out;
 }
 
-std::string qualifier(pugi::xml_node n) {
-  if (pugi::xml_attribute id = n.attribute("id")) return "[@id='" + std::string(id.value()) + "']";
-  if (pugi::xml_attribute nm = n.attribute("name"))
-    return "[@name='" + std::string(nm.value()) + "']";
-  int index = 0, count = 0;
-  for (pugi::xml_node s = n.parent().first_child(); s; s = s.next_sibling()) {
-    if (s.type() != pugi::node_element || std::string(s.name()) != n.name()) continue;
-    ++count;
-    if (s == n) index = count;
+// An element child of a parent with the part of its XML path that tells it from its siblings:
+// [@id='x'], [@name='y'], or [i] when it is the i-th of several elements of its name.
+struct Qualified {
+  pugi::xml_node node;
+  std::string qualifier;
+};
+
+// The element children of `parent`, qualified, in one pass over them and a map of names (a
+// scene of 50,000 shapes has 50,000 siblings).
+std::vector<Qualified> qualified_children(pugi::xml_node parent) {
+  std::map<std::string, int> count, seen;
+  for (pugi::xml_node s = parent.first_child(); s; s = s.next_sibling())
+    if (s.type() == pugi::node_element) ++count[s.name()];
+  std::vector<Qualified> out;
+  for (pugi::xml_node s = parent.first_child(); s; s = s.next_sibling()) {
+    if (s.type() != pugi::node_element) continue;
+    int index = ++seen[s.name()];
+    std::string q;
+    if (pugi::xml_attribute id = s.attribute("id"))
+      q = "[@id='" + std::string(id.value()) + "']";
+    else if (pugi::xml_attribute nm = s.attribute("name"))
+      q = "[@name='" + std::string(nm.value()) + "']";
+    else if (count[s.name()] > 1)
+      q = "[" + std::to_string(index) + "]";
+    out.push_back({s, std::move(q)});
   }
-  return count > 1 ? "[" + std::to_string(index) + "]" : "";
+  return out;
+}
+
+// The first element nested deeper than kMaxNesting, or an empty node (a walk without recursion).
+pugi::xml_node too_deep(pugi::xml_node root) {
+  int depth = 0;
+  pugi::xml_node n = root;
+  while (n) {
+    if (pugi::xml_node c = n.first_child()) {
+      n = c;
+      if (++depth > kMaxNesting) return n;
+      continue;
+    }
+    while (n && n != root && !n.next_sibling()) n = n.parent(), --depth;
+    if (!n || n == root) break;
+    n = n.next_sibling();
+  }
+  return {};
 }
 
 bool is_name_char(char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; }
@@ -86,10 +121,15 @@ const Source& Document::load(const std::string& name, const std::string& bytes, 
     if (bytes[i] == '\n') src->line_starts.push_back(i + 1);
   pugi::xml_parse_result r = src->doc.load_buffer(src->bytes.data(), src->bytes.size(),
                                                   pugi::parse_default, pugi::encoding_utf8);
+  if (r.status == pugi::status_out_of_memory) throw std::bad_alloc();  // not the file's fault
   if (!r)
     throw SceneError(name + ":" + std::to_string(src->line_of(r.offset)) +
                      ": not well-formed XML: " + r.description() +
                      (from ? " (included from " + from->where() + ")" : ""));
+  if (pugi::xml_node deep = too_deep(src->doc))
+    throw SceneError(name + ":" + std::to_string(src->line_of(deep.offset_debug())) +
+                     ": elements nested more than " + std::to_string(kMaxNesting) +
+                     " deep (the import limit on nesting)");
   pugi::xml_node scene = src->doc.document_element();
   Node root{scene, src.get(), "scene"};
   if (std::string(scene.name()) != "scene")
@@ -117,9 +157,10 @@ const Source& Document::load(const std::string& name, const std::string& bytes, 
 // <default name="x" value="y"/>: the first definition wins (Mitsuba: a value given on its command
 // line overrides the file's default; this importer has no such values).
 void Document::collect_defaults(const Source& src, pugi::xml_node scene) {
-  for (pugi::xml_node d = scene.first_child(); d; d = d.next_sibling()) {
-    if (d.type() != pugi::node_element || std::string(d.name()) != "default") continue;
-    Node n{d, &src, "scene/default" + qualifier(d)};
+  for (const Qualified& q : qualified_children(scene)) {
+    pugi::xml_node d = q.node;
+    if (std::string(d.name()) != "default") continue;
+    Node n{d, &src, "scene/default" + q.qualifier};
     if (!d.attribute("name")) fail(n, "<default> needs a 'name' attribute");
     if (!d.attribute("value")) fail(n, "<default> needs a 'value' attribute");
     params_.emplace(d.attribute("name").value(), d.attribute("value").value());
@@ -128,9 +169,9 @@ void Document::collect_defaults(const Source& src, pugi::xml_node scene) {
 
 std::vector<Node> Document::children(const Node& n) {
   std::vector<Node> out;
-  for (pugi::xml_node c = n.xml.first_child(); c; c = c.next_sibling()) {
-    if (c.type() != pugi::node_element) continue;
-    Node child{c, n.source, n.path + "/" + c.name() + qualifier(c)};
+  for (const Qualified& q : qualified_children(n.xml)) {
+    pugi::xml_node c = q.node;
+    Node child{c, n.source, n.path + "/" + c.name() + q.qualifier};
     std::string tag = c.name();
     if (tag == "default") continue;  // collected when the file was parsed
     if (tag != "include") {

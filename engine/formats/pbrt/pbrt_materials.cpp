@@ -73,6 +73,11 @@ RGB Builder::spectrum_value(const Param& p, bool illuminant, const std::string& 
   if (p.type == "blackbody") {
     if (p.numbers.empty() || p.numbers.size() > 2 || !(p.numbers[0] > 0))
       fail(p.at, what + ": expected a temperature in kelvin (> 0)");
+    // Stars run from about 2,000 K to 50,000 K; far outside that a value is likely a typo (the
+    // spectrum is normalised to a peak of 1, so 1e30 K renders as a plain blue-white).
+    if (p.numbers[0] < 500 || p.numbers[0] > 1e5)
+      warn(p.at, what + ": a blackbody of " + format_number(p.numbers[0]) +
+                     " K is outside 500..100000 K (a typo?); its normalised colour is used");
     RGB c = blackbody_rgb(p.numbers[0]);
     return p.numbers.size() == 2 ? c * float(p.numbers[1]) : c;  // pbrt-v3's [T scale]
   }

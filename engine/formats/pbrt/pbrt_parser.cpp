@@ -1,5 +1,7 @@
 #include "engine/formats/pbrt/pbrt_parser.h"
 
+#include <algorithm>
+
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -17,7 +19,12 @@ std::string warning_text(const Location& at, const std::string& what) {
 }
 
 Lexer::Lexer(std::string text, std::string file, std::string chain)
-    : text_(std::move(text)), file_(std::move(file)), chain_(std::move(chain)) {}
+    : text_(std::move(text)), file_(std::move(file)), chain_(std::move(chain)) {
+  // A NUL is never part of a pbrt file, and a message quoting a token with one would end there.
+  if (size_t nul = text_.find('\0'); nul != std::string::npos)
+    fail(at(int(std::count(text_.begin(), text_.begin() + ptrdiff_t(nul), '\n')) + 1),
+         "a NUL byte (pbrt scene files are text)");
+}
 
 const Token& Lexer::peek() {
   if (!has_peek_) {

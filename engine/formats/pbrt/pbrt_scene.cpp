@@ -206,6 +206,9 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   } else if (name == "ReverseOrientation") {
     gs.reverse_orientation = !gs.reverse_orientation;
   } else if (name == "AttributeBegin" || name == "TransformBegin") {
+    if (stack_.size() + transform_stack_.size() >= size_t(kMaxNesting))
+      fail(at, name + ": blocks nested more than " + std::to_string(kMaxNesting) +
+                   " deep (the import limit on nesting)");
     if (name == "TransformBegin")
       transform_stack_.push_back(gs.ctm);
     else {
@@ -611,11 +614,11 @@ void Builder::area_light(const std::string& type, const ParamList& params, const
 
 }  // namespace pbrt
 
-Scene load_pbrt_scene(const std::string& path) {
-  std::string bytes = read_scene_file(path);
+Scene load_pbrt_scene(const std::string& path, const ImportLimits& limits) {
+  SceneFiles files(path, limits);
+  std::string bytes = files.read_main();
   Scene scene;
   scene.path = path;
-  SceneFiles files(path);
   pbrt::Builder builder(path, scene, files);
   builder.run(bytes);
   files.finish(scene, bytes);
