@@ -29,6 +29,7 @@
 #include "coordinator/job_store.h"
 #include "coordinator/scene_check.h"
 #include "coordinator/scheduler.h"
+#include "coordinator/state_dir.h"
 #include "engine/progress.h"
 #include "engine/sample_buffer.h"
 #include "farm/blob_store.h"
@@ -197,6 +198,9 @@ struct CoreOptions {
   // Parses and summarises a submitted job's scenes (scene_check.h). Required: the server runs
   // them in bounded child processes (child_scene_checker); tests may parse in-process.
   SceneChecker scene_checker;
+  // The job store (job_store.h); empty: SQLite at STATE/jobs.sqlite. The core's tests and the
+  // fuzzer give a memory store, kept across their restarts.
+  std::shared_ptr<JobStore> store;
 };
 
 struct JobRecord;
@@ -334,7 +338,7 @@ class Coordinator {
   CoreOptions options_;
   StateDirLock lock_;  // before anything in the state directory is opened
   BlobStore blobs_;
-  JobStore store_;
+  std::shared_ptr<JobStore> store_;
   mutable std::mutex mu_;
   mutable std::condition_variable changed_;
   uint64_t version_ = 1;  // bumped at every change a watcher may want to see

@@ -1,19 +1,28 @@
-// The coordinator's durable job state (DESIGN.md "Coordinator": state survives a restart): an
-// embedded SQLite database in WAL mode with one writer connection, on local disk. It records each
-// job's spec (the serialized JobSpec), its state and error, and every task completion and
-// failure. Which task results an image contains is recorded by the frame checkpoints
-// (checkpoint.h), not here: on restart a task the database calls done but the checkpoint lacks
-// is rendered again.
+// The coordinator's durable job state (DESIGN.md "Coordinator": state survives a restart) behind
+// one interface with two implementations: SQLite on the state directory (WAL, one writer
+// connection; the server's) and memory (the core's unit tests and the coordinator fuzzer). It
+// records each job's spec (spec_codec.h), its state and error, every task completion, failure and
+// refused result, worker registrations, which tenants uploaded which blobs, and the leases of
+// running jobs. Which task results an image contains is recorded by the frame checkpoints
+// (checkpoint.h), not here: on restart a task the store calls done but the checkpoint lacks is
+// rendered again.
+//
+// Writes come in batches applied in order, all or none (one SQLite transaction): the journal
+// (journal.h) groups the writes of many calls into one. Every implementation is safe to call from
+// any thread.
 #pragma once
 
 #include <cstdint>
 #include <functional>
+#include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
+#include <variant>
 #include <vector>
 
-struct sqlite3;
+#include "farm/job.h"
 
 namespace rf {
 
@@ -29,9 +38,9 @@ constexpr int kStoreDamagedExit = 4;
 
 struct StoredJob {
   std::string id;
-  uint64_t seq = 0;  // submission order
-  std::string spec;  // serialized rayfarm.v1.JobSpec
-  int state = 0;     // rayfarm.v1.JobState
+  uint64_t seq = 0;             // submission order
+  std::optional<JobSpec> spec;  // nothing when the stored spec does not decode
+  int state = 0;                // rayfarm.v1.JobState
   std::string error;
   int64_t submitted_unix = 0;
   double core_seconds = 0;
@@ -46,81 +55,100 @@ struct StoredLease {
   std::string worker_id;
 };
 
-// One coordinator per state directory: an exclusive lock (flock) on STATE_DIR/lock, held for
-// the object's life, with the holder's pid written in the file. A second holder is refused
-// with a StoreError naming the first one's pid.
-class StateDirLock {
- public:
-  explicit StateDirLock(const std::string& state_dir);  // creates the directory if needed
-  ~StateDirLock();
-  StateDirLock(const StateDirLock&) = delete;
-  StateDirLock& operator=(const StateDirLock&) = delete;
-
- private:
-  int fd_ = -1;
+// A worker registration: the id the coordinator issued and the principal that registered it.
+struct StoredWorker {
+  std::string id, principal, build_id;
+  std::string refused;  // why it is refused for good (outvoted), or empty
 };
+
+struct TaskFailure {
+  uint32_t frame, pass, tile;
+  std::string worker_id, message;
+};
+
+enum class TaskEventKind : int { Failed = 0, Done = 1, ResultRefused = 2 };
+
+// The writes, one struct each.
+namespace store {
+struct InsertJob {
+  StoredJob job;
+};
+struct SetState {
+  std::string job_id;
+  int state = 0;
+  std::string error;
+};
+struct AddCoreSeconds {
+  std::string job_id;
+  double seconds = 0;
+};
+struct SetBuild {
+  std::string job_id, build_id;
+};
+struct TaskEvent {
+  std::string job_id;
+  uint32_t frame = 0, pass = 0, tile = 0;
+  std::string worker_id;
+  TaskEventKind kind = TaskEventKind::Done;
+  std::string message;
+};
+struct InsertWorker {
+  StoredWorker worker;
+};
+struct RefuseWorker {
+  std::string worker_id, why;
+};
+struct DeleteWorker {
+  std::string worker_id;
+};
+struct AddBlobTenant {
+  std::string tenant, sha256;
+};
+struct InsertLease {
+  StoredLease lease;
+};
+struct DeleteLeases {
+  std::string job_id;
+  std::optional<uint32_t> frame;  // all of the job's when absent
+};
+}  // namespace store
+
+using StoreWrite =
+    std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds, store::SetBuild,
+                 store::TaskEvent, store::InsertWorker, store::RefuseWorker, store::DeleteWorker,
+                 store::AddBlobTenant, store::InsertLease, store::DeleteLeases>;
+
+// Whether losing the write in a power cut costs nothing but work: a lease's row (its holder's
+// late result is then rendered again). Batches of such writes only are not flushed to disk.
+bool lease_write(const StoreWrite& w);
 
 class JobStore {
  public:
-  explicit JobStore(const std::string& path);  // creates the schema if needed
-  ~JobStore();
-  JobStore(const JobStore&) = delete;
-  JobStore& operator=(const JobStore&) = delete;
+  virtual ~JobStore() = default;
 
-  uint64_t next_seq();  // one past the largest job sequence number stored
-  void insert_job(const StoredJob& job);
-  void set_state(const std::string& job_id, int state, const std::string& error);
-  void add_core_seconds(const std::string& job_id, double seconds);
-  void task_done(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
-                 const std::string& worker_id);
-  void task_failed(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
-                   const std::string& worker_id, const std::string& message);
-  std::vector<StoredJob> jobs() const;  // in submission order
+  // Applies the writes in order, all or none, durable on return (batches of lease writes only:
+  // written, not flushed). Throws StoreError naming the store.
+  virtual void write(const std::vector<StoreWrite>& batch) = 0;
+  void write(StoreWrite w) { write(std::vector<StoreWrite>{std::move(w)}); }
 
-  // Worker registrations (id -> the principal that registered it) and leases. Lease rows are
-  // written with synchronous=NORMAL (no fsync): losing the last ones in a power cut only makes
-  // those late results be rendered again.
-  struct StoredWorker {
-    std::string id, principal, build_id;
-    std::string refused;  // why it is refused for good (outvoted), or empty
-  };
-  void insert_worker(const StoredWorker& worker);
-  void refuse_worker(const std::string& worker_id, const std::string& why);
-  void delete_worker(const std::string& worker_id);
-  std::vector<StoredWorker> workers() const;
-  void set_build(const std::string& job_id, const std::string& build_id);
-
+  virtual uint64_t next_seq() const = 0;            // one past the largest job sequence number
+  virtual std::vector<StoredJob> jobs() const = 0;  // in submission order
+  virtual std::vector<StoredWorker> workers() const = 0;
   // Which tenants uploaded a blob: a client sees a blob as present only once its tenant did.
-  void add_blob_tenant(const std::string& tenant, const std::string& sha256);
-  bool blob_tenant(const std::string& tenant, const std::string& sha256) const;
-  void insert_lease(const StoredLease& lease);
+  virtual bool blob_tenant(const std::string& tenant, const std::string& sha256) const = 0;
   // The job's lease rows in the order written, one at a time (a large job may have many).
-  void for_each_lease(const std::string& job_id,
-                      const std::function<void(const StoredLease&)>& f) const;
+  virtual void for_each_lease(const std::string& job_id,
+                              const std::function<void(const StoredLease&)>& f) const = 0;
+  virtual std::vector<TaskFailure> failures(const std::string& job_id) const = 0;  // in order
+  virtual std::vector<std::string> refused_workers(const std::string& job_id) const = 0;
+  virtual uint64_t tasks_done(const std::string& job_id) const = 0;
+
   std::vector<StoredLease> leases(const std::string& job_id) const;
-  void delete_leases(const std::string& job_id);                  // the job ended
-  void delete_leases(const std::string& job_id, uint32_t frame);  // the frame is done
-
-  struct TaskFailure {
-    uint32_t frame, pass, tile;
-    std::string worker_id, message;
-  };
-  std::vector<TaskFailure> failures(const std::string& job_id) const;  // in the order recorded
-  // A worker's result refused (it did not match its task): counted against the worker in the
-  // job, never against the task.
-  void result_refused(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
-                      const std::string& worker_id, const std::string& why);
-  std::vector<std::string> refused_workers(const std::string& job_id) const;  // one per refusal
-  uint64_t tasks_done(const std::string& job_id) const;
-
- private:
-  void exec(const std::string& sql);
-  void open_schema();  // WAL, tables, columns added since
-  void insert_event(const std::string& job_id, uint32_t frame, uint32_t pass, uint32_t tile,
-                    const std::string& worker_id, int kind, const std::string& message);
-  std::string damage_advice() const;
-  sqlite3* db_ = nullptr;
-  std::string path_;
 };
+
+// SQLite at `path` (creates the schema, or upgrades one of an earlier build). Throws StoreDamaged
+// for a damaged database, StoreError (saying why) for a full or unwritable disk.
+std::unique_ptr<JobStore> open_sqlite_store(const std::string& path);
+std::unique_ptr<JobStore> memory_store();
 
 }  // namespace rf

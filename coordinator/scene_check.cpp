@@ -24,7 +24,7 @@
 #include <sstream>
 
 #include "coordinator/errors.h"
-#include "farm/convert.h"
+#include "coordinator/spec_codec.h"
 #include "farm/frame_range.h"
 
 extern char** environ;
@@ -265,7 +265,7 @@ std::vector<SceneSummary> check_in_child(const std::string& binary, const SceneC
     argv.push_back("--import-limit");
     argv.push_back(std::string(name) + "=" + std::to_string(value));
   }
-  ChildRun run = run_child(argv, encode_job_spec(spec), double(limits.wall_seconds));
+  ChildRun run = run_child(argv, encode_spec(spec), double(limits.wall_seconds));
 
   std::vector<SceneSummary> out;
   std::optional<nlohmann::json> last;
@@ -383,7 +383,7 @@ int run_scene_check_child(const std::string& bundle_dir, const SceneCheckLimits&
       }
       request.append(buf, size_t(n));
     }
-    std::optional<JobSpec> spec = decode_job_spec(request);
+    std::optional<JobSpec> spec = decode_spec(request);
     if (!spec) {
       emit_error("invalid_argument", "the scene check's request is not a job spec");
       return 1;

@@ -7,7 +7,7 @@
 // (engine/scene_summary.h), and the coordinator plans the job from those.
 //
 // The protocol, both ends in scene_check.cpp: the child's stdin is the job's encoded spec
-// (farm/convert.h); its working directory is the bundle, so messages name bundle paths only; its
+// (spec_codec.h); its working directory is the bundle, so messages name bundle paths only; its
 // stdout is JSON lines, one {"scene": i, "summary": {...}} per scene file in job_scene_paths()
 // order, then {"ok": true} or {"error": MESSAGE, "code": "invalid_argument" |
 // "resource_exhausted"}. A child that dies, or says nothing more, is a refusal naming the scene

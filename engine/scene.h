@@ -224,6 +224,7 @@ struct SceneOverrides {
   std::optional<std::string> sampler;
   std::optional<std::string> aovs;  // comma-separated AOV names, "" for none
   std::optional<std::string> light_selection;  // auto, power, bvh
+  bool operator==(const SceneOverrides&) const = default;
 };
 
 // Reads a scene file and every file it references, applies the overrides and validates the

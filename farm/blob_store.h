@@ -15,6 +15,7 @@ namespace rf {
 struct BundleEntry {
   std::string path;    // relative, '/'-separated, no '..', not absolute
   std::string sha256;  // lower-case hex
+  bool operator==(const BundleEntry&) const = default;
 };
 
 struct BlobError : std::runtime_error {

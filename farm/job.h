@@ -26,6 +26,7 @@ struct JobSpec {
   uint32_t tile_size = 0;          // pixels; 0: the coordinator's default
   std::string build_id;            // results only from this build; empty: the first result's
   std::string request_id;          // the submit's idempotency key (client-made; may be empty)
+  bool operator==(const JobSpec&) const = default;
 };
 
 // One task of a job: a pass of one tile (by its index in the frame's split) of one frame.

@@ -172,6 +172,7 @@ class Farm {
     CoreOptions o;
     o.state_dir = dir_;
     o.scene_checker = in_process_scene_checker();
+    o.store = store_;  // kept across the program's restarts, as a database would be
     o.lease_seconds = 10;
     o.instance = "i" + std::to_string(starts_++);
     o.clock = [this] { return now_; };
@@ -367,6 +368,7 @@ class Farm {
 
   const bool trace_ = std::getenv("FUZZ_TRACE") != nullptr;  // each request and refusal
   std::string dir_;
+  std::shared_ptr<JobStore> store_ = memory_store();
   double now_ = 0;
   int starts_ = 0;
   std::unique_ptr<Coordinator> core_;

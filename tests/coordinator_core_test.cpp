@@ -37,11 +37,16 @@ namespace fs = std::filesystem;
 const std::string kScene = "scenes/cornell-box/scene.json";
 constexpr int kSamplesPerPass = 4;
 
-// A coordinator on a temporary state directory with a clock the test sets. Jobs render the
-// Cornell box at 16x16 in 8x8 tiles: 4 tiles per pass.
+// A coordinator on a temporary state directory with a clock the test sets, and a memory job
+// store that outlives its restarts (SQLite on the state directory for the tests of the database
+// itself). Jobs render the Cornell box at 16x16 in 8x8 tiles: 4 tiles per pass.
+enum class Store { Memory, Sqlite };
+
 class CoreBench {
  public:
-  explicit CoreBench(const std::string& tag) : state_(test::make_temp_dir(tag) + "/state") {
+  explicit CoreBench(const std::string& tag, Store kind = Store::Memory)
+      : state_(test::make_temp_dir(tag) + "/state"),
+        store_(kind == Store::Memory ? memory_store() : nullptr) {
     start("A");
   }
 
@@ -54,6 +59,7 @@ class CoreBench {
       ++scene_checks;
       return in_process_scene_checker()(dir, spec);
     };
+    o.store = store_;
     o.lease_seconds = 10;
     o.instance = instance;
     o.clock = [this] { return now; };
@@ -135,6 +141,7 @@ class CoreBench {
   }
 
   std::string state_;
+  std::shared_ptr<JobStore> store_;  // empty: SQLite on the state directory
   std::unique_ptr<Coordinator> core_;
   std::map<std::string, std::string> workers_;
 };
@@ -729,7 +736,7 @@ TEST(CoordinatorCore, TheJobListComesInPages) {
 // it had merged, ended jobs stay ended, and new jobs never reuse an id. Before, the coordinator
 // started with 0 jobs and gave the next job the id of an old folder.
 TEST(CoordinatorCore, JobsTheDatabaseLostAreRecoveredFromTheirFolders) {
-  CoreBench bench("core-lost-db");
+  CoreBench bench("core-lost-db", Store::Sqlite);
   std::string done = bench.submit(2), cancelled = bench.submit(2), running = bench.submit(2);
   for (int i = 0; i < 8; ++i) {  // all of the first job's tasks
     TaskAssignment a = bench.lease();
@@ -764,7 +771,7 @@ TEST(CoordinatorCore, JobsTheDatabaseLostAreRecoveredFromTheirFolders) {
 // StoreDamaged, exit status 4 from the process, and a message that says how to recover; doing
 // what it says brings every job back.
 TEST(CoordinatorCore, ADamagedJobDatabaseStopsTheCoordinatorSayingHowToRecover) {
-  CoreBench bench("core-damaged-db");
+  CoreBench bench("core-damaged-db", Store::Sqlite);
   std::string job = bench.submit(2);
   bench.stop();
   std::string db = bench.state_dir() + "/jobs.sqlite";

@@ -1,0 +1,79 @@
+// What the coordinator's files share (core.cpp, intake.cpp, recovery.cpp, workers.cpp,
+// results.cpp: one Coordinator, split by concept): a job's and a frame's records, and the helpers
+// every refusal and log line uses. Not for use outside coordinator/.
+#pragma once
+
+#include <chrono>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "coordinator/checkpoint.h"
+#include "coordinator/core.h"
+#include "engine/frame_accumulator.h"
+
+namespace rf {
+
+namespace core_detail {
+
+// A client-supplied string as it may appear in a message or a log line: at most 64 bytes.
+inline std::string clip(const std::string& s) {
+  if (s.size() <= 64) return printable(s);
+  return printable(s.substr(0, 48)) + "...(" + std::to_string(s.size()) + " bytes)";
+}
+
+[[noreturn]] inline void refuse(ErrorCode code, const std::string& message) {
+  throw CoordinatorError(code, message);
+}
+
+inline double unix_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+}  // namespace core_detail
+
+// One frame of a job: its merge state, durable checkpoint and progress figures.
+struct FrameRecord {
+  uint32_t number = 0;
+  std::string scene_path;                 // in the bundle
+  BufferHeader base;                      // what every task buffer of this frame must match
+  std::mutex m;                           // serializes merges and checkpoints of this frame
+  std::unique_ptr<FrameAccumulator> acc;  // created on the first result; dropped when done
+  std::unique_ptr<FrameCheckpoint> checkpoint;
+  // Under the coordinator's mutex: the figures of the last merge (the ETA is taken when
+  // reported), and when the frame's first task was leased in this run.
+  FrameProgress progress;
+  double first_lease_at = -1;
+  bool leases_dropped = false;  // its lease rows were deleted when it was done
+};
+
+struct JobRecord {
+  std::string id;
+  uint64_t seq = 0;
+  JobSpec spec;
+  JobState state = JobState::Queued;
+  std::string error;
+  int64_t submitted_unix = 0;
+  double core_seconds = 0;
+  std::string tenant;
+  std::string build_id;        // results of this build only; empty: the first merged result's
+  std::string bundle_problem;  // restored without its bundle (its blobs are gone): why
+  std::vector<Rect> tiles;
+  bool splats = false;
+  uint32_t passes = 0;
+  uint64_t spp_per_pass = 0;
+  double noise_target = 0;
+  std::vector<std::unique_ptr<FrameRecord>> frames;
+  std::map<uint32_t, FrameRecord*> by_number;
+
+  ProgressiveOptions merge_options() const { return {0, passes, noise_target}; }
+  std::vector<uint32_t> frame_numbers() const {
+    std::vector<uint32_t> out;
+    for (const auto& f : frames) out.push_back(f->number);
+    return out;
+  }
+};
+
+}  // namespace rf

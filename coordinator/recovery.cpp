@@ -1,0 +1,226 @@
+// Recovery (core.h): each job's folder record, restoring jobs from the store and their frames
+// from checkpoints, jobs the store lost, and what an interrupted process left behind.
+#include "coordinator/core_internal.h"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "coordinator/spec_codec.h"
+#include "engine/digest.h"
+
+namespace rf {
+
+namespace fs = std::filesystem;
+using core_detail::clip;
+using core_detail::refuse;
+using core_detail::unix_now;
+
+void Coordinator::write_folder_record(const StoredJob& j) const {
+  std::string dir = options_.state_dir + "/jobs/" + j.id;
+  write_file_atomic(dir + "/job.spec", j.spec ? encode_spec(*j.spec) : std::string());
+  nlohmann::json meta = {
+      {"id", j.id}, {"seq", j.seq}, {"tenant", j.tenant}, {"submitted_unix", j.submitted_unix}};
+  write_file_atomic(dir + "/job.json", meta.dump() + "\n");
+}
+
+void Coordinator::write_folder_state(const JobRecord& job) const {
+  nlohmann::json st = {{"state", int(job.state)}, {"error", job.error}};
+  try {
+    write_file_atomic(options_.state_dir + "/jobs/" + job.id + "/state.json", st.dump() + "\n");
+  } catch (const std::exception& e) {  // the database holds it; the folder's copy is a backup
+    spdlog::warn("job {}: {}", job.id, e.what());
+  }
+}
+
+namespace {
+
+// Temporary files of atomic writes (write_file_atomic: NAME.tmp.PID.N) that a process killed
+// mid-write left behind: never renamed into place, so nothing reads them.
+void remove_stale_temporaries(const std::string& dir) {
+  std::error_code ec;
+  std::vector<fs::path> stale;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    size_t at = name.rfind(".tmp.");
+    if (at != std::string::npos && it->is_regular_file(ec) &&
+        name.find_first_not_of("0123456789.", at + 5) == std::string::npos)
+      stale.push_back(it->path());
+  }
+  for (const fs::path& p : stale) fs::remove(p, ec);
+  if (!stale.empty())
+    spdlog::info("removed {} temporary files of writes a stopped process left in {}", stale.size(),
+                 dir);
+}
+
+}  // namespace
+
+void Coordinator::recover_folders() {
+  remove_stale_temporaries(options_.state_dir + "/jobs");
+  remove_stale_temporaries(options_.state_dir + "/blobs");
+  std::error_code ec;
+  std::vector<std::string> lost;
+  for (const auto& entry : fs::directory_iterator(options_.state_dir + "/jobs", ec)) {
+    std::string id = entry.path().filename().string();
+    if (id.rfind(".submit-", 0) == 0) {  // a submit being checked when the process ended
+      fs::remove_all(entry.path(), ec);
+      continue;
+    }
+    unsigned long long n = 0;
+    char extra = 0;
+    if (!entry.is_directory() || std::sscanf(id.c_str(), "j%llu%c", &n, &extra) != 1) continue;
+    next_seq_ = std::max<uint64_t>(next_seq_, n + 1);  // never reuse an id
+    if (jobs_.count(id)) {
+      if (!fs::exists(entry.path() / "job.spec")) {  // a folder from before folder records
+        const JobRecord& job = *jobs_.at(id);
+        try {
+          write_folder_record(
+              {id, job.seq, job.spec, 0, "", job.submitted_unix, 0, job.tenant, ""});
+        } catch (const std::exception& e) {
+          spdlog::warn("job {}: {}", id, e.what());
+        }
+      }
+      const JobRecord& job = *jobs_.at(id);
+      if (terminal(job.state) && !fs::exists(entry.path() / "state.json")) write_folder_state(job);
+      continue;
+    }
+    if (!fs::exists(entry.path() / "job.spec") || !fs::exists(entry.path() / "job.json")) {
+      spdlog::info("removing {}: a submit that never finished", entry.path().string());
+      fs::remove_all(entry.path(), ec);
+      continue;
+    }
+    StoredJob stored;
+    try {
+      stored.id = id;
+      stored.spec = decode_spec(read_file_bytes((entry.path() / "job.spec").string()));
+      nlohmann::json meta =
+          nlohmann::json::parse(read_file_bytes((entry.path() / "job.json").string()));
+      stored.seq = meta.at("seq").get<uint64_t>();
+      stored.tenant = meta.at("tenant").get<std::string>();
+      stored.submitted_unix = meta.at("submitted_unix").get<int64_t>();
+      stored.state = int(JobState::Queued);
+      if (fs::exists(entry.path() / "state.json")) {
+        nlohmann::json st =
+            nlohmann::json::parse(read_file_bytes((entry.path() / "state.json").string()));
+        stored.state = st.at("state").get<int>();
+        stored.error = st.at("error").get<std::string>();
+      }
+    } catch (const std::exception& e) {
+      spdlog::error(
+          "job {}: not in the job database, and its folder record is unreadable ({}); "
+          "left in {} for the operator",
+          id, e.what(), entry.path().string());
+      continue;
+    }
+    spdlog::warn(
+        "job {}: missing from the job database (lost: truncated, or its WAL removed); "
+        "recovered from its folder with the passes its checkpoints hold",
+        id);
+    store_->write(store::InsertJob{stored});
+    restore(stored);
+    lost.push_back(id);
+  }
+  if (!lost.empty()) {
+    std::string ids;
+    for (const std::string& id : lost) ids += " " + id;
+    spdlog::warn("recovered {} jobs from their folders:{}", lost.size(), ids);
+  }
+}
+
+// Rebuilds a frame's accumulator from its checkpoint; the scheduler learns which tasks are in.
+void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
+  FrameCheckpoint::Loaded loaded = f.checkpoint->load();
+  for (const std::string& p : loaded.problems)
+    spdlog::warn("job {} frame {}: {} (its tasks will be rendered again)", job.id, f.number, p);
+  if (!loaded.prefix && loaded.tasks.empty()) return;
+  f.acc = std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+  if (loaded.prefix) {
+    try {
+      f.acc->resume_from(std::move(*loaded.prefix));
+    } catch (const std::exception& e) {
+      spdlog::warn("job {} frame {}: checkpoint not used: {}", job.id, f.number, e.what());
+      f.acc =
+          std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+    }
+  }
+  for (FrameCheckpoint::TaskResult& t : loaded.tasks) {
+    if (t.tile >= job.tiles.size()) continue;
+    try {
+      if (f.acc->add(std::move(t.buffer)) != FrameAccumulator::AddResult::Dropped)
+        scheduler_.mark_done(TaskRef{job.id, f.number, t.pass, t.tile});
+    } catch (const std::exception& e) {
+      spdlog::warn("job {} frame {} task {}/{}: not used: {}", job.id, f.number, t.pass, t.tile,
+                   e.what());
+    }
+  }
+  scheduler_.mark_passes_done(job.id, f.number, f.acc->passes_merged());
+  if (f.acc->passes_merged() > 0) f.checkpoint->save_prefix(f.acc->frame());
+  publish_frame(job, f);
+}
+
+void Coordinator::restore(const StoredJob& stored) {
+  const std::optional<JobSpec>& spec = stored.spec;
+  if (!spec) return restore_failed(stored, "its stored spec does not parse");
+  if (!spec->request_id.empty()) requests_[{stored.tenant, spec->request_id}] = stored.id;
+  std::shared_ptr<JobRecord> job;
+  try {
+    job = build_job(stored.id, stored.seq, *spec, Caller{}, true);
+    job->state = JobState(stored.state);
+    job->error = stored.error;
+    job->submitted_unix = stored.submitted_unix;
+    job->core_seconds = stored.core_seconds;
+    job->tenant = stored.tenant;
+    if (job->build_id.empty()) job->build_id = stored.build_id;
+    if (!job->bundle_problem.empty() && !terminal(job->state))
+      set_state(*job, JobState::Failed,
+                "the coordinator could not restore its scene bundle: " + job->bundle_problem +
+                    "; the passes merged before are kept (fetch)");
+    scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
+                       spec->priority);
+    if (terminal(job->state)) {
+      scheduler_.cancel_job(job->id);
+    } else {
+      // Leases from before the restart, ended: their holders' late results are still accepted.
+      store_->for_each_lease(job->id, [&](const StoredLease& l) {
+        scheduler_.restore_lease(l.lease_id, TaskRef{job->id, l.frame, l.pass, l.tile},
+                                 l.worker_id);
+      });
+      // Refused results before the restart still count against their workers.
+      for (const std::string& worker : store_->refused_workers(job->id))
+        scheduler_.restore_refusal(job->id, worker);
+      // Failures before the restart still count toward failing a task (and skipping a worker).
+      for (const TaskFailure& e : store_->failures(job->id))
+        scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id,
+                                   e.message);
+      if (scheduler_.job_failed(job->id))
+        set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
+    }
+    for (auto& f : job->frames) resume_frame(*job, *f);
+  } catch (const std::exception& e) {  // bad_alloc included: one job never stops the others
+    if (job) scheduler_.cancel_job(job->id);
+    return restore_failed(stored, e.what());
+  }
+  jobs_[job->id] = job;
+  spdlog::info("restored job {} ({}), {} tasks done in the database", job->id,
+               job_state_name(job->state), store_->tasks_done(job->id));
+}
+
+void Coordinator::restore_failed(const StoredJob& stored, const std::string& why) {
+  auto job = std::make_shared<JobRecord>();
+  job->id = stored.id;
+  job->seq = stored.seq;
+  if (stored.spec) job->spec = *stored.spec;
+  job->submitted_unix = stored.submitted_unix;
+  job->core_seconds = stored.core_seconds;
+  job->tenant = stored.tenant;
+  job->state = JobState(stored.state);
+  job->error = stored.error;
+  jobs_[job->id] = job;
+  spdlog::error("job {}: cannot be restored: {}", stored.id, why);
+  if (!terminal(job->state))
+    set_state(*job, JobState::Failed, "the coordinator could not restore it: " + why);
+}
+
+}  // namespace rf

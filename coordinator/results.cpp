@@ -1,0 +1,298 @@
+// Results (core.h): a task's result checked, made durable and merged into its frame, verified
+// against another worker's, refused or failed; a frame's and a job's end.
+#include "coordinator/core_internal.h"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+
+#include "engine/buffer_file.h"
+#include "engine/digest.h"
+
+namespace rf {
+
+namespace fs = std::filesystem;
+using core_detail::clip;
+using core_detail::refuse;
+using core_detail::unix_now;
+
+// After a merge or a restore: the frame's figures, the scheduler's stop, the job's completion.
+void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
+  if (f.acc)
+    f.progress = frame_progress(f.acc->frame(), job.passes, f.acc->done(),
+                                f.acc->stopped_on_target(), job.noise_target, -1);
+  if (f.progress.done) {
+    scheduler_.stop_frame(job.id, f.number, f.progress.passes_merged);
+    if (!f.leases_dropped)  // no late result is needed
+      store_->write(store::DeleteLeases{job.id, f.number});
+    f.leases_dropped = true;
+  }
+  bool all_done = true;
+  for (auto& g : job.frames) all_done &= g->progress.done;
+  if (all_done && !terminal(job.state)) set_state(job, JobState::Completed, "");
+  ++version_;
+  changed_.notify_all();
+}
+
+void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) {
+  job.state = s;
+  job.error = err;
+  store_->write(store::SetState{job.id, int(s), err});
+  if (terminal(s)) {
+    write_folder_state(job);
+    store_->write(store::DeleteLeases{job.id, std::nullopt});
+    scheduler_.cancel_job(job.id);  // frees its tasks and leases (a no-op once all are done)
+    for (auto it = verifying_.begin(); it != verifying_.end();)
+      it = it->first.job_id == job.id ? verifying_.erase(it) : std::next(it);
+  }
+  if (terminal(s))
+    spdlog::info("job {} {}{}", job.id, job_state_name(s), err.empty() ? "" : ": " + err);
+  ++version_;
+  changed_.notify_all();
+}
+
+void Coordinator::cancel(const std::string& id, const Caller& caller) {
+  std::shared_ptr<JobRecord> job;
+  {
+    std::lock_guard lock(mu_);
+    job = find_for(id, caller);
+    if (job->state == JobState::Cancelled) return;  // idempotent: a second or retried cancel
+    if (terminal(job->state))
+      refuse(ErrorCode::FailedPrecondition,
+             "job " + id + " has already " +
+                 (job->state == JobState::Completed ? "completed" : "failed") +
+                 "; there is nothing to cancel");
+    scheduler_.cancel_job(id);
+    set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
+  }
+  // Its merged passes are in the checkpoints (fetch reads them there): the accumulators go.
+  for (auto& f : job->frames) {
+    std::lock_guard frame_lock(f->m);
+    f->acc.reset();
+  }
+}
+
+// Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
+// frame's header (scene digest, seed, frame, integrator, settings, resolution).
+SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord& f,
+                                         const TaskResult& r) const {
+  std::string task_id = task_id_text(r.task);
+  SampleBuffer buffer;
+  try {
+    buffer = decode_buffer(r.buffer, "sample buffer of task " + task_id);
+  } catch (const std::exception& e) {
+    refuse(ErrorCode::InvalidArgument, e.what());
+  }
+  const Rect& rect = job.tiles[r.task.tile];
+  if (!(buffer.rect == rect))
+    refuse(ErrorCode::InvalidArgument,
+           "task " + task_id + ": buffer covers " + std::to_string(buffer.rect.w) + "x" +
+               std::to_string(buffer.rect.h) + " at " + std::to_string(buffer.rect.x0) + "," +
+               std::to_string(buffer.rect.y0) + ", not the task's tile");
+  if (!(buffer.header.passes == PassSet::range(r.task.pass, r.task.pass + 1)))
+    refuse(ErrorCode::InvalidArgument, "task " + task_id + ": buffer holds passes " +
+                                           buffer.header.passes.to_string() + ", not pass " +
+                                           std::to_string(r.task.pass));
+  if (std::string why = merge_incompatibility(f.base, buffer.header); !why.empty())
+    refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
+  if (std::string why = task_buffer_problem(buffer, job.spp_per_pass); !why.empty())
+    refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
+  return buffer;
+}
+
+// The scheduler's verdict on a durable result and, when it is the first, the database row.
+// The row goes first: if the database cannot take it, the scheduler has not counted the task
+// done, and the worker's retry finds it still open.
+bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds,
+                                const std::string& build_id) {
+  if (!build_ok(job, build_id)) return false;  // another build's result was merged meanwhile
+  if (scheduler_.settled(r.task)) {
+    scheduler_.complete(r.lease_id, r.task, now());  // ends the lease
+    return false;  // another result came first, or the job was cancelled or failed meanwhile
+  }
+  try {
+    std::vector<StoreWrite> batch;
+    if (job.build_id.empty()) batch.push_back(store::SetBuild{job.id, build_id});
+    batch.push_back(store::TaskEvent{job.id, r.task.frame, r.task.pass, r.task.tile, r.worker_id,
+                                     TaskEventKind::Done, ""});
+    batch.push_back(store::AddCoreSeconds{job.id, core_seconds});
+    store_->write(batch);
+  } catch (const std::exception& e) {
+    storage_failed(e.what());
+    refuse(ErrorCode::Unavailable,
+           std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
+  }
+  if (job.build_id.empty()) job.build_id = build_id;  // the first merged result pins the job
+  job.core_seconds += core_seconds;
+  scheduler_.complete(r.lease_id, r.task, now());
+  storage_ok();
+  return true;
+}
+
+bool Coordinator::check_upload(const std::string& worker_id, const std::string& lease_id,
+                               const TaskRef& task, const Caller& caller) const {
+  std::lock_guard lock(mu_);
+  check_worker(worker_id, caller);
+  std::shared_ptr<JobRecord> job = find_or_throw(task.job_id);
+  if (!job->by_number.count(task.frame) || task.tile >= job->tiles.size() ||
+      task.pass >= job->passes)
+    refuse(ErrorCode::NotFound, "job " + job->id + " has no task " + task_id_text(task));
+  return check_lease(worker_id, lease_id, &task) && !scheduler_.settled(task);
+}
+
+void Coordinator::refuse_upload(const std::string& worker_id, const std::string& lease_id,
+                                const TaskRef& task, const std::string& why) {
+  spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(task),
+               clip(worker_id), why);
+  std::lock_guard lock(mu_);
+  ++counters_.results_refused;
+  scheduler_.refuse_result(lease_id, now());  // counted against the worker, not the job
+  store_->write(store::TaskEvent{task.job_id, task.frame, task.pass, task.tile, worker_id,
+                                 TaskEventKind::ResultRefused, why});
+}
+
+bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
+  if (!check_upload(r.worker_id, r.lease_id, r.task, caller)) return false;  // not needed
+  std::shared_ptr<JobRecord> job;
+  FrameRecord* f = nullptr;
+  {
+    std::lock_guard lock(mu_);
+    job = find_or_throw(r.task.job_id);
+    f = job->by_number.at(r.task.frame);
+  }
+  SampleBuffer buffer;
+  try {
+    buffer = checked_buffer(*job, *f, r);
+    std::lock_guard lock(mu_);
+    if (!build_ok(*job, buffer.header.build_id))
+      refuse(ErrorCode::FailedPrecondition, "job " + job->id + " merges results of build '" +
+                                                job->build_id + "'; this one is from '" +
+                                                clip(buffer.header.build_id) + "'");
+  } catch (const CoordinatorError& e) {
+    refuse_upload(r.worker_id, r.lease_id, r.task, e.what());
+    throw;
+  }
+  std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
+  if (!f->acc) {
+    {
+      std::lock_guard lock(mu_);
+      // Merged and checkpointed already, or its job ended meanwhile.
+      if (f->progress.done || scheduler_.settled(r.task)) return false;
+    }
+    f->acc =
+        std::make_unique<FrameAccumulator>(f->base, job->tiles, job->splats, job->merge_options());
+  }
+  if (!f->acc->task_needed(buffer.rect, r.task.pass)) {  // merged already, or beyond the stop
+    std::lock_guard lock(mu_);
+    scheduler_.complete(r.lease_id, r.task, now());
+    return false;
+  }
+  if (verified(r.task)) {
+    std::lock_guard lock(mu_);
+    if (!verify(*job, r, buffer)) return true;  // taken, and held until another result agrees
+  }
+  // Durable first: the task's result, then the database, then the answer.
+  try {
+    f->checkpoint->save_task(r.task.pass, r.task.tile, buffer);
+  } catch (const std::exception& e) {
+    // The coordinator's fault (disk full, unwritable state): never the worker's. It retries.
+    std::lock_guard lock(mu_);
+    storage_failed(e.what());
+    refuse(ErrorCode::Unavailable,
+           std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
+  }
+  {
+    std::lock_guard lock(mu_);
+    if (!record_result(*job, r, buffer.header.core_seconds, buffer.header.build_id)) return false;
+    ++counters_.tasks_completed;
+    counters_.samples_merged += buffer.total_samples();
+    counters_.bytes_merged += r.buffer.size();
+    counters_.core_seconds += buffer.header.core_seconds;
+  }
+  // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
+  // frames' merges go on meanwhile.
+  bool merged = f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
+  if (merged) {
+    try {  // the task files stay until a prefix holding them is durable
+      f->checkpoint->save_prefix(f->acc->frame());
+    } catch (const std::exception& e) {
+      std::lock_guard lock(mu_);
+      storage_failed(e.what());
+    }
+  }
+  std::lock_guard lock(mu_);
+  publish_frame(*job, *f);
+  if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
+  return true;
+}
+
+bool Coordinator::verified(const TaskRef& task) const {
+  double f = options_.verify_fraction;
+  if (f <= 0) return false;
+  if (f >= 1) return true;
+  // A fixed choice per task, so a restart verifies the same tasks.
+  uint64_t h = std::stoull(sha256_hex(task_id_text(task)).substr(0, 15), nullptr, 16);
+  return double(h) / double(uint64_t(1) << 60) < f;
+}
+
+bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer& buffer) {
+  std::vector<std::pair<std::string, SampleBuffer>>& held = verifying_[r.task];
+  for (const auto& [worker, other] : held) {
+    if (worker == r.worker_id || !same_samples(other, buffer)) continue;
+    for (const auto& [liar, theirs] : held) {
+      if (same_samples(theirs, buffer)) continue;
+      std::string why = "its result of task " + task_id_text(r.task) +
+                        " differed from those of workers " + worker + " and " + r.worker_id;
+      outvoted_[liar] = why;
+      store_->write(store::RefuseWorker{liar, why});
+      spdlog::error("worker {} (registered by {}) outvoted: {}; it is refused from now on", liar,
+                    workers_.at(liar).principal, why);
+    }
+    verifying_.erase(r.task);
+    return true;
+  }
+  held.emplace_back(r.worker_id, buffer);
+  if (held.size() >= 3) {  // three workers, no two agreeing: not a liar, the engine is not
+    std::string why = "task " + task_id_text(r.task) + ": the results of " +
+                      std::to_string(held.size()) +
+                      " workers all differ, against the determinism contract";
+    verifying_.erase(r.task);
+    scheduler_.cancel_job(job.id);
+    set_state(job, JobState::Failed, why);
+    return false;
+  }
+  spdlog::info("task {}: result of {} held until another worker's agrees", task_id_text(r.task),
+               r.worker_id);
+  scheduler_.verify_again(r.lease_id, now());
+  return false;
+}
+
+void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
+  std::lock_guard lock(mu_);
+  check_worker(report.worker_id, caller);
+  check_lease(report.worker_id, report.lease_id, nullptr);
+  std::optional<TaskRef> task = scheduler_.lease_task(report.lease_id);
+  std::string message = printable(report.message.substr(0, 4096));  // part of the job's error
+  switch (scheduler_.fail(report.lease_id, message, report.handed_back, now())) {
+    case LeaseOutcome::NotFound:
+      refuse(ErrorCode::NotFound, "no lease '" + report.lease_id + "'");
+    case LeaseOutcome::Ended:
+      refuse(ErrorCode::FailedPrecondition, "lease " + report.lease_id + " has ended");
+    case LeaseOutcome::Ok:
+      break;
+  }
+  ++(report.handed_back ? counters_.tasks_handed_back : counters_.tasks_failed);
+  if (task && !report.handed_back) {
+    // Recorded under the id the scheduler counted it under (the lease's worker).
+    store_->write(store::TaskEvent{task->job_id, task->frame, task->pass, task->tile,
+                                   report.worker_id, TaskEventKind::Failed, message});
+    spdlog::warn("task {} failed on {}: {}", task_id_text(*task), report.worker_id, clip(message));
+  }
+  if (task && scheduler_.job_failed(task->job_id)) {
+    std::shared_ptr<JobRecord> job = find(task->job_id);
+    if (job && !terminal(job->state))
+      set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
+  }
+}
+
+}  // namespace rf

@@ -1,0 +1,196 @@
+// The worker registry and leasing (core.h): registrations, leases, renewals and scene blobs.
+#include "coordinator/core_internal.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cctype>
+#include <filesystem>
+#include "engine/digest.h"
+
+namespace rf {
+
+namespace fs = std::filesystem;
+using core_detail::clip;
+using core_detail::refuse;
+using core_detail::unix_now;
+
+// ---------------------------------------------------------------------------------------------
+// Workers
+
+// A registration no call has used for kUnusedWorkerSeconds (a worker that registered and died, or
+// a client registering in a loop) is forgotten, in memory and in the store; a live worker that
+// comes back is answered NOT_FOUND and registers again. Swept at most once a minute, at a
+// registration.
+void Coordinator::forget_unused_workers() {
+  const double expiry = std::max(kUnusedWorkerSeconds, 10 * options_.lease_seconds);
+  if (now() - last_worker_sweep_ < 60) return;
+  last_worker_sweep_ = now();
+  std::vector<std::string> gone;
+  for (const auto& [id, w] : workers_) {
+    if (!w.used && !outvoted_.count(id) && now() - w.registered_at > expiry) gone.push_back(id);
+  }
+  for (const std::string& id : gone) {
+    workers_.erase(id);
+    last_seen_.erase(id);
+    store_->write(store::DeleteWorker{id});
+  }
+  if (!gone.empty())
+    spdlog::info("forgot {} worker registrations unused for {:g} s", gone.size(), expiry);
+}
+
+Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& caller) {
+  std::lock_guard lock(mu_);
+  std::string host;
+  for (char c : w.hostname.substr(0, 64))  // part of an id that appears in logs and file rows
+    if (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.') host += c;
+  if (host.empty()) host = "worker";
+  Registration r;
+  r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
+  r.lease_seconds = uint32_t(std::max(1.0, options_.lease_seconds));
+  r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
+  forget_unused_workers();
+  store_->write(
+      store::InsertWorker{{r.worker_id, caller.principal, w.build_id.substr(0, 256), ""}});
+  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256), now()};
+  last_seen_[r.worker_id] = now();
+  spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
+               w.cores, clip(w.build_id), clip(w.isa));
+  return r;
+}
+
+void Coordinator::check_worker(const std::string& worker_id, const Caller& caller) const {
+  if (worker_id.empty()) refuse(ErrorCode::InvalidArgument, "worker_id is empty");
+  auto it = workers_.find(worker_id);
+  if (it == workers_.end())
+    refuse(ErrorCode::NotFound, "no worker '" + clip(worker_id) + "' registered; register first");
+  if (auto o = outvoted_.find(worker_id); o != outvoted_.end())
+    refuse(ErrorCode::PermissionDenied, "worker " + worker_id + " is refused: " + o->second);
+  if (it->second.principal != caller.principal) {
+    spdlog::warn("refused: {} called as worker {}, registered by {}", caller.principal, worker_id,
+                 it->second.principal);
+    refuse(ErrorCode::PermissionDenied,
+           "worker " + worker_id + " was registered with another token");
+  }
+  last_seen_[worker_id] = now();
+  it->second.used = true;
+}
+
+bool Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
+                              const TaskRef* task) const {
+  std::string holder = scheduler_.lease_worker(lease_id);
+  // A lease whose record is gone ended with its task settled (done, stopped, or its job over):
+  // nothing sent under it will be merged, whoever sends it.
+  if (holder.empty() && (scheduler_.retired(lease_id) || (task && scheduler_.settled(*task))))
+    return false;
+  if (holder.empty()) refuse(ErrorCode::NotFound, "no lease '" + clip(lease_id) + "'");
+  if (holder != worker_id) {
+    spdlog::warn("refused: worker {} used lease {}, held by {}", worker_id, lease_id, holder);
+    refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is held by another worker");
+  }
+  if (task && !(*scheduler_.lease_task(lease_id) == *task)) {
+    spdlog::warn("refused: worker {} sent task {} under lease {}, which is for task {}", worker_id,
+                 task_id_text(*task), lease_id, task_id_text(*scheduler_.lease_task(lease_id)));
+    refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is for another task");
+  }
+  return true;
+}
+
+LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& caller) {
+  // The call's time in the core, lock wait included, recorded on every way out.
+  struct Timed {
+    CoordinatorMetrics::Counters& c;
+    std::chrono::steady_clock::time_point t0;
+    ~Timed() {
+      double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      ++c.lease_calls;
+      c.lease_seconds += s;
+      const auto& bounds = CoordinatorMetrics::kLeaseBuckets;
+      for (size_t i = 0; i < std::size(bounds); ++i)
+        if (s <= bounds[i]) {
+          ++c.lease_buckets[i];
+          break;
+        }
+    }
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  std::lock_guard lock(mu_);
+  Timed timed{counters_, t0};  // destroyed before the lock is released
+  check_worker(worker_id, caller);
+  if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
+  LeaseResult out;
+  // Only jobs that merge this worker's build (a job pinned to another build is not its work).
+  const std::string& build = workers_.at(worker_id).build_id;
+  Scheduler::JobFilter may = [&](const std::string& job_id) {
+    std::shared_ptr<JobRecord> job = find(job_id);
+    return job && build_ok(*job, build);
+  };
+  std::optional<Lease> l = scheduler_.lease(worker_id, now(), may);
+  if (!l) {
+    out.no_more_work = !scheduler_.work_left_for(worker_id, may);
+    return out;
+  }
+  try {
+    store_->write(store::InsertLease{
+        {l->lease_id, l->task.job_id, l->task.frame, l->task.pass, l->task.tile, worker_id}});
+  } catch (const std::exception& e) {  // the coordinator's storage, not the worker's doing
+    scheduler_.fail(l->lease_id, "", /*handed_back=*/true, now());
+    storage_failed(e.what());
+    refuse(ErrorCode::Unavailable,
+           std::string("the coordinator cannot store leases now (") + e.what() + "); retry later");
+  }
+  ++counters_.tasks_leased;
+  std::shared_ptr<JobRecord> job = find(l->task.job_id);
+  FrameRecord* f = job->by_number.at(l->task.frame);
+  if (f->first_lease_at < 0) f->first_lease_at = now();
+  if (job->state == JobState::Queued) set_state(*job, JobState::Running, "");
+  out.task =
+      TaskAssignment{l->task,         l->lease_id,         job->tiles[l->task.tile], f->scene_path,
+                     job->spec.files, job->spec.overrides, f->base.scene_digest};
+  return out;
+}
+
+uint32_t Coordinator::renew(const std::string& worker_id, const std::string& lease_id,
+                            const Caller& caller) {
+  std::lock_guard lock(mu_);
+  check_worker(worker_id, caller);
+  check_lease(worker_id, lease_id, nullptr);
+  switch (scheduler_.renew(lease_id, now())) {
+    case LeaseOutcome::Ok:
+      return uint32_t(std::max(1.0, options_.lease_seconds));
+    case LeaseOutcome::NotFound:
+      refuse(ErrorCode::NotFound, "no lease '" + clip(lease_id) + "'");
+    case LeaseOutcome::Ended:
+      break;
+  }
+  refuse(ErrorCode::FailedPrecondition,
+         "lease " + lease_id +
+             " has ended (it expired, its task was completed by another lease, or its job "
+             "stopped)");
+}
+
+std::string Coordinator::blob(const std::string& sha256, const Caller& caller) const {
+  if (!is_sha256_hex(sha256))
+    refuse(ErrorCode::InvalidArgument,
+           "'" + clip(sha256) + "' is not a SHA-256 (64 lower-case hex digits)");
+  if (!caller.all_tenants) {
+    std::lock_guard lock(mu_);
+    bool leased = false;
+    for (const std::string& id : scheduler_.leased_jobs([&](const std::string& w) {
+           auto it = workers_.find(w);
+           return it != workers_.end() && it->second.principal == caller.principal;
+         })) {
+      std::shared_ptr<JobRecord> job = find(id);
+      if (!job) continue;
+      for (const BundleEntry& f : job->spec.files) leased |= f.sha256 == sha256;
+    }
+    // The same answer as for a blob the store lacks: a digest query reveals nothing.
+    if (!leased)
+      refuse(ErrorCode::NotFound, "no blob " + sha256 + " in a job your workers hold a lease of");
+  }
+  std::optional<std::string> bytes = blobs_.get(sha256);
+  if (!bytes)
+    refuse(ErrorCode::NotFound, "no blob " + sha256 + " in a job your workers hold a lease of");
+  return std::move(*bytes);
+}
+
+}  // namespace rf
