@@ -1,6 +1,8 @@
 // The Coordinator facade (core.h): construction, the job list and status, fetch, storage
 // health and metrics. Intake, recovery, workers and leases, and results are in their own files.
 #include "coordinator/core_internal.h"
+#include "coordinator/journal.h"
+#include "coordinator/ledger.h"
 
 #include <spdlog/spdlog.h>
 
@@ -61,14 +63,22 @@ Coordinator::Coordinator(CoreOptions o)
       blobs_(options_.state_dir + "/blobs"),  // creates the state directory too
       store_(options_.store ? options_.store
                             : open_sqlite_store(options_.state_dir + "/jobs.sqlite")),
-      scheduler_(SchedulerOptions{
-          options_.lease_seconds, options_.max_failures, options_.window_frames,
-          options_.instance + "-L",
-          [this](const std::string& lease, const std::string& worker, const TaskRef& task) {
-            ++counters_.leases_expired;  // the scheduler is driven under mu_
-            spdlog::warn("lease {} of worker {} on task {} expired: not renewed for {:g} s", lease,
-                         worker, task_id_text(task), options_.lease_seconds);
-          }}) {
+      journal_(std::make_unique<Journal>(
+          *store_,
+          [this](const std::string& problem) {
+            std::lock_guard lock(mu_);  // the journal's writer thread, holding no lock of its own
+            problem.empty() ? storage_ok() : storage_failed(problem);
+          })),
+      ledger_(std::make_unique<Ledger>(
+          SchedulerOptions{
+              options_.lease_seconds, options_.max_failures, options_.window_frames,
+              options_.instance + "-L",
+              [this](const std::string& lease, const std::string& worker, const TaskRef& task) {
+                ++counters_.leases_expired;  // the scheduler is driven under mu_
+                spdlog::warn("lease {} of worker {} on task {} expired: not renewed for {:g} s",
+                             lease, worker, task_id_text(task), options_.lease_seconds);
+              }},
+          *journal_)) {
   counters_.lease_buckets.assign(std::size(CoordinatorMetrics::kLeaseBuckets), 0);
   next_seq_ = store_->next_seq();
   for (const StoredWorker& w : store_->workers()) {
@@ -80,7 +90,12 @@ Coordinator::Coordinator(CoreOptions o)
   recover_folders();
 }
 
-Coordinator::~Coordinator() = default;
+Coordinator::~Coordinator() {
+  // The journal stores what is queued and stops its writer (which may lock mu_) before the rest
+  // goes.
+  ledger_.reset();
+  journal_.reset();
+}
 
 bool Coordinator::build_ok(const JobRecord& job, const std::string& build_id) const {
   return job.build_id.empty() || job.build_id == build_id;
@@ -234,7 +249,7 @@ CoordinatorMetrics Coordinator::metrics() const {
   for (const auto& [id, w] : workers_) m.workers_registered += !outvoted_.count(id);
   for (const auto& [id, seen] : last_seen_)
     m.workers_connected += now() - seen <= options_.lease_seconds && !outvoted_.count(id);
-  std::map<std::string, Scheduler::JobLoad> load = scheduler_.load_by_job();
+  std::map<std::string, Scheduler::JobLoad> load = ledger_->scheduler().load_by_job();
   for (const auto& [id, job] : jobs_) {
     ++m.jobs_by_state[size_t(job->state)];
     if (terminal(job->state)) continue;

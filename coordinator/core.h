@@ -205,6 +205,8 @@ struct CoreOptions {
 
 struct JobRecord;
 struct FrameRecord;
+class Journal;
+class Ledger;
 
 class Coordinator {
  public:
@@ -320,7 +322,13 @@ class Coordinator {
   bool record_result(JobRecord& job, const TaskResult& r, double core_seconds,  // under mu_
                      const std::string& build_id);
   void publish_frame(JobRecord& job, FrameRecord& f);                          // under mu_
-  void set_state(JobRecord& job, JobState s, const std::string& error);        // under mu_
+  // The ledger's transition, and what the coordinator keeps beside the state: the folder's copy,
+  // held verification results, watchers. Returns the journal ticket to wait for.   // under mu_
+  uint64_t set_state(JobRecord& job, JobState s, const std::string& error);
+  // Waits (without mu_) until the journal has stored everything up to `ticket`; after
+  // kStoreWaitSeconds refuses UNAVAILABLE naming `what` and the store's problem.
+  void wait_stored(uint64_t ticket, const std::string& what) const;
+  static constexpr double kStoreWaitSeconds = 10;
   JobStatus status_of(const JobRecord& job) const;                             // under mu_
   FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;  // under mu_
   std::shared_ptr<JobRecord> find(const std::string& id) const;                // under mu_
@@ -339,16 +347,19 @@ class Coordinator {
   StateDirLock lock_;  // before anything in the state directory is opened
   BlobStore blobs_;
   std::shared_ptr<JobStore> store_;
+  std::unique_ptr<Journal> journal_;  // the store's writes, in order, off mu_ (journal.h)
+  std::unique_ptr<Ledger> ledger_;    // the only code that changes task and job state
   mutable std::mutex mu_;
   mutable std::condition_variable changed_;
   uint64_t version_ = 1;  // bumped at every change a watcher may want to see
   bool closing_ = false;
-  Scheduler scheduler_;
   std::map<std::string, std::shared_ptr<JobRecord>> jobs_;
   // (tenant, request id) -> the job that submit made: a retried submit gets it again.
   std::map<std::pair<std::string, std::string>, std::string> requests_;
-  // The job a (tenant, request id) already made, checked against this spec; "" if none. Under mu_.
-  std::string submitted_before(const JobSpec& spec, const Caller& caller) const;
+  // The job a (tenant, request id) already made, checked against this spec; "" if none. Under mu_
+  // (`lock`): while the first submit of the request is storing its job, waits for it.
+  std::string submitted_before(const JobSpec& spec, const Caller& caller,
+                               std::unique_lock<std::mutex>& lock) const;
   struct WorkerRecord {
     std::string principal;      // the identity that registered it
     std::string build_id;       // the build it said it runs

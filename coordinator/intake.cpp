@@ -1,5 +1,7 @@
 // Intake (core.h): blobs, submission checks and limits, the scene check, and a job's frames.
 #include "coordinator/core_internal.h"
+#include "coordinator/journal.h"
+#include "coordinator/ledger.h"
 
 #include <spdlog/spdlog.h>
 
@@ -333,16 +335,26 @@ std::vector<std::string> Coordinator::missing_blobs(const std::vector<std::strin
 std::string Coordinator::put_blob(std::string_view bytes, const Caller& caller) {
   std::string digest = blobs_.put(bytes);
   if (!caller.tenant.empty()) {
-    std::lock_guard lock(mu_);
-    store_->write(store::AddBlobTenant{caller.tenant, digest});
+    try {  // stored before the upload is acknowledged (and before a submit may name it)
+      journal_->write_ahead({store::AddBlobTenant{caller.tenant, digest}});
+    } catch (const StoreError& e) {
+      refuse(ErrorCode::Unavailable, std::string("cannot store the upload now: ") + e.what());
+    }
   }
   return digest;
 }
 
-std::string Coordinator::submitted_before(const JobSpec& spec, const Caller& caller) const {
+std::string Coordinator::submitted_before(const JobSpec& spec, const Caller& caller,
+                                          std::unique_lock<std::mutex>& lock) const {
   if (spec.request_id.empty()) return "";
-  auto it = requests_.find({caller.tenant, spec.request_id});
+  const std::pair<std::string, std::string> key{caller.tenant, spec.request_id};
+  auto it = requests_.find(key);
   if (it == requests_.end()) return "";
+  // The first submit of this request is storing its job: its answer, once it has one.
+  std::string id = it->second;
+  changed_.wait(lock, [&] { return jobs_.count(id) || !requests_.count(key); });
+  it = requests_.find(key);
+  if (it == requests_.end()) return "";  // that submit failed: this one is the first now
   std::shared_ptr<JobRecord> job = find(it->second);
   if (job && !(job->spec == spec))
     refuse(ErrorCode::InvalidArgument, "request_id '" + clip(spec.request_id) +
@@ -354,8 +366,8 @@ std::string Coordinator::submitted_before(const JobSpec& spec, const Caller& cal
 std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   std::string staging;
   {
-    std::lock_guard lock(mu_);
-    if (std::string id = submitted_before(spec, caller); !id.empty()) {
+    std::unique_lock lock(mu_);
+    if (std::string id = submitted_before(spec, caller, lock); !id.empty()) {
       spdlog::info("submit by {} repeated request {}: job {}", caller.principal,
                    clip(spec.request_id), id);
       return id;
@@ -378,20 +390,34 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   }
   job->submitted_unix = int64_t(unix_now());
   job->tenant = caller.tenant;
-  std::lock_guard lock(mu_);
-  // The same request, retried while this one was being built: the first to get here wins.
-  if (std::string first = submitted_before(spec, caller); !first.empty()) {
-    remove(staging);
-    return first;
+  const std::pair<std::string, std::string> key{caller.tenant, spec.request_id};
+  std::string id;
+  uint64_t seq = 0;
+  {
+    std::unique_lock lock(mu_);
+    // The same request, retried while this one was being built: the first to get here wins.
+    if (std::string first = submitted_before(spec, caller, lock); !first.empty()) {
+      remove(staging);
+      return first;
+    }
+    seq = next_seq_++;
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "j%06llu", (unsigned long long)seq);
+    id = buf;
+    if (!spec.request_id.empty()) requests_[key] = id;  // a retry meanwhile waits for this one
   }
-  uint64_t seq = next_seq_++;
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "j%06llu", (unsigned long long)seq);
-  std::string id = buf;
+  // Stored before it is known: the folder's record first (a folder without it is a submit that
+  // never finished), then the store's row, written ahead, without the coordinator's lock.
+  auto forget = [&] {
+    std::lock_guard lock(mu_);
+    if (!spec.request_id.empty()) requests_.erase(key);
+    changed_.notify_all();
+  };
   std::error_code ec;
   fs::rename(jobs_dir + staging, jobs_dir + id, ec);
   if (ec) {
     remove(staging);
+    forget();
     refuse(ErrorCode::Unavailable, "cannot store the job: " + ec.message());
   }
   job->id = id;
@@ -402,15 +428,15 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   StoredJob record{id, seq,           spec, int(JobState::Queued), "", job->submitted_unix,
                    0,  caller.tenant, ""};
   try {
-    write_folder_record(record);  // first: a folder without it is a submit that never finished
-    store_->write(store::InsertJob{record});
+    write_folder_record(record);
+    journal_->write_ahead({store::InsertJob{record}});
   } catch (const std::exception& e) {
     remove(id);
+    forget();
     refuse(ErrorCode::Unavailable, std::string("cannot store the job: ") + e.what());
   }
-  if (!spec.request_id.empty()) requests_[{caller.tenant, spec.request_id}] = id;
-  scheduler_.add_job(id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
-                     spec.priority);
+  std::lock_guard lock(mu_);
+  ledger_->add_job(*job);
   jobs_[id] = job;
   ++version_;
   changed_.notify_all();

@@ -1,6 +1,8 @@
 // Recovery (core.h): each job's folder record, restoring jobs from the store and their frames
 // from checkpoints, jobs the store lost, and what an interrupted process left behind.
 #include "coordinator/core_internal.h"
+#include "coordinator/journal.h"
+#include "coordinator/ledger.h"
 
 #include <spdlog/spdlog.h>
 
@@ -118,7 +120,7 @@ void Coordinator::recover_folders() {
         "job {}: missing from the job database (lost: truncated, or its WAL removed); "
         "recovered from its folder with the passes its checkpoints hold",
         id);
-    store_->write(store::InsertJob{stored});
+    journal_->write_ahead({store::InsertJob{stored}});
     restore(stored);
     lost.push_back(id);
   }
@@ -149,13 +151,13 @@ void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
     if (t.tile >= job.tiles.size()) continue;
     try {
       if (f.acc->add(std::move(t.buffer)) != FrameAccumulator::AddResult::Dropped)
-        scheduler_.mark_done(TaskRef{job.id, f.number, t.pass, t.tile});
+        ledger_->restore_done(TaskRef{job.id, f.number, t.pass, t.tile});
     } catch (const std::exception& e) {
       spdlog::warn("job {} frame {} task {}/{}: not used: {}", job.id, f.number, t.pass, t.tile,
                    e.what());
     }
   }
-  scheduler_.mark_passes_done(job.id, f.number, f.acc->passes_merged());
+  ledger_->restore_passes(job.id, f.number, f.acc->passes_merged());
   if (f.acc->passes_merged() > 0) f.checkpoint->save_prefix(f.acc->frame());
   publish_frame(job, f);
 }
@@ -177,29 +179,18 @@ void Coordinator::restore(const StoredJob& stored) {
       set_state(*job, JobState::Failed,
                 "the coordinator could not restore its scene bundle: " + job->bundle_problem +
                     "; the passes merged before are kept (fetch)");
-    scheduler_.add_job(job->id, job->frame_numbers(), uint32_t(job->tiles.size()), job->passes,
-                       spec->priority);
-    if (terminal(job->state)) {
-      scheduler_.cancel_job(job->id);
-    } else {
-      // Leases from before the restart, ended: their holders' late results are still accepted.
-      store_->for_each_lease(job->id, [&](const StoredLease& l) {
-        scheduler_.restore_lease(l.lease_id, TaskRef{job->id, l.frame, l.pass, l.tile},
-                                 l.worker_id);
-      });
-      // Refused results before the restart still count against their workers.
-      for (const std::string& worker : store_->refused_workers(job->id))
-        scheduler_.restore_refusal(job->id, worker);
-      // Failures before the restart still count toward failing a task (and skipping a worker).
-      for (const TaskFailure& e : store_->failures(job->id))
-        scheduler_.restore_failure(TaskRef{job->id, e.frame, e.pass, e.tile}, e.worker_id,
-                                   e.message);
-      if (scheduler_.job_failed(job->id))
-        set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
+    Ledger::Trail trail;
+    if (!terminal(job->state)) {
+      trail.leases = store_->leases(job->id);
+      trail.refused_workers = store_->refused_workers(job->id);
+      trail.failures = store_->failures(job->id);
     }
+    ledger_->restore_job(*job, trail);
+    if (!terminal(job->state) && ledger_->scheduler().job_failed(job->id))
+      set_state(*job, JobState::Failed, ledger_->scheduler().job_error(job->id));
     for (auto& f : job->frames) resume_frame(*job, *f);
   } catch (const std::exception& e) {  // bad_alloc included: one job never stops the others
-    if (job) scheduler_.cancel_job(job->id);
+    if (job) ledger_->drop_job(job->id);
     return restore_failed(stored, e.what());
   }
   jobs_[job->id] = job;

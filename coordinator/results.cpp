@@ -1,6 +1,8 @@
 // Results (core.h): a task's result checked, made durable and merged into its frame, verified
 // against another worker's, refused or failed; a frame's and a job's end.
 #include "coordinator/core_internal.h"
+#include "coordinator/journal.h"
+#include "coordinator/ledger.h"
 
 #include <spdlog/spdlog.h>
 
@@ -21,12 +23,7 @@ void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
   if (f.acc)
     f.progress = frame_progress(f.acc->frame(), job.passes, f.acc->done(),
                                 f.acc->stopped_on_target(), job.noise_target, -1);
-  if (f.progress.done) {
-    scheduler_.stop_frame(job.id, f.number, f.progress.passes_merged);
-    if (!f.leases_dropped)  // no late result is needed
-      store_->write(store::DeleteLeases{job.id, f.number});
-    f.leases_dropped = true;
-  }
+  if (f.progress.done) ledger_->frame_done(job, f, f.progress.passes_merged);
   bool all_done = true;
   for (auto& g : job.frames) all_done &= g->progress.done;
   if (all_done && !terminal(job.state)) set_state(job, JobState::Completed, "");
@@ -34,25 +31,22 @@ void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
   changed_.notify_all();
 }
 
-void Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) {
-  job.state = s;
-  job.error = err;
-  store_->write(store::SetState{job.id, int(s), err});
+uint64_t Coordinator::set_state(JobRecord& job, JobState s, const std::string& err) {
+  Ledger::Ticket ticket = ledger_->set_state(job, s, err);
   if (terminal(s)) {
     write_folder_state(job);
-    store_->write(store::DeleteLeases{job.id, std::nullopt});
-    scheduler_.cancel_job(job.id);  // frees its tasks and leases (a no-op once all are done)
-    for (auto it = verifying_.begin(); it != verifying_.end();)
+    for (auto it = verifying_.begin(); it != verifying_.end();)  // held results go with it
       it = it->first.job_id == job.id ? verifying_.erase(it) : std::next(it);
-  }
-  if (terminal(s))
     spdlog::info("job {} {}{}", job.id, job_state_name(s), err.empty() ? "" : ": " + err);
+  }
   ++version_;
   changed_.notify_all();
+  return ticket;
 }
 
 void Coordinator::cancel(const std::string& id, const Caller& caller) {
   std::shared_ptr<JobRecord> job;
+  Ledger::Ticket ticket = 0;
   {
     std::lock_guard lock(mu_);
     job = find_for(id, caller);
@@ -62,9 +56,9 @@ void Coordinator::cancel(const std::string& id, const Caller& caller) {
              "job " + id + " has already " +
                  (job->state == JobState::Completed ? "completed" : "failed") +
                  "; there is nothing to cancel");
-    scheduler_.cancel_job(id);
-    set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
+    ticket = set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
   }
+  wait_stored(ticket, "the cancellation");
   // Its merged passes are in the checkpoints (fetch reads them there): the accumulators go.
   for (auto& f : job->frames) {
     std::lock_guard frame_lock(f->m);
@@ -100,33 +94,24 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
   return buffer;
 }
 
-// The scheduler's verdict on a durable result and, when it is the first, the database row.
-// The row goes first: if the database cannot take it, the scheduler has not counted the task
-// done, and the worker's retry finds it still open.
+// The ledger's verdict on a durable result: the task done (its rows to the journal), or, when it
+// is settled already, its lease ended.
 bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds,
                                 const std::string& build_id) {
   if (!build_ok(job, build_id)) return false;  // another build's result was merged meanwhile
-  if (scheduler_.settled(r.task)) {
-    scheduler_.complete(r.lease_id, r.task, now());  // ends the lease
+  if (ledger_->scheduler().settled(r.task)) {
+    ledger_->not_needed(r.lease_id, r.task, now());
     return false;  // another result came first, or the job was cancelled or failed meanwhile
   }
-  try {
-    std::vector<StoreWrite> batch;
-    if (job.build_id.empty()) batch.push_back(store::SetBuild{job.id, build_id});
-    batch.push_back(store::TaskEvent{job.id, r.task.frame, r.task.pass, r.task.tile, r.worker_id,
-                                     TaskEventKind::Done, ""});
-    batch.push_back(store::AddCoreSeconds{job.id, core_seconds});
-    store_->write(batch);
-  } catch (const std::exception& e) {
-    storage_failed(e.what());
-    refuse(ErrorCode::Unavailable,
-           std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
-  }
-  if (job.build_id.empty()) job.build_id = build_id;  // the first merged result pins the job
-  job.core_seconds += core_seconds;
-  scheduler_.complete(r.lease_id, r.task, now());
-  storage_ok();
+  ledger_->complete(job, r.lease_id, r.task, r.worker_id, core_seconds, build_id, now());
   return true;
+}
+
+void Coordinator::wait_stored(uint64_t ticket, const std::string& what) const {
+  if (journal_->wait(ticket, kStoreWaitSeconds)) return;
+  refuse(ErrorCode::Unavailable, "the coordinator cannot store " + what + " now (" +
+                                     journal_->problem() + "); it is kept and stored when the " +
+                                     "disk takes it: retry later");
 }
 
 bool Coordinator::check_upload(const std::string& worker_id, const std::string& lease_id,
@@ -137,7 +122,7 @@ bool Coordinator::check_upload(const std::string& worker_id, const std::string& 
   if (!job->by_number.count(task.frame) || task.tile >= job->tiles.size() ||
       task.pass >= job->passes)
     refuse(ErrorCode::NotFound, "job " + job->id + " has no task " + task_id_text(task));
-  return check_lease(worker_id, lease_id, &task) && !scheduler_.settled(task);
+  return check_lease(worker_id, lease_id, &task) && !ledger_->scheduler().settled(task);
 }
 
 void Coordinator::refuse_upload(const std::string& worker_id, const std::string& lease_id,
@@ -146,9 +131,7 @@ void Coordinator::refuse_upload(const std::string& worker_id, const std::string&
                clip(worker_id), why);
   std::lock_guard lock(mu_);
   ++counters_.results_refused;
-  scheduler_.refuse_result(lease_id, now());  // counted against the worker, not the job
-  store_->write(store::TaskEvent{task.job_id, task.frame, task.pass, task.tile, worker_id,
-                                 TaskEventKind::ResultRefused, why});
+  ledger_->refuse_result(worker_id, lease_id, task, why, now());
 }
 
 bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
@@ -177,21 +160,22 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     {
       std::lock_guard lock(mu_);
       // Merged and checkpointed already, or its job ended meanwhile.
-      if (f->progress.done || scheduler_.settled(r.task)) return false;
+      if (f->progress.done || ledger_->scheduler().settled(r.task)) return false;
     }
     f->acc =
         std::make_unique<FrameAccumulator>(f->base, job->tiles, job->splats, job->merge_options());
   }
   if (!f->acc->task_needed(buffer.rect, r.task.pass)) {  // merged already, or beyond the stop
     std::lock_guard lock(mu_);
-    scheduler_.complete(r.lease_id, r.task, now());
+    ledger_->not_needed(r.lease_id, r.task, now());
     return false;
   }
   if (verified(r.task)) {
     std::lock_guard lock(mu_);
     if (!verify(*job, r, buffer)) return true;  // taken, and held until another result agrees
   }
-  // Durable first: the task's result, then the database, then the answer.
+  // Durable first: the task's result (its checkpoint file, the record of which tasks an image
+  // holds), then the ledger's transition and its rows, then the answer once they are stored.
   try {
     f->checkpoint->save_task(r.task.pass, r.task.tile, buffer);
   } catch (const std::exception& e) {
@@ -203,6 +187,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   }
   {
     std::lock_guard lock(mu_);
+    if (journal_->problem().empty()) storage_ok();
     if (!record_result(*job, r, buffer.header.core_seconds, buffer.header.build_id)) return false;
     ++counters_.tasks_completed;
     counters_.samples_merged += buffer.total_samples();
@@ -220,9 +205,14 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
       storage_failed(e.what());
     }
   }
-  std::lock_guard lock(mu_);
-  publish_frame(*job, *f);
-  if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
+  Ledger::Ticket ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    publish_frame(*job, *f);
+    if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
+    ticket = journal_->append({});         // the last write queued: this result's and the rest
+  }
+  wait_stored(ticket, "the result's record");
   return true;
 }
 
@@ -244,7 +234,7 @@ bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer
       std::string why = "its result of task " + task_id_text(r.task) +
                         " differed from those of workers " + worker + " and " + r.worker_id;
       outvoted_[liar] = why;
-      store_->write(store::RefuseWorker{liar, why});
+      journal_->append({store::RefuseWorker{liar, why}});
       spdlog::error("worker {} (registered by {}) outvoted: {}; it is refused from now on", liar,
                     workers_.at(liar).principal, why);
     }
@@ -257,42 +247,43 @@ bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer
                       std::to_string(held.size()) +
                       " workers all differ, against the determinism contract";
     verifying_.erase(r.task);
-    scheduler_.cancel_job(job.id);
     set_state(job, JobState::Failed, why);
     return false;
   }
   spdlog::info("task {}: result of {} held until another worker's agrees", task_id_text(r.task),
                r.worker_id);
-  scheduler_.verify_again(r.lease_id, now());
+  ledger_->hold_for_verification(r.lease_id, now());
   return false;
 }
 
 void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
-  std::lock_guard lock(mu_);
-  check_worker(report.worker_id, caller);
-  check_lease(report.worker_id, report.lease_id, nullptr);
-  std::optional<TaskRef> task = scheduler_.lease_task(report.lease_id);
-  std::string message = printable(report.message.substr(0, 4096));  // part of the job's error
-  switch (scheduler_.fail(report.lease_id, message, report.handed_back, now())) {
-    case LeaseOutcome::NotFound:
-      refuse(ErrorCode::NotFound, "no lease '" + report.lease_id + "'");
-    case LeaseOutcome::Ended:
-      refuse(ErrorCode::FailedPrecondition, "lease " + report.lease_id + " has ended");
-    case LeaseOutcome::Ok:
-      break;
+  Ledger::Ticket ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    check_worker(report.worker_id, caller);
+    check_lease(report.worker_id, report.lease_id, nullptr);
+    std::optional<TaskRef> task = ledger_->scheduler().lease_task(report.lease_id);
+    std::string message = printable(report.message.substr(0, 4096));  // part of the job's error
+    switch (ledger_->fail(report.lease_id, report.worker_id, message, report.handed_back, now(),
+                          &ticket)) {
+      case LeaseOutcome::NotFound:
+        refuse(ErrorCode::NotFound, "no lease '" + clip(report.lease_id) + "'");
+      case LeaseOutcome::Ended:
+        refuse(ErrorCode::FailedPrecondition, "lease " + report.lease_id + " has ended");
+      case LeaseOutcome::Ok:
+        break;
+    }
+    ++(report.handed_back ? counters_.tasks_handed_back : counters_.tasks_failed);
+    if (task && !report.handed_back)
+      spdlog::warn("task {} failed on {}: {}", task_id_text(*task), report.worker_id,
+                   clip(message));
+    if (task && ledger_->scheduler().job_failed(task->job_id)) {
+      std::shared_ptr<JobRecord> job = find(task->job_id);
+      if (job && !terminal(job->state))
+        ticket = set_state(*job, JobState::Failed, ledger_->scheduler().job_error(job->id));
+    }
   }
-  ++(report.handed_back ? counters_.tasks_handed_back : counters_.tasks_failed);
-  if (task && !report.handed_back) {
-    // Recorded under the id the scheduler counted it under (the lease's worker).
-    store_->write(store::TaskEvent{task->job_id, task->frame, task->pass, task->tile,
-                                   report.worker_id, TaskEventKind::Failed, message});
-    spdlog::warn("task {} failed on {}: {}", task_id_text(*task), report.worker_id, clip(message));
-  }
-  if (task && scheduler_.job_failed(task->job_id)) {
-    std::shared_ptr<JobRecord> job = find(task->job_id);
-    if (job && !terminal(job->state))
-      set_state(*job, JobState::Failed, scheduler_.job_error(job->id));
-  }
+  wait_stored(ticket, "the failure");
 }
 
 }  // namespace rf

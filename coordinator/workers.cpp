@@ -1,5 +1,7 @@
 // The worker registry and leasing (core.h): registrations, leases, renewals and scene blobs.
 #include "coordinator/core_internal.h"
+#include "coordinator/journal.h"
+#include "coordinator/ledger.h"
 
 #include <spdlog/spdlog.h>
 
@@ -32,25 +34,32 @@ void Coordinator::forget_unused_workers() {
   for (const std::string& id : gone) {
     workers_.erase(id);
     last_seen_.erase(id);
-    store_->write(store::DeleteWorker{id});
+    journal_->append({store::DeleteWorker{id}});
   }
   if (!gone.empty())
     spdlog::info("forgot {} worker registrations unused for {:g} s", gone.size(), expiry);
 }
 
 Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& caller) {
-  std::lock_guard lock(mu_);
   std::string host;
   for (char c : w.hostname.substr(0, 64))  // part of an id that appears in logs and file rows
     if (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.') host += c;
   if (host.empty()) host = "worker";
   Registration r;
-  r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
+  {
+    std::lock_guard lock(mu_);
+    r.worker_id = options_.instance + "-w" + std::to_string(next_worker_++) + "-" + host;
+    forget_unused_workers();
+  }
   r.lease_seconds = uint32_t(std::max(1.0, options_.lease_seconds));
   r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
-  forget_unused_workers();
-  store_->write(
-      store::InsertWorker{{r.worker_id, caller.principal, w.build_id.substr(0, 256), ""}});
+  try {  // stored before the worker may use it, without the coordinator's lock
+    journal_->write_ahead(
+        {store::InsertWorker{{r.worker_id, caller.principal, w.build_id.substr(0, 256), ""}}});
+  } catch (const StoreError& e) {
+    refuse(ErrorCode::Unavailable, std::string("cannot store the registration now: ") + e.what());
+  }
+  std::lock_guard lock(mu_);
   workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256), now()};
   last_seen_[r.worker_id] = now();
   spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
@@ -77,19 +86,20 @@ void Coordinator::check_worker(const std::string& worker_id, const Caller& calle
 
 bool Coordinator::check_lease(const std::string& worker_id, const std::string& lease_id,
                               const TaskRef* task) const {
-  std::string holder = scheduler_.lease_worker(lease_id);
+  const Scheduler& scheduler = ledger_->scheduler();
+  std::string holder = scheduler.lease_worker(lease_id);
   // A lease whose record is gone ended with its task settled (done, stopped, or its job over):
   // nothing sent under it will be merged, whoever sends it.
-  if (holder.empty() && (scheduler_.retired(lease_id) || (task && scheduler_.settled(*task))))
+  if (holder.empty() && (scheduler.retired(lease_id) || (task && scheduler.settled(*task))))
     return false;
   if (holder.empty()) refuse(ErrorCode::NotFound, "no lease '" + clip(lease_id) + "'");
   if (holder != worker_id) {
     spdlog::warn("refused: worker {} used lease {}, held by {}", worker_id, lease_id, holder);
     refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is held by another worker");
   }
-  if (task && !(*scheduler_.lease_task(lease_id) == *task)) {
+  if (task && !(*scheduler.lease_task(lease_id) == *task)) {
     spdlog::warn("refused: worker {} sent task {} under lease {}, which is for task {}", worker_id,
-                 task_id_text(*task), lease_id, task_id_text(*scheduler_.lease_task(lease_id)));
+                 task_id_text(*task), lease_id, task_id_text(*scheduler.lease_task(lease_id)));
     refuse(ErrorCode::PermissionDenied, "lease " + lease_id + " is for another task");
   }
   return true;
@@ -117,6 +127,11 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
   Timed timed{counters_, t0};  // destroyed before the lock is released
   check_worker(worker_id, caller);
   if (closing_) refuse(ErrorCode::Unavailable, "the coordinator is shutting down");
+  // A lease is stored (its row lets its holder's late result count after a restart): while the
+  // store refuses writes, none is handed out.
+  if (std::string problem = journal_->problem(); !problem.empty())
+    refuse(ErrorCode::Unavailable,
+           "the coordinator cannot store leases now (" + problem + "); retry later");
   LeaseResult out;
   // Only jobs that merge this worker's build (a job pinned to another build is not its work).
   const std::string& build = workers_.at(worker_id).build_id;
@@ -124,19 +139,10 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
     std::shared_ptr<JobRecord> job = find(job_id);
     return job && build_ok(*job, build);
   };
-  std::optional<Lease> l = scheduler_.lease(worker_id, now(), may);
+  std::optional<Lease> l = ledger_->lease(worker_id, now(), may);
   if (!l) {
-    out.no_more_work = !scheduler_.work_left_for(worker_id, may);
+    out.no_more_work = !ledger_->scheduler().work_left_for(worker_id, may);
     return out;
-  }
-  try {
-    store_->write(store::InsertLease{
-        {l->lease_id, l->task.job_id, l->task.frame, l->task.pass, l->task.tile, worker_id}});
-  } catch (const std::exception& e) {  // the coordinator's storage, not the worker's doing
-    scheduler_.fail(l->lease_id, "", /*handed_back=*/true, now());
-    storage_failed(e.what());
-    refuse(ErrorCode::Unavailable,
-           std::string("the coordinator cannot store leases now (") + e.what() + "); retry later");
   }
   ++counters_.tasks_leased;
   std::shared_ptr<JobRecord> job = find(l->task.job_id);
@@ -154,7 +160,7 @@ uint32_t Coordinator::renew(const std::string& worker_id, const std::string& lea
   std::lock_guard lock(mu_);
   check_worker(worker_id, caller);
   check_lease(worker_id, lease_id, nullptr);
-  switch (scheduler_.renew(lease_id, now())) {
+  switch (ledger_->renew(lease_id, now())) {
     case LeaseOutcome::Ok:
       return uint32_t(std::max(1.0, options_.lease_seconds));
     case LeaseOutcome::NotFound:
@@ -175,7 +181,7 @@ std::string Coordinator::blob(const std::string& sha256, const Caller& caller) c
   if (!caller.all_tenants) {
     std::lock_guard lock(mu_);
     bool leased = false;
-    for (const std::string& id : scheduler_.leased_jobs([&](const std::string& w) {
+    for (const std::string& id : ledger_->scheduler().leased_jobs([&](const std::string& w) {
            auto it = workers_.find(w);
            return it != workers_.end() && it->second.principal == caller.principal;
          })) {

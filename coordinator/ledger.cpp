@@ -1,0 +1,142 @@
+#include "coordinator/ledger.h"
+
+#include <stdexcept>
+
+namespace rf {
+
+namespace {
+
+// The job state machine (ledger.h): which transitions exist.
+bool legal(JobState from, JobState to) {
+  if (terminal(from)) return false;
+  switch (to) {
+    case JobState::Queued:
+      return false;
+    case JobState::Running:
+      return from == JobState::Queued;
+    case JobState::Completed:
+    case JobState::Failed:
+    case JobState::Cancelled:
+      return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+Ledger::Ledger(SchedulerOptions options, Journal& journal)
+    : scheduler_(std::move(options)), journal_(journal) {}
+
+void Ledger::add_job(const JobRecord& job) {
+  scheduler_.add_job(job.id, job.frame_numbers(), uint32_t(job.tiles.size()), job.passes,
+                     job.spec.priority);
+}
+
+Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string& error) {
+  if (!legal(job.state, to))
+    throw std::logic_error(std::string("job ") + job.id + ": no transition " +
+                           job_state_name(job.state) + " -> " + job_state_name(to));
+  job.state = to;
+  job.error = error;
+  std::vector<StoreWrite> writes{store::SetState{job.id, int(to), error}};
+  if (terminal(to)) {
+    writes.push_back(store::DeleteLeases{job.id, std::nullopt});
+    scheduler_.cancel_job(job.id);  // frees its tasks and leases (a no-op once all are done)
+  }
+  return journal_.append(std::move(writes));
+}
+
+Ledger::Ticket Ledger::cancel(JobRecord& job, const std::string& by) {
+  if (job.state == JobState::Cancelled) return journal_.append({});
+  return set_state(job, JobState::Cancelled, "cancelled by " + by);
+}
+
+void Ledger::restore_job(JobRecord& job, const Trail& trail) {
+  add_job(job);
+  if (terminal(job.state)) {
+    scheduler_.cancel_job(job.id);
+    return;
+  }
+  // Leases from before the restart, ended: their holders' late results are still accepted.
+  for (const StoredLease& l : trail.leases)
+    scheduler_.restore_lease(l.lease_id, TaskRef{job.id, l.frame, l.pass, l.tile}, l.worker_id);
+  // Refused results before the restart still count against their workers.
+  for (const std::string& worker : trail.refused_workers)
+    scheduler_.restore_refusal(job.id, worker);
+  // Failures before the restart still count toward failing a task (and skipping a worker).
+  for (const TaskFailure& e : trail.failures)
+    scheduler_.restore_failure(TaskRef{job.id, e.frame, e.pass, e.tile}, e.worker_id, e.message);
+}
+
+void Ledger::drop_job(const std::string& job_id) { scheduler_.cancel_job(job_id); }
+
+void Ledger::restore_done(const TaskRef& task) { scheduler_.mark_done(task); }
+
+void Ledger::restore_passes(const std::string& job_id, uint32_t frame, uint32_t passes) {
+  scheduler_.mark_passes_done(job_id, frame, passes);
+}
+
+std::optional<Lease> Ledger::lease(const std::string& worker_id, double now,
+                                   const Scheduler::JobFilter& may) {
+  std::optional<Lease> l = scheduler_.lease(worker_id, now, may);
+  if (l)
+    journal_.append({store::InsertLease{
+        {l->lease_id, l->task.job_id, l->task.frame, l->task.pass, l->task.tile, worker_id}}});
+  return l;
+}
+
+LeaseOutcome Ledger::renew(const std::string& lease_id, double now) {
+  return scheduler_.renew(lease_id, now);
+}
+
+Ledger::Ticket Ledger::complete(JobRecord& job, const std::string& lease_id, const TaskRef& task,
+                                const std::string& worker_id, double core_seconds,
+                                const std::string& build_id, double now) {
+  std::vector<StoreWrite> writes;
+  if (job.build_id.empty()) {  // the first merged result pins the job
+    job.build_id = build_id;
+    writes.push_back(store::SetBuild{job.id, build_id});
+  }
+  writes.push_back(store::TaskEvent{job.id, task.frame, task.pass, task.tile, worker_id,
+                                    TaskEventKind::Done, ""});
+  writes.push_back(store::AddCoreSeconds{job.id, core_seconds});
+  job.core_seconds += core_seconds;
+  scheduler_.complete(lease_id, task, now);
+  return journal_.append(std::move(writes));
+}
+
+void Ledger::not_needed(const std::string& lease_id, const TaskRef& task, double now) {
+  scheduler_.complete(lease_id, task, now);  // ends the lease
+}
+
+Ledger::Ticket Ledger::refuse_result(const std::string& worker_id, const std::string& lease_id,
+                                     const TaskRef& task, const std::string& why, double now) {
+  scheduler_.refuse_result(lease_id, now);  // counted against the worker, not the job
+  return journal_.append({store::TaskEvent{task.job_id, task.frame, task.pass, task.tile, worker_id,
+                                           TaskEventKind::ResultRefused, why}});
+}
+
+void Ledger::hold_for_verification(const std::string& lease_id, double now) {
+  scheduler_.verify_again(lease_id, now);
+}
+
+LeaseOutcome Ledger::fail(const std::string& lease_id, const std::string& worker_id,
+                          const std::string& message, bool handed_back, double now,
+                          Ticket* ticket) {
+  std::optional<TaskRef> task = scheduler_.lease_task(lease_id);
+  LeaseOutcome outcome = scheduler_.fail(lease_id, message, handed_back, now);
+  *ticket = journal_.append({});
+  if (outcome == LeaseOutcome::Ok && task && !handed_back)
+    *ticket = journal_.append({store::TaskEvent{task->job_id, task->frame, task->pass, task->tile,
+                                                worker_id, TaskEventKind::Failed, message}});
+  return outcome;
+}
+
+Ledger::Ticket Ledger::frame_done(JobRecord& job, FrameRecord& frame, uint32_t passes) {
+  scheduler_.stop_frame(job.id, frame.number, passes);
+  if (frame.leases_dropped) return journal_.append({});
+  frame.leases_dropped = true;  // no late result of the frame is needed
+  return journal_.append({store::DeleteLeases{job.id, frame.number}});
+}
+
+}  // namespace rf

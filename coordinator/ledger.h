@@ -1,0 +1,92 @@
+// The task ledger (DESIGN.md "The task ledger"): the only code that changes a task's or a job's
+// state. Each transition is applied at once to the memory state, the scheduler's (tasks, leases,
+// failures) and the job's record (state, error, build pin, core seconds), and its store writes are
+// appended to the journal (journal.h) in the same order; the caller waits for them, outside the
+// coordinator's lock, before it acknowledges. The coordinator calls every method under its lock.
+//
+// A job: Queued -> Running (its first lease) -> Completed (every frame done); Queued or Running ->
+// Failed (a task failed on max_failures workers, a verification with no two results agreeing, a
+// stored job that cannot be restored) or Cancelled (a client). The ended states are final: any
+// other transition from them is refused (std::logic_error: a bug, not a request).
+// A task: waiting -> leased -> done; leased -> waiting (lease expired, failed, handed back, result
+// refused, result held for verification); waiting or leased -> stopped (its frame needs no more
+// passes, its job ended); failed on max_failures workers -> its job fails. Scheduler holds the
+// task states (scheduler.h); these methods are the only callers that change them.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "coordinator/core_internal.h"
+#include "coordinator/journal.h"
+#include "coordinator/scheduler.h"
+
+namespace rf {
+
+class Ledger {
+ public:
+  using Ticket = Journal::Ticket;
+
+  Ledger(SchedulerOptions options, Journal& journal);
+
+  const Scheduler& scheduler() const { return scheduler_; }
+  Journal& journal() { return journal_; }
+
+  // ---- Jobs
+  // A job accepted (its store row written ahead by intake): its tasks are queued.
+  void add_job(const JobRecord& job);
+  // The job's state and error; ending it frees its tasks and drops its lease rows. Throws
+  // std::logic_error for a transition the state machine above does not have.
+  Ticket set_state(JobRecord& job, JobState to, const std::string& error);
+  // Cancelled by `by`; a cancelled job stays so (no write). Throws std::logic_error if it has
+  // completed or failed (the caller refuses that first).
+  Ticket cancel(JobRecord& job, const std::string& by);
+
+  // ---- Restoring at start (nothing written: it is what the store and checkpoints hold)
+  struct Trail {
+    std::vector<StoredLease> leases;           // handed out before the restart
+    std::vector<std::string> refused_workers;  // one per refused result
+    std::vector<TaskFailure> failures;         // in the order recorded
+  };
+  // A stored job: its tasks queued again, minus an ended job's; its trail counted as before (the
+  // caller fails a job whose failures fail it now: scheduler().job_failed()).
+  void restore_job(JobRecord& job, const Trail& trail);
+  // A job that could not be restored after restore_job began: its tasks go.
+  void drop_job(const std::string& job_id);
+  // Tasks whose results a frame's checkpoint holds, and passes [0, passes) merged.
+  void restore_done(const TaskRef& task);
+  void restore_passes(const std::string& job_id, uint32_t frame, uint32_t passes);
+
+  // ---- Tasks
+  // The next task for the worker, and its lease row (the caller moves a queued job to Running).
+  std::optional<Lease> lease(const std::string& worker_id, double now,
+                             const Scheduler::JobFilter& may);
+  LeaseOutcome renew(const std::string& lease_id, double now);
+  // A result merged: the task is done, its event and the job's core seconds stored, and the job
+  // pinned to the result's build if it was not.
+  Ticket complete(JobRecord& job, const std::string& lease_id, const TaskRef& task,
+                  const std::string& worker_id, double core_seconds, const std::string& build_id,
+                  double now);
+  // A result for a task that needs none (settled, merged already, or beyond its frame's stop):
+  // its lease ends and the task counts as done; nothing is stored.
+  void not_needed(const std::string& lease_id, const TaskRef& task, double now);
+  // A result refused (or an upload refused on its way in): the lease ends, the task is queued
+  // again, and the refusal counts against the worker in the job.
+  Ticket refuse_result(const std::string& worker_id, const std::string& lease_id,
+                       const TaskRef& task, const std::string& why, double now);
+  // A verified task's first result, held: the task goes to another worker.
+  void hold_for_verification(const std::string& lease_id, double now);
+  // The worker could not render the task (or hands it back): a failure counts (the caller fails
+  // the job when scheduler().job_failed() says the task failed on max_failures workers).
+  LeaseOutcome fail(const std::string& lease_id, const std::string& worker_id,
+                    const std::string& message, bool handed_back, double now, Ticket* ticket);
+  // The frame needs no more passes from `passes` on: its remaining tasks are stopped and its
+  // lease rows dropped (once).
+  Ticket frame_done(JobRecord& job, FrameRecord& frame, uint32_t passes);
+
+ private:
+  Scheduler scheduler_;
+  Journal& journal_;
+};
+
+}  // namespace rf

@@ -1,0 +1,334 @@
+// The task ledger and its journal (coordinator/ledger.h, journal.h): every job transition and the
+// ones the state machine does not have, every task transition with the store rows it leaves, the
+// journal's order, grouping, retries and write-ahead refusals, and a coordinator whose leases do
+// not wait while the disk is slow.
+#include "coordinator/ledger.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <future>
+#include <thread>
+
+#include "coordinator/journal.h"
+#include "engine/buffer_file.h"
+#include "engine/build_info.h"
+#include "engine/digest.h"
+#include "engine/scene.h"
+#include "engine/work_units.h"
+#include "farm/blob_store.h"
+#include "tests/support/test_support.h"
+
+namespace rf {
+namespace {
+
+// A memory store whose writes can be made to fail, or to wait at a gate.
+class TestStore final : public JobStore {
+ public:
+  using JobStore::write;
+  void write(const std::vector<StoreWrite>& batch) override {
+    if (delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(int(delay_ms)));
+    {
+      std::unique_lock lock(m_);
+      ++waiting;
+      cv_.wait(lock, [&] { return open; });
+      --waiting;
+    }
+    if (failing) throw StoreError("test store: disk full");
+    inner_->write(batch);
+  }
+  uint64_t next_seq() const override { return inner_->next_seq(); }
+  std::vector<StoredJob> jobs() const override { return inner_->jobs(); }
+  std::vector<StoredWorker> workers() const override { return inner_->workers(); }
+  bool blob_tenant(const std::string& t, const std::string& d) const override {
+    return inner_->blob_tenant(t, d);
+  }
+  void for_each_lease(const std::string& j,
+                      const std::function<void(const StoredLease&)>& f) const override {
+    inner_->for_each_lease(j, f);
+  }
+  std::vector<TaskFailure> failures(const std::string& j) const override {
+    return inner_->failures(j);
+  }
+  std::vector<std::string> refused_workers(const std::string& j) const override {
+    return inner_->refused_workers(j);
+  }
+  uint64_t tasks_done(const std::string& j) const override { return inner_->tasks_done(j); }
+
+  void close_gate() {
+    std::lock_guard lock(m_);
+    open = false;
+  }
+  void open_gate() {
+    {
+      std::lock_guard lock(m_);
+      open = true;
+    }
+    cv_.notify_all();
+  }
+  std::atomic<bool> failing{false};
+  std::atomic<double> delay_ms{0};
+  int waiting = 0;  // under m_
+
+ private:
+  std::unique_ptr<JobStore> inner_ = memory_store();
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool open = true;
+};
+
+// A job record of `frames` frames, 4 tiles, `passes` passes (what intake makes, minus the scene).
+std::shared_ptr<JobRecord> make_job(const std::string& id, uint32_t frames = 1,
+                                    uint32_t passes = 2) {
+  auto job = std::make_shared<JobRecord>();
+  job->id = id;
+  job->passes = passes;
+  job->tiles = {{0, 0, 8, 8}, {8, 0, 8, 8}, {0, 8, 8, 8}, {8, 8, 8, 8}};
+  for (uint32_t n = 1; n <= frames; ++n) {
+    auto f = std::make_unique<FrameRecord>();
+    f->number = n;
+    job->by_number[n] = f.get();
+    job->frames.push_back(std::move(f));
+  }
+  return job;
+}
+
+struct Bench {
+  TestStore store;
+  Journal journal{store};
+  Ledger ledger{SchedulerOptions{10, 3, 4, "L", {}}, journal};
+  double now = 0;
+  void flush() { ASSERT_TRUE(journal.wait(journal.append({}), 10)); }
+};
+
+TEST(Ledger, JobTransitionsAreTheStateMachinesAndNoOthers) {
+  const JobState all[] = {JobState::Queued, JobState::Running, JobState::Completed,
+                          JobState::Failed, JobState::Cancelled};
+  // Every (from, to): legal exactly as ledger.h says.
+  for (JobState from : all)
+    for (JobState to : all) {
+      Bench b;
+      auto job = make_job("j1");
+      job->state = from;
+      bool legal = !terminal(from) && to != JobState::Queued &&
+                   (to != JobState::Running || from == JobState::Queued);
+      if (legal) {
+        EXPECT_NO_THROW(b.ledger.set_state(*job, to, "why"))
+            << job_state_name(from) << " -> " << job_state_name(to);
+        EXPECT_EQ(job->state, to);
+      } else {
+        EXPECT_THROW(b.ledger.set_state(*job, to, "why"), std::logic_error)
+            << job_state_name(from) << " -> " << job_state_name(to);
+        EXPECT_EQ(job->state, from) << "a refused transition changes nothing";
+      }
+    }
+  // Cancel: once is the transition, again nothing; a completed job is not cancelled.
+  Bench b;
+  auto job = make_job("j1");
+  b.ledger.add_job(*job);
+  b.ledger.cancel(*job, "alice");
+  EXPECT_EQ(job->state, JobState::Cancelled);
+  EXPECT_EQ(job->error, "cancelled by alice");
+  b.ledger.cancel(*job, "bob");
+  EXPECT_EQ(job->error, "cancelled by alice");
+  auto done = make_job("j2");
+  done->state = JobState::Completed;
+  EXPECT_THROW(b.ledger.cancel(*done, "alice"), std::logic_error);
+}
+
+// An ended job's row says so, its lease rows go, and its tasks are no longer handed out.
+TEST(Ledger, EndingAJobStoresItsStateDropsItsLeasesAndItsTasks) {
+  Bench b;
+  auto job = make_job("j1");
+  b.store.write(store::InsertJob{{"j1", 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*job);
+  ASSERT_TRUE(b.ledger.lease("w", b.now, {}));
+  b.flush();
+  EXPECT_EQ(b.store.leases("j1").size(), 1u);
+  b.ledger.set_state(*job, JobState::Failed, "broken");
+  b.flush();
+  EXPECT_EQ(b.store.jobs()[0].state, int(JobState::Failed));
+  EXPECT_EQ(b.store.jobs()[0].error, "broken");
+  EXPECT_TRUE(b.store.leases("j1").empty());
+  EXPECT_FALSE(b.ledger.lease("w", b.now, {})) << "no task of an ended job";
+}
+
+// A task: leased, then done (one event, the core seconds, the build pinned once); a second
+// result needs nothing stored; refused, failed and held tasks go back to the queue (held ones to
+// another worker), a failure and a refusal are stored; a frame's stop ends its tasks.
+TEST(Ledger, TaskTransitionsAndTheirRows) {
+  Bench b;
+  auto job = make_job("j1", 1, 2);  // 8 tasks
+  b.store.write(store::InsertJob{{"j1", 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*job);
+  std::optional<Lease> a = b.ledger.lease("w1", b.now, {});
+  ASSERT_TRUE(a);
+  b.ledger.complete(*job, a->lease_id, a->task, "w1", 1.5, "build-1", b.now);
+  EXPECT_TRUE(b.ledger.scheduler().settled(a->task));
+  EXPECT_EQ(job->build_id, "build-1");
+  std::optional<Lease> c = b.ledger.lease("w1", b.now, {});
+  b.ledger.complete(*job, c->lease_id, c->task, "w1", 2.5, "build-1", b.now);
+  b.flush();
+  EXPECT_EQ(b.store.tasks_done("j1"), 2u);
+  EXPECT_EQ(b.store.jobs()[0].core_seconds, 4.0);
+  EXPECT_EQ(b.store.jobs()[0].build_id, "build-1");
+  EXPECT_EQ(job->core_seconds, 4.0);
+
+  // Refused: queued again, at once, for anyone; counted against w2.
+  std::optional<Lease> r = b.ledger.lease("w2", b.now, {});
+  b.ledger.refuse_result("w2", r->lease_id, r->task, "NaN", b.now);
+  EXPECT_EQ(b.ledger.renew(r->lease_id, b.now), LeaseOutcome::Ended);
+  std::optional<Lease> again = b.ledger.lease("w3", b.now, {});
+  EXPECT_EQ(again->task, r->task);
+  // Failed: queued again; its event stored under the worker.
+  Journal::Ticket t = 0;
+  EXPECT_EQ(b.ledger.fail(again->lease_id, "w3", "out of memory", false, b.now, &t),
+            LeaseOutcome::Ok);
+  EXPECT_EQ(b.ledger.fail(again->lease_id, "w3", "twice", false, b.now, &t), LeaseOutcome::Ended);
+  // Held for verification: it goes to another worker than w4.
+  std::optional<Lease> h = b.ledger.lease("w4", b.now, {});
+  EXPECT_EQ(h->task, r->task);
+  b.ledger.hold_for_verification(h->lease_id, b.now);
+  std::optional<Lease> other = b.ledger.lease("w4", b.now, {});
+  ASSERT_TRUE(other);
+  EXPECT_FALSE(other->task == r->task) << "w4 may not verify its own result";
+  // Not needed (its result merged already, or beyond its frame's stop): the lease ends and the
+  // task counts as done, with nothing stored.
+  b.ledger.not_needed(other->lease_id, other->task, b.now);
+  EXPECT_EQ(b.ledger.renew(other->lease_id, b.now), LeaseOutcome::Ended);
+  EXPECT_TRUE(b.ledger.scheduler().settled(other->task));
+  b.flush();
+  EXPECT_EQ(b.store.refused_workers("j1"), std::vector<std::string>{"w2"});
+  ASSERT_EQ(b.store.failures("j1").size(), 1u);
+  EXPECT_EQ(b.store.failures("j1")[0].message, "out of memory");
+  EXPECT_EQ(b.store.tasks_done("j1"), 2u);
+
+  // The frame needs no pass from 0 on: every task stopped, the lease rows dropped once.
+  b.ledger.frame_done(*job, *job->frames[0], 0);
+  EXPECT_TRUE(job->frames[0]->leases_dropped);
+  b.flush();
+  EXPECT_TRUE(b.store.leases("j1").empty());
+  EXPECT_FALSE(b.ledger.lease("w9", b.now, {}));
+  EXPECT_TRUE(b.ledger.scheduler().settled(other->task));
+}
+
+// Restoring: an ended job's tasks are not queued; a running job's trail counts as before.
+TEST(Ledger, RestoringCountsTheTrail) {
+  Bench b;
+  auto ended = make_job("j1");
+  ended->state = JobState::Completed;
+  b.ledger.restore_job(*ended, {});
+  EXPECT_FALSE(b.ledger.lease("w", b.now, {}));
+  auto job = make_job("j2");
+  Ledger::Trail trail;
+  trail.failures = {{1, 0, 0, "a", "x"}, {1, 0, 0, "b", "y"}, {1, 0, 0, "c", "z"}};
+  b.ledger.restore_job(*job, trail);
+  EXPECT_TRUE(b.ledger.scheduler().job_failed("j2")) << "failed on 3 workers before the restart";
+}
+
+// The journal stores appended writes in order, many calls' writes in one batch while the store
+// is busy (group commit), and wait() says when a ticket is stored.
+TEST(Journal, AppendedWritesAreStoredInOrderAndGrouped) {
+  TestStore store;
+  store.delay_ms = 20;
+  Journal journal(store);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&, t] {
+      for (uint32_t i = 0; i < 50; ++i)
+        journal.append({store::TaskEvent{"j" + std::to_string(t), 0, i, 0, "w",
+                                         TaskEventKind::Failed, std::to_string(i)}});
+    });
+  for (auto& t : threads) t.join();
+  ASSERT_TRUE(journal.wait(journal.append({}), 30));
+  for (int t = 0; t < 4; ++t) {
+    std::vector<TaskFailure> f = store.failures("j" + std::to_string(t));
+    ASSERT_EQ(f.size(), 50u);
+    for (uint32_t i = 0; i < 50; ++i) EXPECT_EQ(f[i].pass, i) << "in the order appended";
+  }
+  EXPECT_LT(journal.batches(), 50u) << "200 appends, grouped while the store was busy";
+  EXPECT_TRUE(journal.problem().empty());
+}
+
+// A store that refuses: appended writes are kept and retried (wait() runs out, problem() says
+// why, the listener hears it), and stored once it takes them; a write ahead is refused and
+// dropped; one queued behind a refused batch gives up after its timeout and is never written.
+TEST(Journal, RefusedWritesAreRetriedOrDroppedAsTheirKindSays) {
+  TestStore store;
+  std::vector<std::string> heard;
+  std::mutex heard_mu;
+  Journal journal(store, [&](const std::string& p) {
+    std::lock_guard lock(heard_mu);
+    heard.push_back(p);
+  });
+  store.failing = true;
+  EXPECT_THROW(journal.write_ahead({store::InsertWorker{{"w1", "p", "", ""}}}), StoreError);
+  Journal::Ticket t = journal.append({store::InsertWorker{{"w2", "p", "", ""}}});
+  EXPECT_FALSE(journal.wait(t, 0.5));
+  EXPECT_NE(journal.problem().find("disk full"), std::string::npos);
+  EXPECT_THROW(journal.write_ahead({store::InsertWorker{{"w3", "p", "", ""}}}, 0.3), StoreError);
+  store.failing = false;
+  EXPECT_TRUE(journal.wait(t, 10));
+  EXPECT_TRUE(journal.problem().empty());
+  std::vector<StoredWorker> w = store.workers();
+  ASSERT_EQ(w.size(), 1u);
+  EXPECT_EQ(w[0].id, "w2") << "w1 was refused, w3 given up on: neither is stored";
+  std::lock_guard lock(heard_mu);
+  ASSERT_GE(heard.size(), 2u);
+  EXPECT_NE(heard.front().find("disk full"), std::string::npos);
+  EXPECT_EQ(heard.back(), "") << "told when writes work again";
+}
+
+// A coordinator on a store that is slow to take writes: leases answer without waiting for it
+// (no disk write under the lock leases take), while a result is acknowledged only once its
+// record is stored.
+TEST(Ledger, LeasesDoNotWaitForTheDiskAndResultsWaitForTheirRecord) {
+  auto store = std::make_shared<TestStore>();
+  std::string dir = test::make_temp_dir("ledger-slow");
+  CoreOptions o;
+  o.state_dir = dir + "/state";
+  o.scene_checker = in_process_scene_checker();
+  o.store = store;
+  o.lease_seconds = 30;
+  Coordinator core(o);
+  std::string scene = test::source_dir() + "/scenes/cornell-box/scene.json";
+  JobSpec spec;
+  spec.scene_path = "scene.json";
+  spec.files = bundle_of_scene(scene);
+  for (const BundleEntry& f : spec.files)
+    core.put_blob(read_file_bytes((std::filesystem::path(scene).parent_path() / f.path).string()));
+  spec.overrides.width = 16;
+  spec.overrides.height = 16;
+  spec.overrides.spp = 4;
+  spec.overrides.passes = 1;
+  spec.tile_size = 8;
+  core.submit(spec);
+  std::string w = core.register_worker({"w", 1, build_id(), "test"}).worker_id;
+  std::optional<TaskAssignment> first = core.lease(w).task;
+  ASSERT_TRUE(first);
+
+  store->close_gate();  // every write now waits at the gate
+  auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(core.lease(w).task);
+  double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(took, 1.0) << "leases waited for the store";
+
+  Scene s = load_scene(scene, first->overrides);
+  SampleBuffer b(frame_header(s, first->task.frame, PassSet::range(0, 1)), first->rect, false);
+  for (int y = first->rect.y0; y < first->rect.y1(); ++y)
+    for (int x = first->rect.x0; x < first->rect.x1(); ++x)
+      for (int k = 0; k < 4; ++k) b.add_sample(x, y, RGB(1.0f));
+  b.finish_pass();
+  auto done = std::async(std::launch::async, [&] {
+    return core.complete({w, first->lease_id, first->task, encode_buffer(b)});
+  });
+  EXPECT_EQ(done.wait_for(std::chrono::milliseconds(500)), std::future_status::timeout)
+      << "the result was acknowledged before its record was stored";
+  store->open_gate();
+  EXPECT_TRUE(done.get());
+}
+
+}  // namespace
+}  // namespace rf
