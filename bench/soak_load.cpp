@@ -41,6 +41,7 @@
 #include "farm/blob_store.h"
 #include "farm/chunking.h"
 #include "farm/convert.h"
+#include "farm/upload.h"
 #include "proto/rayfarm.grpc.pb.h"
 
 namespace {
@@ -248,20 +249,12 @@ class SimulatedWorker {
 
   void upload(const pb::Task& task, const std::string& bytes, bool corrupt, bool late) {
     for (int attempt = 0; attempt < 5 && !g_stop; ++attempt) {
-      grpc::ClientContext ctx;
-      set_deadline(ctx, 60);
-      pb::CompleteResponse resp;
-      auto w = stub_->CompleteTask(&ctx, &resp);
-      pb::CompleteHeader h;
-      h.set_worker_id(worker_id_);
-      h.set_lease_id(task.lease_id());
-      h.set_task_id(task.task_id());
-      h.set_core_seconds(0.01);
-      rf::write_result(*w, h, bytes);
-      grpc::Status s = w->Finish();
+      // The worker's own upload client (farm/upload.h).
+      rf::UploadAnswer answer = rf::upload_result(*stub_, worker_id_, task, bytes, 0.01, 60, false);
+      const grpc::Status& s = answer.status;
       if (s.ok()) {
-        if (corrupt && resp.accepted()) ++g_count.corrupt_accepted;
-        (resp.accepted() ? g_count.merged : g_count.not_needed)++;
+        if (corrupt && answer.accepted) ++g_count.corrupt_accepted;
+        (answer.accepted ? g_count.merged : g_count.not_needed)++;
         return;
       }
       switch (s.error_code()) {

@@ -9,7 +9,6 @@
 #include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
-#include <tbb/global_control.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -368,7 +367,7 @@ int run_scene_check_child(const std::string& bundle_dir, const SceneCheckLimits&
     set_limit(RLIMIT_AS, rlim_t(limits.memory_mb) << 20, rlim_t(limits.memory_mb) << 20);
 #endif
     set_limit(RLIMIT_CPU, rlim_t(limits.cpu_seconds), rlim_t(limits.cpu_seconds) + 1);
-    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    set_import_threads(1);
     if (::chdir(bundle_dir.c_str()) != 0) {
       emit_error("invalid_argument", "the bundle cannot be read");
       return 1;

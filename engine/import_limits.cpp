@@ -1,5 +1,7 @@
 #include "engine/import_limits.h"
 
+#include <OpenImageIO/imageio.h>
+
 #include <map>
 
 namespace rf {
@@ -14,5 +16,10 @@ bool ImportLimits::set(const std::string& name, uint64_t value) {
 }
 
 std::vector<std::string> ImportLimits::names() { return {"files", "bytes", "elements"}; }
+
+void set_import_threads(int threads) {
+  OIIO::attribute("threads", threads);
+  OIIO::attribute("exr_threads", threads);
+}
 
 }  // namespace rf

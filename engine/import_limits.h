@@ -30,4 +30,8 @@ struct ImportLimits {
   static std::vector<std::string> names();
 };
 
+// Image reads (OpenImageIO, OpenEXR) on at most `threads` threads from now on in this process:
+// the scene check's child sets 1, so that its CPU budget is one core's.
+void set_import_threads(int threads);
+
 }  // namespace rf

@@ -3,7 +3,14 @@
 #     graph CMake has, edge for edge;
 #   - the worker, client and farm libraries link no SQLite, however indirectly: only the
 #     coordinator keeps a job store;
-#   - the engine links neither gRPC nor protobuf (docs/design.md: the engine knows no RPC).
+#   - the engine links neither gRPC nor protobuf (docs/design.md: the engine knows no RPC);
+#   - the scene library links no Embree and no TBB: reading scenes and writing images never
+#     needs the renderer;
+#   - the farm model links no protobuf, gRPC, Embree or TBB;
+#   - the client links no Embree or TBB: it reads scenes and writes images, it never renders;
+#   - the coordinator library links no gRPC or protobuf (the service is its only gRPC part),
+#     and no Embree or TBB (it never renders).
+# The layer link checks (tests/CMakeLists.txt, layer_*) hold the same rules at the symbol level.
 # Configures the source tree into WORK_DIR with `cmake --graphviz`, then walks each library's
 # link closure in the graph CMake writes (every edge counts: a static library's private links
 # reach whatever links it).
@@ -119,4 +126,11 @@ set(no_store "only the coordinator library keeps the SQLite job store")
 forbid(rayfarm_worker "sqlite" "${no_store}")
 forbid(rayfarm_client "sqlite" "${no_store}")
 forbid(rayfarm_farm "sqlite" "${no_store}")
+forbid(rayfarm_wire "sqlite" "${no_store}")
 forbid(rayfarm_engine "grpc|protobuf" "the engine knows no RPC")
+forbid(rayfarm_scene "embree|tbb|grpc|protobuf"
+       "the scene library reads scenes and writes images without the renderer or RPC")
+forbid(rayfarm_farm "protobuf|grpc|embree|tbb" "the farm model is plain types")
+forbid(rayfarm_client "embree|tbb" "the client never renders")
+forbid(rayfarm_coordinator "grpc|protobuf|embree|tbb"
+       "the coordinator library knows no RPC (service.cpp is its gRPC adapter) and never renders")

@@ -31,6 +31,7 @@
 #include "farm/channel.h"
 #include "farm/chunking.h"
 #include "farm/convert.h"
+#include "farm/upload.h"
 #include "proto/rayfarm.grpc.pb.h"
 
 namespace rf {
@@ -391,21 +392,13 @@ void Worker::fail_task(const pb::Task& task, const std::string& message, bool ha
 void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds) {
   std::string bytes = encode_buffer(buffer);
   for (int attempt = 0;; ++attempt) {
-    grpc::ClientContext ctx;
-    set_deadline(ctx, 600, kWaitForReady);
-    pb::CompleteResponse resp;
-    auto w = stub_->CompleteTask(&ctx, &resp);
-    pb::CompleteHeader h;
-    h.set_worker_id(worker_id_);
-    h.set_lease_id(task.lease_id());
-    h.set_task_id(task.task_id());
-    h.set_core_seconds(core_seconds);
-    write_result(*w, h, bytes);
-    grpc::Status s = w->Finish();
+    UploadAnswer answer =
+        upload_result(*stub_, worker_id_, task, bytes, core_seconds, 600, kWaitForReady);
+    const grpc::Status& s = answer.status;
     if (s.ok()) {
       heard_from_coordinator();
       spdlog::info("task {}: {}", task.task_id(),
-                   resp.accepted() ? "merged" : "not needed (another result was merged first)");
+                   answer.accepted ? "merged" : "not needed (another result was merged first)");
       return;
     }
     // A coordinator that went away gets the result when it is back (a late result still counts

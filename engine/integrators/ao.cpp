@@ -41,27 +41,6 @@ RGB AoIntegrator::radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
   return RGB(float(sum / s.samples));
 }
 
-void AoIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
-  if (const Json* v = r.find(j, "max_distance")) {
-    max_distance = r.number(*v, p + ".max_distance");
-    if (!(max_distance > 0)) r.fail(p + ".max_distance", "must be > 0, got " + v->dump());
-  }
-  if (const Json* v = r.find(j, "sampling")) {
-    std::string s = r.string(*v, p + ".sampling");
-    if (s != "cosine" && s != "uniform")
-      r.fail(p + ".sampling", "expected \"cosine\" or \"uniform\", got '" + s + "'");
-    cosine = s == "cosine";
-  }
-  if (const Json* v = r.find(j, "samples")) samples = int(r.integer(*v, p + ".samples", 1, 1 << 16));
-}
-
-std::string AoIntegrator::settings_text() const {
-  char buf[128];
-  std::snprintf(buf, sizeof buf, ";ao=%g:%s:%d", double(max_distance),
-                cosine ? "cosine" : "uniform", samples);
-  return buf;
-}
-
 SampleBuffer AoIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                   bool parallel) const {
   return render_camera_paths<false>(ctx, task, parallel,

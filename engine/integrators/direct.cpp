@@ -90,34 +90,6 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
 
 }  // namespace
 
-void DirectIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
-  if (const Json* v = r.find(j, "strategy")) {
-    std::string s = r.string(*v, p + ".strategy");
-    if (s == "light") strategy = Strategy::Light;
-    else if (s == "bsdf") strategy = Strategy::Bsdf;
-    else if (s == "mis") strategy = Strategy::Mis;
-    else r.fail(p + ".strategy", "expected \"light\", \"bsdf\" or \"mis\", got '" + s + "'");
-  }
-  if (const Json* v = r.find(j, "heuristic")) {
-    std::string s = r.string(*v, p + ".heuristic");
-    if (s != "power" && s != "balance")
-      r.fail(p + ".heuristic", "expected \"power\" or \"balance\", got '" + s + "'");
-    power_heuristic = s == "power";
-  }
-  if (const Json* v = r.find(j, "light_samples"))
-    light_samples = int(r.integer(*v, p + ".light_samples", 0, 1 << 16));
-  if (const Json* v = r.find(j, "bsdf_samples"))
-    bsdf_samples = int(r.integer(*v, p + ".bsdf_samples", 0, 1 << 16));
-  if (light_samples + bsdf_samples == 0) r.fail(p, "light_samples and bsdf_samples cannot both be 0");
-}
-
-std::string DirectIntegrator::settings_text() const {
-  char buf[128];
-  std::snprintf(buf, sizeof buf, ";direct=%d:%s:%d:%d", int(strategy),
-                power_heuristic ? "power" : "balance", light_samples, bsdf_samples);
-  return buf;
-}
-
 SampleBuffer DirectIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                       bool parallel) const {
   return render_camera_paths<false>(ctx, task, parallel,

@@ -65,6 +65,9 @@ struct IrIntegrator : IntegratorDefaults {
   static constexpr const char* kKeys[] = {"type",           "max_depth",   "rr_min_depth",
                                           "vpl_paths",      "vpl_samples", "vpl_candidates",
                                           "clamp_distance", "compensation"};
+  // Bounds of the two parameters that size the estimator's stack arrays.
+  static constexpr int kMaxVplSamples = 64;
+  static constexpr int kMaxVplCandidates = 256;
 
   int vpl_paths = 4096;      // light paths per pass depositing virtual point lights
   float clamp_distance = 0;  // G is clamped at 1 / d^2; 0: 0.1 x LightSet::scene_radius()

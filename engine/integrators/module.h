@@ -1,5 +1,7 @@
 // What an integrator module is (docs/adding-an-integrator.md). Each integrator is a struct in its
-// own NAME.h / NAME.cpp pair that holds its parameters as plain data and says, in this shape:
+// own NAME.h, with its settings (parse, settings_text, check) in NAME_settings.cpp (the scene
+// library) and its estimator (render) in NAME.cpp (the renderer). The struct holds its parameters
+// as plain data and says, in this shape:
 //
 //   struct FooIntegrator : IntegratorDefaults {
 //     static constexpr const char* kName = "foo";       // render.integrator.type, --integrator

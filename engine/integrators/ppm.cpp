@@ -150,27 +150,6 @@ RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sample
 
 }  // namespace
 
-void PpmIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
-  // At most 2^24 photons per pass: each costs about 64 bytes in the photon map and its tree, so
-  // the cap bounds a pass's map to about 1 GiB (2^28 asked for 16 GiB and ended in bad_alloc).
-  if (const Json* v = r.find(j, "photons"))
-    photons = int(r.integer(*v, p + ".photons", 1, 1 << 24));
-  if (const Json* v = r.find(j, "radius")) {
-    radius = r.number(*v, p + ".radius");
-    if (radius < 0) r.fail(p + ".radius", "must be >= 0 (0: automatic), got " + v->dump());
-  }
-  if (const Json* v = r.find(j, "alpha")) {
-    alpha = r.number(*v, p + ".alpha");
-    if (!(alpha > 0 && alpha < 1)) r.fail(p + ".alpha", "must lie in (0, 1), got " + v->dump());
-  }
-}
-
-std::string PpmIntegrator::settings_text() const {
-  char buf[128];
-  std::snprintf(buf, sizeof buf, ";ppm=%d:%.9g:%.9g", photons, double(radius), double(alpha));
-  return buf;
-}
-
 SampleBuffer PpmIntegrator::render(const RenderContext& ctx, const TaskKey& task,
                                    bool parallel) const {
   return render_camera_paths_with_pass_state<PhotonMap>(

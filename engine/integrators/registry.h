@@ -1,7 +1,9 @@
 // The closed list of integrators (docs/adding-an-integrator.md). Each is a struct in its own
-// NAME.h / NAME.cpp pair (module.h says what it holds); adding one is a new pair, its #include
-// and one entry in the variant below. Everything that depends on which integrator a scene uses dispatches here, on
-// the variant: names, scene keys, settings text, checks, splatting and rendering.
+// NAME.h with NAME_settings.cpp and NAME.cpp (module.h says what they hold); adding one is those
+// files, its #include and one entry in the variant below. Everything that depends on which
+// integrator a scene uses dispatches here, on the variant: names, scene keys, settings text,
+// checks and splatting (registry_settings.cpp, the scene library) and rendering (registry.cpp,
+// the renderer).
 #pragma once
 
 #include <string>
