@@ -133,7 +133,7 @@ int cmd_render(const RenderArgs& a) {
   opt.progress = [&](const LocalProgress& p) { printer(p); };
 
   Renderer renderer(scene);
-  if (!renderer.has_lights() && scene.render.integrator.type() != "ao")
+  if (!renderer.has_lights() && integrator_needs_lights(scene.render.integrator.method))
     spdlog::warn(
         "{}: the scene has no lights (no emitter, light or environment): the {} image "
         "will be black",

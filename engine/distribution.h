@@ -8,6 +8,8 @@
 #include <utility>
 #include <vector>
 
+#include "engine/check.h"
+
 namespace rf {
 
 // Density on [0,1) proportional to f[i] on [i/n, (i+1)/n). f must be >= 0; an all-zero f
@@ -17,6 +19,7 @@ class Distribution1D {
   Distribution1D() = default;
   explicit Distribution1D(std::vector<float> f) : func_(std::move(f)) {
     size_t n = func_.size();
+    RF_CHECK(n > 0, "a distribution over no cells");
     cdf_.assign(n + 1, 0.0f);
     double sum = 0;
     for (float v : func_) sum += double(v);

@@ -1,7 +1,9 @@
 #include "engine/lights.h"
 
 #include <algorithm>
+#include <cmath>
 
+#include "engine/check.h"
 #include "engine/sampling.h"
 #include "engine/shapes.h"
 #include "engine/simd.h"
@@ -94,10 +96,17 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
   // a group (a light, or all primitives of an emissive mesh) by its power, then a primitive of
   // the group by its power within the group.
   const size_t n = kinds_.size();
+  RF_CHECK(power_.size() == n,
+           std::to_string(power_.size()) + " powers for " + std::to_string(n) + " lights");
   double total = 0;
   for (double p : power_) total += p;
   pmf_.resize(n);
   for (size_t i = 0; i < n; ++i) pmf_[i] = float(total > 0 ? power_[i] / total : 1.0 / double(n));
+  if constexpr (kDchecks) {
+    double sum = 0;  // each pmf is rounded to float: the sum is 1 within n x 2^-24 relative
+    for (float p : pmf_) sum += double(p);
+    RF_DCHECK(n == 0 || std::fabs(sum - 1.0) < 1e-5, "light pmfs sum to " + std::to_string(sum));
+  }
   cdf_.assign(groups_.size() + 1, 0.0);
   within_cdf_.assign(n, 1.0);
   for (size_t g = 0; g < groups_.size(); ++g) {
@@ -112,6 +121,8 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
     }
     within_cdf_[gr.first + gr.count - 1] = 1.0;
   }
+  RF_DCHECK(groups_.empty() || std::fabs(cdf_.back() - 1.0) < 1e-9,
+            "the light groups' cdf ends at " + std::to_string(cdf_.back()));
   if (!groups_.empty()) cdf_.back() = 1.0;
   build_bvh(scene.render.light_selection);
   triangles_by_power_ =

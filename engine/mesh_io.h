@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "engine/math.h"
-#include "engine/scene.h"
+#include "engine/scene_error.h"
 
 namespace rf {
 

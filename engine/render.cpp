@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "engine/check.h"
+
 namespace rf {
 
 Renderer::Renderer(const Scene& scene)
@@ -27,6 +29,9 @@ BufferHeader Renderer::header(uint32_t frame, const PassSet& passes) const {
 }
 
 SampleBuffer Renderer::render(const TaskKey& task, bool parallel) const {
+  const Rect film{0, 0, scene_.film.width, scene_.film.height};
+  RF_CHECK(task.rect.w > 0 && task.rect.h > 0 && film.contains(task.rect),
+           "task rect " + to_string(task.rect) + " in a " + to_string(film) + " film");
   return render_task(*context_, task, parallel);
 }
 

@@ -13,6 +13,7 @@
 #include "engine/integrators/registry.h"
 #include "engine/math.h"
 #include "engine/scene_error.h"
+#include "engine/shapes.h"
 
 namespace rf {
 
@@ -78,16 +79,6 @@ struct Material {
 struct Emission {
   RGB radiance{0.0f};
   bool two_sided = false;
-};
-
-// An exact sphere (Embree's sphere primitive; shapes.h has its geometry): world-space centre and
-// radius, and the unit axes of its parametrisation (uv and the pole are those of make_sphere:
-// the pole along axis[1], phi from axis[0] towards -axis[2]). The axes may be left-handed (a
-// mirrored sphere); the outward normal is (p - center) / radius either way.
-struct SphereShape {
-  Vec3 center{0.0f};
-  float radius = 1;
-  Vec3 axis[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
 };
 
 // A surface: triangles, or one exact sphere (then positions, normals, uvs and indices are empty

@@ -4,9 +4,18 @@
 
 #include "engine/math.h"
 #include "engine/mesh_io.h"
-#include "engine/scene.h"
 
 namespace rf {
+
+// An exact sphere (Embree's sphere primitive; its geometry is below): world-space centre and
+// radius, and the unit axes of its parametrisation (uv and the pole are those of make_sphere:
+// the pole along axis[1], phi from axis[0] towards -axis[2]). The axes may be left-handed (a
+// mirrored sphere); the outward normal is (p - center) / radius either way.
+struct SphereShape {
+  Vec3 center{0.0f};
+  float radius = 1;
+  Vec3 axis[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+};
 
 // The square [-1, 1]^2 in the z = 0 plane, normal +z.
 MeshData make_rectangle();
@@ -18,7 +27,7 @@ MeshData make_sphere(Vec3 c, float r, int n_theta, int n_phi);
 // The unit disk in the z = 0 plane, normal +z, as a fan of `segments` triangles.
 MeshData make_disk(int segments);
 
-// Exact spheres (SphereShape, scene.h).
+// Exact spheres (SphereShape, above).
 //
 // The sphere of centre c and radius r placed by to_world with its parametrisation axes `axes`
 // (object space; make_sphere's are x, y, z), when to_world is a similarity (rotation, uniform

@@ -78,7 +78,7 @@ void expect_vec(Vec3 got, Vec3 want, float tol, const std::string& what) {
 constexpr float kGeomTol = 1e-5f;
 
 TEST(GltfTest, HierarchyTrsMatrixAndInstancing) {
-  Scene s = load_gltf_scene(data("hierarchy.gltf"));
+  Scene s = import_scene(data("hierarchy.gltf"));
   // Mesh 0 is placed by two nodes: one object, two instances (in node order).
   ASSERT_EQ(s.objects.size(), 1u);
   ASSERT_EQ(s.instances.size(), 2u);
@@ -119,7 +119,7 @@ TEST(GltfTest, PortraitYfovBecomesTheHorizontalFov) {
   json j = read_json(data("hierarchy.gltf"));
   j["cameras"][0]["perspective"]["aspectRatio"] = 0.5;
   test::write_text(dir + "/portrait.gltf", j.dump());
-  Scene s = load_gltf_scene(dir + "/portrait.gltf");
+  Scene s = import_scene(dir + "/portrait.gltf");
   EXPECT_EQ(s.film.width, 256);
   EXPECT_EQ(s.film.height, 512);
   // The shorter axis is now horizontal: 2 atan(tan(yfov / 2) * 256 / 512).
@@ -137,7 +137,7 @@ TEST(GltfTest, PortraitYfovBecomesTheHorizontalFov) {
 }
 
 TEST(GltfTest, PunctualLightsInRadiometricUnits) {
-  Scene s = load_gltf_scene(data("lights.gltf"));
+  Scene s = import_scene(data("lights.gltf"));
   ASSERT_EQ(s.lights.size(), 3u);
   // Point: colour (1, .5, .25) x 4*683 cd / 683 lm/W = (4, 2, 1) W/sr at the node's position.
   const Light& p = s.lights[0];
@@ -164,7 +164,7 @@ TEST(GltfTest, PunctualLightsInRadiometricUnits) {
 }
 
 TEST(GltfTest, MaterialMapping) {
-  Scene s = load_gltf_scene(data("materials.gltf"));
+  Scene s = import_scene(data("materials.gltf"));
   ASSERT_EQ(s.meshes.size(), 10u);  // one per glTF mesh, in mesh order
   auto mat = [&](size_t mesh) -> const Material& {
     return s.materials.at(s.meshes[mesh].material);
@@ -236,7 +236,7 @@ void expect_textured(const Scene& s) {
 }
 
 TEST(GltfTest, DataUriTexturesAndPackedRoughness) {
-  Scene s = load_gltf_scene(data("textured.gltf"));
+  Scene s = import_scene(data("textured.gltf"));
   expect_textured(s);
   const Texture& mr = s.textures[1];
   EXPECT_TRUE(mr.is_data);
@@ -258,7 +258,7 @@ TEST(GltfTest, DataUriTexturesAndPackedRoughness) {
   json j = read_json(data("textured.gltf"));
   j["materials"][0]["pbrMetallicRoughness"]["metallicFactor"] = 0;
   test::write_text(dir + "/dielectric.gltf", j.dump());
-  Scene d = load_gltf_scene(dir + "/dielectric.gltf");
+  Scene d = import_scene(dir + "/dielectric.gltf");
   EXPECT_EQ(d.materials.at(d.meshes.at(0).material).type, MaterialType::Diffuse);
   EXPECT_EQ(d.materials.at(d.meshes.at(0).material).reflectance.texture, 0);
   EXPECT_TRUE(
@@ -266,7 +266,7 @@ TEST(GltfTest, DataUriTexturesAndPackedRoughness) {
 }
 
 TEST(GltfTest, ExternalImageIsRegisteredForTheBundle) {
-  Scene s = load_gltf_scene(data("textured_external.gltf"));
+  Scene s = import_scene(data("textured_external.gltf"));
   ASSERT_EQ(s.textures.size(), 1u);
   EXPECT_EQ(s.textures[0].resolved_path, data("checker.png"));
   EXPECT_EQ(s.assets, std::vector<std::string>{"checker.png"});
@@ -275,10 +275,10 @@ TEST(GltfTest, ExternalImageIsRegisteredForTheBundle) {
   fs::copy_file(data("textured_external.gltf"), dir + "/t.gltf");
   std::string png = read_bytes(data("checker.png"));
   test::write_text(dir + "/checker.png", png);
-  std::string d1 = load_gltf_scene(dir + "/t.gltf").digest;
+  std::string d1 = import_scene(dir + "/t.gltf").digest;
   png[png.size() - 20] ^= 1;
   test::write_text(dir + "/checker.png", png);
-  EXPECT_NE(load_gltf_scene(dir + "/t.gltf").digest, d1);
+  EXPECT_NE(import_scene(dir + "/t.gltf").digest, d1);
 }
 
 // A .glb written here: textured.gltf's JSON with its geometry still in a data: URI buffer (1) and
@@ -303,23 +303,23 @@ TEST(GltfTest, GlbEmbeddedPngIsExtractedDeterministically) {
   std::string dir = test::make_temp_dir("gltf");
   std::string png = read_bytes(data("checker.png"));
   test::write_text(dir + "/textured.glb", make_glb(png));
-  Scene s = load_gltf_scene(dir + "/textured.glb");
+  Scene s = import_scene(dir + "/textured.glb");
   std::string expected = env->dir_ + "/rayfarm/gltf-images/" + sha256_hex(png) + ".png";
   EXPECT_EQ(s.textures.at(0).resolved_path, expected);
   EXPECT_EQ(read_bytes(expected), png);
   expect_textured(s);
   // A second import (a farm worker's) names the same file.
-  EXPECT_EQ(load_gltf_scene(dir + "/textured.glb").textures.at(0).resolved_path, expected);
+  EXPECT_EQ(import_scene(dir + "/textured.glb").textures.at(0).resolved_path, expected);
   // Truncated by one byte: refused by the header check before any parsing.
   std::string glb = make_glb(png);
   test::write_text(dir + "/cut.glb", glb.substr(0, glb.size() - 1));
-  std::string e = test::error_of([&] { load_gltf_scene(dir + "/cut.glb"); });
+  std::string e = test::error_of([&] { import_scene(dir + "/cut.glb"); });
   EXPECT_NE(e.find("cut.glb: (GLB header): "), std::string::npos) << e;
   EXPECT_NE(e.find("(truncated)"), std::string::npos) << e;
 }
 
 TEST(GltfTest, PrimitiveModesIndexTypesAndSparse) {
-  Scene s = load_gltf_scene(data("primitives.gltf"));
+  Scene s = import_scene(data("primitives.gltf"));
   ASSERT_EQ(s.meshes.size(), 4u) << all_warnings(s);  // strip, fan, list, sparse (points skipped)
   // Strip 0 1 2 3 4 (u8 indices): every other triangle swaps its first two vertices.
   EXPECT_EQ(s.meshes[0].indices, (std::vector<uint32_t>{0, 1, 2, 2, 1, 3, 2, 3, 4}));
@@ -334,7 +334,7 @@ TEST(GltfTest, PrimitiveModesIndexTypesAndSparse) {
 }
 
 TEST(GltfTest, InterleavedNormalizedAndQuantizedAccessors) {
-  Scene s = load_gltf_scene(data("interleaved.gltf"));
+  Scene s = import_scene(data("interleaved.gltf"));
   ASSERT_EQ(s.meshes.size(), 2u) << all_warnings(s);
   const Mesh& m = s.meshes[0];
   // Positions and normals interleaved in one 24-byte stride.

@@ -271,10 +271,10 @@ TEST(LightTracing, AgreesWithPathOnCornellBox) {
   expect_agree(light, path, "light vs path (4x4 blocks)");
 }
 
-// The determinism contract for every integrator here: a pass is the same whole or in tiles,
-// serial or threaded, and the same twice.
+// The determinism contract for every integrator of the registry: a pass is the same whole or in
+// tiles, serial or threaded, and the same twice.
 TEST(IntegratorDeterminism, PassesAreReproducibleAndTileIndependent) {
-  for (const char* name : {"whitted", "ao", "direct", "light"}) {
+  for (const std::string& name : known_integrators()) {
     SCOPED_TRACE(name);
     Scene s = test::cornell_box({name, 24, 4, 4, 3});
     Renderer r(s);

@@ -190,7 +190,7 @@ TEST(PbrtDirectives, ShapesIncludesAndInstances) {
 }
 
 TEST(PbrtDirectives, InstancesStayObjectsUntilLoadSceneFlattens) {
-  Scene s = load_pbrt_scene(data("directives.pbrt"));
+  Scene s = import_scene(data("directives.pbrt"));
   ASSERT_EQ(s.objects.size(), 1u);
   EXPECT_EQ(s.objects[0].name, "post");
   ASSERT_EQ(s.instances.size(), 2u);

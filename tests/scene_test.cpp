@@ -7,9 +7,13 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
 
 #include "engine/digest.h"
+#include "engine/json_reader.h"
 #include "engine/mesh_io.h"
 #include "engine/scene.h"
 #include "tests/support/test_support.h"
@@ -469,7 +473,8 @@ TEST(Overrides, ValidatedAndNamedByFlag) {
   EXPECT_EQ(override_error(s, o), "--passes: must divide the scene's spp (256), got 3");
   o = {};
   o.integrator = "pathh";
-  EXPECT_EQ(override_error(s, o), "--integrator: unknown integrator 'pathh' (known: whitted, ao, direct, path, light, bdpt, ir, ppm)");
+  EXPECT_EQ(override_error(s, o), "--integrator: unknown integrator 'pathh' (known: " +
+                                      join_names(known_integrators()) + ")");
   o = {};
   o.width = 0;
   EXPECT_EQ(override_error(s, o), "--res: width must be between 1 and 16384, got 0");
@@ -524,8 +529,43 @@ TEST(Overrides, Applied) {
   EXPECT_EQ(b.render.spp_per_pass(), 6u);
 }
 
+// The registry's names are its variant's, each once, and each makes its own integrator.
 TEST(Integrators, KnownNames) {
-  EXPECT_EQ(known_integrators(), (std::vector<std::string>{"whitted", "ao", "direct", "path", "light", "bdpt", "ir", "ppm"}));
+  const std::vector<std::string>& names = known_integrators();
+  EXPECT_EQ(names.size(), std::variant_size_v<Integrator>);
+  EXPECT_EQ(std::set<std::string>(names.begin(), names.end()).size(), names.size());
+  for (const std::string& name : names) EXPECT_EQ(integrator_name(make_integrator(name)), name);
+  EXPECT_THROW(make_integrator("pathh"), std::invalid_argument);
+}
+
+// Other renderers' integrator types map through the modules' own lists (module.h).
+TEST(Integrators, ImportedTypesMapThroughTheModules) {
+  EXPECT_EQ(integrator_for_pbrt("ambientocclusion"), "ao");
+  EXPECT_EQ(integrator_for_pbrt("volpath"), "path");
+  EXPECT_EQ(integrator_for_pbrt("sppm"), "ppm");
+  EXPECT_EQ(integrator_for_pbrt("bdpt"), "bdpt");
+  EXPECT_EQ(integrator_for_pbrt("lightpath"), "light");
+  EXPECT_EQ(integrator_for_pbrt("mystery"), "");
+  EXPECT_EQ(integrator_for_mitsuba("ptracer"), "light");
+  EXPECT_EQ(integrator_for_mitsuba("prb"), "path");
+  EXPECT_EQ(integrator_for_mitsuba("ambientocclusion"), "");
+  EXPECT_EQ(mitsuba_integrator_types(),
+            "direct, path, volpath, volpathmis, prb (as path), ptracer (as light), bdpt");
+  // Each imported type is claimed by one module at most.
+  std::map<std::string, int> claims;
+  for (const std::string& name : known_integrators())
+    std::visit(
+        [&](const auto& i) {
+          using T = std::decay_t<decltype(i)>;
+          std::istringstream pbrt(T::kPbrtTypes), mitsuba(T::kMitsubaTypes);
+          for (std::string w; pbrt >> w;) ++claims["pbrt:" + w];
+          for (std::string w; mitsuba >> w;) ++claims["mitsuba:" + w];
+        },
+        make_integrator(name));
+  for (const auto& [type, n] : claims) EXPECT_EQ(n, 1) << type;
+  EXPECT_EQ(claims.size(), 17u);  // 10 pbrt-v4 types, 7 Mitsuba 3 types
+  EXPECT_FALSE(integrator_needs_lights(make_integrator("ao")));
+  EXPECT_TRUE(integrator_needs_lights(make_integrator("path")));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -717,7 +757,8 @@ const std::vector<BadScene>& bad_scenes() {
       {"NegativeMaxDepth", edit([](json& j) { j["render"]["integrator"]["max_depth"] = -1; }),
        "render.integrator.max_depth", "must be at least 0, got -1"},
       {"UnknownIntegrator", edit([](json& j) { j["render"]["integrator"]["type"] = "pathh"; }),
-       "render.integrator.type", "unknown integrator 'pathh' (known: whitted, ao, direct, path, light, bdpt, ir, ppm)"},
+       "render.integrator.type",
+       "unknown integrator 'pathh' (known: " + join_names(known_integrators()) + ")"},
       {"NegativeSeed", edit([](json& j) { j["render"]["seed"] = -1; }), "render.seed",
        "expected a non-negative integer, got number -1"},
       {"FovOutOfRange", edit([](json& j) { j["camera"]["fov_deg"] = 180; }), "camera.fov_deg",
@@ -817,8 +858,10 @@ const std::vector<BadScene>& bad_scenes() {
          j["film"]["filter"] = {{"type", "box"}, {"sigma", 0.5}};
        }),
        "film.filter.sigma", "only the gaussian filter has a sigma"},
-      {"AoKeyOnPathIntegrator", edit([](json& j) { j["render"]["integrator"]["max_distance"] = 1; }),
-       "render.integrator.max_distance", "unknown key (expected one of: type, max_depth, rr_min_depth)"},
+      {"AoKeyOnPathIntegrator",
+       edit([](json& j) { j["render"]["integrator"]["max_distance"] = 1; }),
+       "render.integrator.max_distance",
+       "unknown key (expected one of: type, max_depth, rr_min_depth)"},
       {"UnknownDirectStrategy", edit([](json& j) {
          j["render"]["integrator"] = {{"type", "direct"}, {"strategy", "both"}};
        }),
@@ -832,10 +875,11 @@ const std::vector<BadScene>& bad_scenes() {
          j["render"]["integrator"] = {{"type", "ppm"}, {"photons", 1 << 28}};
        }),
        "render.integrator.photons", "16777216"},
-      {"UnknownSampler", edit([](json& j) { j["render"]["sampler"] = "halton"; }),
-       "render.sampler", "unknown sampler 'halton' (known: independent, sobol, sobol-sequence)"},
-      {"SphereNegativeRadius", with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"),
-       "shapes[0].radius", "must be > 0"},
+      {"UnknownSampler", edit([](json& j) { j["render"]["sampler"] = "halton"; }), "render.sampler",
+       "unknown sampler 'halton' (known: independent, sobol, sobol-sequence)"},
+      {"SphereNegativeRadius",
+       with_shape(R"({"type": "sphere", "material": "white", "radius": -1})"), "shapes[0].radius",
+       "must be > 0"},
       // A referenced file may not lead outside the scene's directory, a symbolic link included.
       {"TextureSymlinkOutsideTheSceneDirectory",
        [](const std::string& dir) {

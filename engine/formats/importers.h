@@ -1,7 +1,9 @@
-// The importers, one per format (engine/formats/<format>/): each reads its file and every file it
-// references (registered through SceneFiles, so the farm ships them and the digest covers them)
-// and returns the engine's Scene with its digest and assets set, before command-line overrides.
-// load_scene (scene.h) picks one by the file's extension and applies the overrides.
+// The importers, one per format (engine/formats/<format>/), all of one shape: each takes the main
+// file's bytes and fills the scene (whose path is set), reading every file it references through
+// SceneFiles (so the farm ships them and the digest covers them). import_scene owns what they
+// share: it picks the importer by the file's extension, reads the main file (counted against the
+// limits), and sets the digest and assets after it; load_scene (scene.h) then prepares instances
+// and applies command-line overrides.
 //
 // Error policy, every format: a problem is a SceneError naming the file, the line (or JSON/XML
 // path) and the directive; a feature the importer does not support is a warning (in
@@ -16,12 +18,15 @@
 
 namespace rf {
 
-// Each counts what it reads against `limits` (engine/import_limits.h).
-Scene load_json_scene(const std::string& path,
-                      const ImportLimits& limits = {});  // docs/scene-format.md
-Scene load_pbrt_scene(const std::string& path, const ImportLimits& limits = {});  // pbrt-v4
-Scene load_mitsuba_scene(const std::string& path,
-                         const ImportLimits& limits = {});                        // Mitsuba 3 XML
-Scene load_gltf_scene(const std::string& path, const ImportLimits& limits = {});  // .gltf and .glb
+class SceneFiles;
+
+void import_json(const std::string& bytes, SceneFiles& files, Scene& scene);     // the rest
+void import_pbrt(const std::string& bytes, SceneFiles& files, Scene& scene);     // .pbrt, pbrt-v4
+void import_mitsuba(const std::string& bytes, SceneFiles& files, Scene& scene);  // .xml, Mitsuba 3
+void import_gltf(const std::string& bytes, SceneFiles& files, Scene& scene);     // .gltf, .glb
+
+// The scene in `path` as its importer reads it, with its digest and assets, before instances are
+// prepared and overrides applied. Counts what it reads against `limits`.
+Scene import_scene(const std::string& path, const ImportLimits& limits = {});
 
 }  // namespace rf

@@ -23,6 +23,8 @@ struct AoIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "ao";
   static constexpr bool kSplats = false;
   static constexpr const char* kKeys[] = {"type", "max_distance", "sampling", "samples"};
+  static constexpr bool kNeedsLights = false;
+  static constexpr const char* kPbrtTypes = "ambientocclusion";
 
   float max_distance = kInf;  // occluders farther than this do not count
   bool cosine = true;         // cosine-weighted (true) or uniform hemisphere sampling
@@ -30,6 +32,7 @@ struct AoIntegrator : IntegratorDefaults {
 
   void parse(const JsonReader& r, const Json& j, const std::string& path);
   std::string settings_text() const;
+  void from_pbrt(const ForeignParams& p);  // cossample, maxdistance
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   // The estimator: the occlusion seen along one camera ray (for tests at a chosen point).

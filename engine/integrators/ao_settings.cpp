@@ -30,4 +30,10 @@ std::string AoIntegrator::settings_text() const {
   return buf;
 }
 
+void AoIntegrator::from_pbrt(const ForeignParams& p) {
+  cosine = p.boolean("cossample", true);
+  double d = p.number("maxdistance", 1e30);
+  max_distance = d >= 1e30 ? kInf : float(d);
+}
+
 }  // namespace rf

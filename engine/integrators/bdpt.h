@@ -67,6 +67,8 @@ struct BdptIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "bdpt";
   static constexpr bool kSplats = true;
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
+  static constexpr const char* kPbrtTypes = "bdpt";
+  static constexpr const char* kMitsubaTypes = "bdpt";
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const BdptIntegrator&) const = default;

@@ -27,6 +27,7 @@ struct DirectIntegrator : IntegratorDefaults {
   static constexpr const char* kKeys[] = {"type", "strategy", "heuristic", "light_samples", "bsdf_samples"};
 
   static constexpr int kFixedMaxDepth = 1;  // direct lighting is exactly one bounce
+  static constexpr const char* kMitsubaTypes = "direct";
 
   enum class Strategy : uint8_t { Light, Bsdf, Mis };  // values appear in settings_text
   Strategy strategy = Strategy::Mis;
@@ -36,6 +37,7 @@ struct DirectIntegrator : IntegratorDefaults {
 
   void parse(const JsonReader& r, const Json& j, const std::string& path);
   std::string settings_text() const;
+  void from_mitsuba(const ForeignParams& p);  // shading_samples, emitter_samples, bsdf_samples
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const DirectIntegrator&) const = default;

@@ -41,4 +41,12 @@ std::string DirectIntegrator::settings_text() const {
   return buf;
 }
 
+void DirectIntegrator::from_mitsuba(const ForeignParams& p) {
+  int shading = p.integer("shading_samples", 1);
+  light_samples = p.integer("emitter_samples", shading);
+  bsdf_samples = p.integer("bsdf_samples", shading);
+  if (light_samples < 0 || bsdf_samples < 0 || light_samples + bsdf_samples == 0)
+    p.fail("emitter_samples and bsdf_samples must be >= 0 and not both 0");
+}
+
 }  // namespace rf

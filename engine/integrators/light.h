@@ -32,6 +32,8 @@ struct LightIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "light";
   static constexpr bool kSplats = true;
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
+  static constexpr const char* kPbrtTypes = "lightpath";
+  static constexpr const char* kMitsubaTypes = "ptracer";
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const LightIntegrator&) const = default;

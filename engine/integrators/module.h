@@ -12,6 +12,7 @@
 //     void parse(const JsonReader&, const Json&, const std::string& path);  // its own keys
 //     std::string settings_text() const;                 // appended to the buffer header's
 //     void check(const Scene&) const;                    // throws SceneError if it cannot render
+//     // optional: kNeedsLights, kPbrtTypes, kMitsubaTypes, from_pbrt, from_mitsuba (below)
 //     SampleBuffer render(const RenderContext&, const TaskKey&, bool parallel) const;
 //     bool operator==(const FooIntegrator&) const = default;
 //   };
@@ -38,11 +39,34 @@ struct Ray;
 class Sampler;
 struct TraceCounters;
 
-// Members an integrator without parameters or restrictions need not write.
+// An imported scene's integrator parameters (pbrt-v4's `Integrator` directive, Mitsuba 3's
+// <integrator>), read by the module's own mapping (from_pbrt, from_mitsuba). Each importer adapts
+// its parameter list: a read marks the parameter used (the importer warns of the rest), a value
+// of the wrong type and fail() are SceneErrors naming the file and line.
+class ForeignParams {
+ public:
+  virtual ~ForeignParams() = default;
+  virtual int integer(const std::string& name, int fallback) const = 0;
+  virtual double number(const std::string& name, double fallback) const = 0;
+  virtual bool boolean(const std::string& name, bool fallback) const = 0;
+  [[noreturn]] virtual void fail(const std::string& message) const = 0;
+};
+
+// Members an integrator without parameters, restrictions or imported names need not write.
 struct IntegratorDefaults {
+  // Whether an image without lights is black (a warning says so); ambient occlusion needs none.
+  static constexpr bool kNeedsLights = true;
+  // The integrator types of other renderers' scenes that map to this one, space-separated:
+  // pbrt-v4 `Integrator` names and Mitsuba 3 <integrator type> names.
+  static constexpr const char* kPbrtTypes = "";
+  static constexpr const char* kMitsubaTypes = "";
+
   void parse(const JsonReader&, const Json&, const std::string&) {}
   std::string settings_text() const { return {}; }
   void check(const Scene&) const {}
+  // The imported scene's parameters of this integrator (depths are the importer's: common to all).
+  void from_pbrt(const ForeignParams&) {}
+  void from_mitsuba(const ForeignParams&) {}
 };
 
 }  // namespace rf

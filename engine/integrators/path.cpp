@@ -1,6 +1,7 @@
 // The `path` integrator: see path.h.
 #include "engine/integrators/path.h"
 
+#include "engine/check.h"
 #include "engine/integrators/drivers.h"
 #include "engine/simd.h"
 
@@ -466,13 +467,14 @@ struct PathResume {
 // the one it would get traced alone: bit-identical with K = 1 (tests/integrators_test.cpp), given
 // the same hits. A ray that meets two triangles at one distance (e.g. exactly on a shared edge) is
 // the exception: Embree's packet and single-ray kernels may report different ones
-// (docs/performance.md, "What a ratio of 1.25 would take"); packets depend on the pixel and pass
+// (docs/performance.md, "Open observations"); packets depend on the pixel and pass
 // alone, so a tile and the frame still trace the same packets.
 // Every vertex consumes the same dimensions whether or not it reads them (skipped ones cost
 // nothing), so a material change does not reshuffle the random numbers of later bounces.
 template <int K, class Packet>
 void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samplers, int n,
                  RGB* radiance, TraceCounters& counters, const PathResume* resume = nullptr) {
+  RF_CHECK(n >= 1 && n <= K, std::to_string(n) + " paths for " + std::to_string(K) + " lanes");
   const IntegratorSettings& settings = ctx.scene.render.integrator;
   using Lane = PathLane;
   Lane lanes[K];

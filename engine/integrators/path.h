@@ -31,6 +31,8 @@ struct PathIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "path";
   static constexpr bool kSplats = false;
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
+  static constexpr const char* kPbrtTypes = "path volpath simplepath simplevolpath randomwalk mlt";
+  static constexpr const char* kMitsubaTypes = "path volpath volpathmis prb";
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const PathIntegrator&) const = default;

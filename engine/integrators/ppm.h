@@ -47,6 +47,7 @@ struct PpmIntegrator : IntegratorDefaults {
   static constexpr bool kSplats = false;
   static constexpr const char* kKeys[] = {"type",    "max_depth", "rr_min_depth",
                                           "photons", "radius",    "alpha"};
+  static constexpr const char* kPbrtTypes = "sppm";
 
   int photons = 100000;       // photon paths traced per pass
   float radius = 0;           // r_1, the first pass's radius; 0: 0.02 x scene_radius()
@@ -54,6 +55,7 @@ struct PpmIntegrator : IntegratorDefaults {
 
   void parse(const JsonReader& r, const Json& j, const std::string& path);
   std::string settings_text() const;
+  void from_pbrt(const ForeignParams& p);  // photonsperiteration, radius
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const PpmIntegrator&) const = default;

@@ -1,5 +1,6 @@
 // The ppm integrator's settings (scene layer, rayfarm_scene): its keys under render.integrator
 // and its part of the settings text. Its estimator is ppm.cpp (renderer).
+#include <algorithm>
 #include <cstdio>
 #include <string>
 
@@ -27,6 +28,12 @@ std::string PpmIntegrator::settings_text() const {
   char buf[128];
   std::snprintf(buf, sizeof buf, ";ppm=%d:%.9g:%.9g", photons, double(radius), double(alpha));
   return buf;
+}
+
+void PpmIntegrator::from_pbrt(const ForeignParams& p) {
+  int per_iteration = p.integer("photonsperiteration", -1);
+  photons = std::max(1, per_iteration > 0 ? per_iteration : photons);
+  radius = float(p.number("radius", 0));
 }
 
 }  // namespace rf

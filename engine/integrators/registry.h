@@ -32,9 +32,20 @@ const std::vector<std::string>& known_integrators();
 Integrator make_integrator(const std::string& name);
 std::string integrator_name(const Integrator& integrator);
 // Splatting integrators render whole-frame tasks and fill the splat plane (DESIGN.md).
-bool integrator_splats(const Integrator& integrator);
-
 struct IntegratorSettings;  // scene.h
+
+bool integrator_splats(const Integrator& integrator);
+bool integrator_needs_lights(const Integrator& integrator);
+
+// Other renderers' integrator types (module.h, kPbrtTypes and kMitsubaTypes): the name of the
+// integrator a type maps to, "" when none does; and the Mitsuba types one by one for a message
+// ("path, volpath, volpathmis, prb (as path), ...").
+std::string integrator_for_pbrt(const std::string& type);
+std::string integrator_for_mitsuba(const std::string& type);
+std::string mitsuba_integrator_types();
+// The imported parameters of the integrator `settings` holds, through its module's mapping.
+void map_pbrt_integrator(IntegratorSettings& settings, const ForeignParams& params);
+void map_mitsuba_integrator(IntegratorSettings& settings, const ForeignParams& params);
 
 // Reads render.integrator (`j`, at JSON path `path`): its type, then the keys that integrator
 // accepts (its kKeys; any other key is an error): max_depth and rr_min_depth, then its own.

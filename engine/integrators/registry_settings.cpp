@@ -36,6 +36,37 @@ std::vector<std::string> keys_of() {
   return std::vector<std::string>(std::begin(T::kKeys), std::end(T::kKeys));
 }
 
+// The words of a space-separated list.
+std::vector<std::string> words(const char* list) {
+  std::vector<std::string> out;
+  std::string w;
+  for (const char* c = list;; ++c) {
+    if (*c == ' ' || *c == 0) {
+      if (!w.empty()) out.push_back(w);
+      w.clear();
+      if (*c == 0) return out;
+    } else {
+      w += *c;
+    }
+  }
+}
+
+// The integrator whose pbrt-v4 (or Mitsuba 3) type list holds `type`; "" if none.
+template <bool kMitsuba>
+std::string integrator_for(const std::string& type) {
+  std::string found;
+  for (const std::string& name : known_integrators()) {
+    std::visit(
+        [&](const auto& i) {
+          using T = std::decay_t<decltype(i)>;
+          for (const std::string& w : words(kMitsuba ? T::kMitsubaTypes : T::kPbrtTypes))
+            if (w == type && found.empty()) found = T::kName;
+        },
+        make_integrator(name));
+  }
+  return found;
+}
+
 const char* filter_name(FilterType t) {
   switch (t) {
     case FilterType::Box:
@@ -64,6 +95,34 @@ std::string integrator_name(const Integrator& integrator) {
 
 bool integrator_splats(const Integrator& integrator) {
   return std::visit([](const auto& i) { return i.kSplats; }, integrator);
+}
+
+bool integrator_needs_lights(const Integrator& integrator) {
+  return std::visit([](const auto& i) { return i.kNeedsLights; }, integrator);
+}
+
+std::string integrator_for_pbrt(const std::string& type) { return integrator_for<false>(type); }
+
+std::string integrator_for_mitsuba(const std::string& type) { return integrator_for<true>(type); }
+
+std::string mitsuba_integrator_types() {
+  std::string out;
+  for (const std::string& name : known_integrators()) {
+    std::vector<std::string> types =
+        std::visit([](const auto& i) { return words(std::decay_t<decltype(i)>::kMitsubaTypes); },
+                   make_integrator(name));
+    for (const std::string& t : types) out += (out.empty() ? "" : ", ") + t;
+    if (!types.empty() && types != std::vector<std::string>{name}) out += " (as " + name + ")";
+  }
+  return out;
+}
+
+void map_pbrt_integrator(IntegratorSettings& settings, const ForeignParams& params) {
+  std::visit([&](auto& i) { i.from_pbrt(params); }, settings.method);
+}
+
+void map_mitsuba_integrator(IntegratorSettings& settings, const ForeignParams& params) {
+  std::visit([&](auto& i) { i.from_mitsuba(params); }, settings.method);
 }
 
 void parse_integrator(const JsonReader& r, const Json& j, const std::string& p,

@@ -478,7 +478,7 @@ void set_camera(Context& c, const std::vector<PlacedNode>& nodes) {
       chosen = &pn;
   }
   Scene& s = *c.scene;
-  if (!chosen) return;  // the default camera is placed after the meshes (load_gltf_scene)
+  if (!chosen) return;  // the default camera is placed after the meshes (import_gltf)
   if (others)
     c.warn("/nodes", std::to_string(others) + " other camera node(s) ignored: the first, /nodes/" +
                          std::to_string(chosen->node) + ", is used");
@@ -687,11 +687,8 @@ const json* Context::extension(const std::string& pointer, const std::string& na
 
 }  // namespace gltf
 
-Scene load_gltf_scene(const std::string& path, const ImportLimits& limits) {
-  SceneFiles files(path, limits);
-  std::string bytes = files.read_main();
-  Scene scene;
-  scene.path = path;
+void import_gltf(const std::string& bytes, SceneFiles& files, Scene& scene) {
+  const std::string& path = scene.path;
   gltf::Context c;
   c.file = path;
   c.files = &files;
@@ -723,8 +720,6 @@ Scene load_gltf_scene(const std::string& path, const ImportLimits& limits) {
   scene.render.integrator.max_depth = gltf::kDefaultMaxDepth;
   scene.render.spp = gltf::kDefaultSpp;
   scene.render.passes = default_passes(scene.render.spp);
-  files.finish(scene, bytes);
-  return scene;
 }
 
 }  // namespace rf

@@ -681,16 +681,10 @@ class SceneParser {
 
 }  // namespace
 
-Scene load_json_scene(const std::string& path, const ImportLimits& limits) {
-  SceneFiles files(path, limits);
-  std::string bytes = files.read_main();
-  Scene scene;
-  scene.path = path;
-  json root = parse_json_text(bytes, path);
-  SceneParser parser(path, scene, files);
+void import_json(const std::string& bytes, SceneFiles& files, Scene& scene) {
+  json root = parse_json_text(bytes, scene.path);
+  SceneParser parser(scene.path, scene, files);
   parser.parse(root);
-  files.finish(scene, bytes);
-  return scene;
 }
 
 }  // namespace rf

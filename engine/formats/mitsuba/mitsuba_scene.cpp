@@ -406,15 +406,12 @@ class MitsubaParser {
       parse_integrator(inner[0], out);
       return;
     }
-    static const std::map<std::string, std::string> kMap = {
-        {"path", "path"},     {"volpath", "path"},  {"volpathmis", "path"}, {"prb", "path"},
-        {"direct", "direct"}, {"ptracer", "light"}, {"bdpt", "bdpt"}};
-    auto it = kMap.find(type);
-    if (it == kMap.end())
-      fail(n, "unsupported integrator '" + type +
-                  "' (supported: path, volpath, volpathmis, prb (as path), direct, ptracer, bdpt)");
+    std::string ours = integrator_for_mitsuba(type);
+    if (ours.empty())
+      fail(n,
+           "unsupported integrator '" + type + "' (supported: " + mitsuba_integrator_types() + ")");
     out = IntegratorSettings{};
-    out.method = make_integrator(it->second);
+    out.method = make_integrator(ours);
     int max_depth = get_int(p, "max_depth", -1);
     if (max_depth == 0 || max_depth < -1)
       fail(*p.find("max_depth"), "@value: max_depth must be -1 (unbounded) or at least 1, got " +
@@ -431,14 +428,26 @@ class MitsubaParser {
       doc_.warn(*p.find("hide_emitters"),
                 "not supported: emitters seen directly by the camera are rendered (their light is "
                 "the same)");
-    if (type == "direct") {
-      DirectIntegrator& d = std::get<DirectIntegrator>(out.method);
-      int shading = get_int(p, "shading_samples", 1);
-      d.light_samples = get_int(p, "emitter_samples", shading);
-      d.bsdf_samples = get_int(p, "bsdf_samples", shading);
-      if (d.light_samples < 0 || d.bsdf_samples < 0 || d.light_samples + d.bsdf_samples == 0)
-        fail(n, "emitter_samples and bsdf_samples must be >= 0 and not both 0");
-    }
+    // The module maps its own parameters (module.h, from_mitsuba).
+    struct Params : ForeignParams {
+      MitsubaParser& parser;
+      Props& props;
+      const Node& node;
+      Params(MitsubaParser& pa, Props& pr, const Node& no) : parser(pa), props(pr), node(no) {}
+      int integer(const std::string& name, int fallback) const override {
+        return parser.get_int(props, name, fallback);
+      }
+      double number(const std::string& name, double fallback) const override {
+        return parser.get_float(props, name, float(fallback));
+      }
+      bool boolean(const std::string& name, bool fallback) const override {
+        return parser.get_bool(props, name, fallback);
+      }
+      [[noreturn]] void fail(const std::string& message) const override {
+        parser.fail(node, message);
+      }
+    };
+    map_mitsuba_integrator(out, Params(*this, p, n));
     p.ignore("samples_per_pass");
     p.ignore("timeout");
     apply_fixed_max_depth(out);
@@ -1133,16 +1142,10 @@ class MitsubaParser {
 
 }  // namespace
 
-Scene load_mitsuba_scene(const std::string& path, const ImportLimits& limits) {
-  SceneFiles files(path, limits);
-  std::string bytes = files.read_main();
-  Scene scene;
-  scene.path = path;
-  mitsuba::Document doc(path, bytes, files, scene.warnings);
+void import_mitsuba(const std::string& bytes, SceneFiles& files, Scene& scene) {
+  mitsuba::Document doc(scene.path, bytes, files, scene.warnings);
   MitsubaParser parser(doc, scene, files);
   parser.parse();
-  files.finish(scene, bytes);
-  return scene;
 }
 
 }  // namespace rf

@@ -469,34 +469,34 @@ void Builder::sampler(const std::string& type, const ParamList& params, const Lo
 
 void Builder::integrator(const std::string& type, const ParamList& params, const Location& at) {
   IntegratorSettings& is = scene_.render.integrator;
-  std::string ours = "path";
-  if (type == "bdpt")
-    ours = "bdpt";
-  else if (type == "lightpath")
-    ours = "light";
-  else if (type == "ambientocclusion")
-    ours = "ao";
-  else if (type == "sppm")
-    ours = "ppm";
-  else if (type != "path" && type != "volpath" && type != "simplepath" && type != "simplevolpath" &&
-           type != "randomwalk" && type != "mlt")
+  std::string ours = integrator_for_pbrt(type);
+  if (ours.empty()) {
     warn(at, "Integrator \"" + type + "\": not supported; the path tracer is used");
+    ours = PathIntegrator::kName;
+  }
   set_integrator(is, ours);
   int depth = params.integer("maxdepth", 5);
   if (depth < 0) fail(at, "Integrator: \"integer maxdepth\" must be at least 0");
   is.max_depth = depth;
-  if (ours == "ao") {
-    AoIntegrator& ao = is.as<AoIntegrator>();
-    ao.cosine = params.boolean("cossample", true);
-    double d = params.number("maxdistance", 1e30);
-    ao.max_distance = d >= 1e30 ? kInf : float(d);
-  } else if (ours == "ppm") {
-    PpmIntegrator& ppm = is.as<PpmIntegrator>();
-    ppm.photons = std::max(1, params.integer("photonsperiteration", -1) > 0
-                                  ? params.integer("photonsperiteration", -1)
-                                  : ppm.photons);
-    ppm.radius = float(params.number("radius", 0));
-  }
+  // The module maps its own parameters (module.h, from_pbrt).
+  struct Params : ForeignParams {
+    const ParamList& list;
+    const Location& at;
+    Params(const ParamList& l, const Location& a) : list(l), at(a) {}
+    int integer(const std::string& n, int fallback) const override {
+      return list.integer(n, fallback);
+    }
+    double number(const std::string& n, double fallback) const override {
+      return list.number(n, fallback);
+    }
+    bool boolean(const std::string& n, bool fallback) const override {
+      return list.boolean(n, fallback);
+    }
+    [[noreturn]] void fail(const std::string& message) const override {
+      rf::pbrt::fail(at, "Integrator: " + message);
+    }
+  };
+  map_pbrt_integrator(is, Params(params, at));
   params.find("lightsampler");  // light selection changes the noise, not the image
   if (params.boolean("regularize", false))
     warn(at, "Integrator \"" + type + "\": \"bool regularize\" is not supported (ignored)");
@@ -614,15 +614,9 @@ void Builder::area_light(const std::string& type, const ParamList& params, const
 
 }  // namespace pbrt
 
-Scene load_pbrt_scene(const std::string& path, const ImportLimits& limits) {
-  SceneFiles files(path, limits);
-  std::string bytes = files.read_main();
-  Scene scene;
-  scene.path = path;
-  pbrt::Builder builder(path, scene, files);
+void import_pbrt(const std::string& bytes, SceneFiles& files, Scene& scene) {
+  pbrt::Builder builder(scene.path, scene, files);
   builder.run(bytes);
-  files.finish(scene, bytes);
-  return scene;
 }
 
 }  // namespace rf
