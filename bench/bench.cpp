@@ -136,9 +136,10 @@ void packet_comparison(const Renderer& r, int spp) {
 // The path tracer's two ways of casting (path_radiance): each pixel's samples one at a time with
 // single-ray queries, and 16 at a time in lockstep with packet queries; one pass of the frame
 // through the render driver on all cores each, three rounds alternating the two (the best of
-// each: this VM's speed drifts by 10-30% over seconds). Samples/s of both, and how many pixel
-// sums differ in any bit (0 is path.cpp's contract, except where a ray meets two triangles at one
-// distance and Embree's two kernels report different ones: see trace_paths).
+// each: a shared VM's speed drifts over seconds; docs/performance.md, "Machines and how to read
+// the figures"). Samples/s of both, and how many pixel sums differ in any bit (0 is path.cpp's
+// contract, except where a ray meets two triangles at one distance and Embree's two kernels
+// report different ones: see trace_paths).
 void path_packet_comparison(const Renderer& r) {
   const RenderContext& ctx = r.context();
   const TaskKey task{0, Rect{0, 0, r.scene().film.width, r.scene().film.height}, 0};

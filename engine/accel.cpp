@@ -173,10 +173,10 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
   quiet_packets_ = !rtcGetDeviceProperty(device_, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED);
   rtc_scene_ = rtcNewScene(device_);
   // Medium (Embree's default, binned SAH without spatial splits): on the million-triangle benchmark
-  // scene it builds in 0.6 s less than high quality (1.35 s against 1.95 s for a whole 1-spp
-  // render) and traces as fast within this machine's noise, here and on the Cornell box and
-  // veach-mis (docs/performance.md, "Fixed costs of a render"). Which triangle of a shared edge a
-  // ray hits can depend on the tree, so the choice is part of the estimator version (registry.cpp).
+  // scene it builds faster than high quality, and it traces as fast within the noise there and on
+  // the Cornell box and veach-mis (docs/performance.md, "Fixed costs of a render: start-up,
+  // import, BVH build, output"). Which triangle of a shared edge a ray hits can depend on the
+  // tree, so the choice is part of the estimator version (registry.cpp).
   rtcSetSceneBuildQuality(rtc_scene_, RTC_BUILD_QUALITY_MEDIUM);
   for (size_t i = 0; i < scene.meshes.size(); ++i) {
     surfaces_.push_back(&scene.meshes[i]);
@@ -250,11 +250,10 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
   const RTCHit16& h = packet.rh.hit;
   // The lanes' hits are scattered over the meshes: on a scene larger than the caches, fetch every
   // lane's index triple first, then its vertices, so that the lanes' cache misses overlap instead
-  // of following one another (on a million triangles, hit_from_embree was 12% of a render
-  // waiting on them; the prefetches are still worth x1.03 there). On a scene that fits in the
-  // caches they only cost (x1.02 to x1.05 on the Cornell box without them). Triangles of meshes
-  // placed without an instance are then computed together (triangle_hits); the other hits
-  // (spheres, instances) one by one.
+  // of following one another in hit_from_embree. On a scene that fits in the caches they only
+  // cost, hence kPrefetchAboveBytes (docs/performance.md, "The path tracer's inner loop").
+  // Triangles of meshes placed without an instance are then computed together (triangle_hits);
+  // the other hits (spheres, instances) one by one.
   const Mesh* meshes[kPacket];   // the triangle hits' meshes (prefetched)
   const Mesh* batched[kPacket];  // those placed without an instance (triangle_hits)
   for (int i = 0; i < n; ++i) {

@@ -65,8 +65,9 @@ inline float next_float_down(float v) {
 
 // Moves p off its surface along ng, towards the side w points to, by the hit's error bound
 // (pbrt-v4's OffsetRayOrigin), then one ulp further away from p per axis. Inline: it runs three
-// times per path vertex (the spawned ray and both ends of the shadow ray), and as a call it was
-// 7% of a path render's instructions, mostly moving its four vectors through the stack.
+// times per path vertex (the spawned ray and both ends of the shadow ray), and a call would move
+// its four vectors through the stack each time (docs/performance.md, "The path tracer's inner
+// loop").
 inline Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
   float d = dot(abs(ng), p_error);
   Vec3 offset = ng * d;
@@ -100,8 +101,8 @@ class Accel {
   // packet and single-ray sphere kernels round t differently. A grazing occlusion test could
   // still differ between kernels, so a caller that must be bit-identical across tiles forms its
   // packets from a fixed set of samples (one pixel's, see the path integrator). Coherent rays
-  // (the samples of one pixel, shadow rays towards one light) traverse the BVH together: 1.3x to
-  // 3x the single-ray rate (docs/performance.md).
+  // (the samples of one pixel, shadow rays towards one light) traverse the BVH together, faster
+  // than one by one (docs/performance.md, "The path tracer's inner loop").
   static constexpr int kPacket = 16;
   struct RayPacket {
     RayPacket() { std::memset(static_cast<void*>(this), 0, sizeof(*this)); }
@@ -126,7 +127,8 @@ class Accel {
     // tnear <= tfar and asserts every traced ray finite, so the NaNs a lane loop leaves in unused
     // slots aborted the process there (tests/accel_test.cpp,
     // Accel.PacketQueriesOnEmbreesAvx2Kernels). The queries call it on such a device only: its
-    // scalar stores right before Embree's vector loads cost 7% of a render (Cornell box).
+    // scalar stores right before Embree's vector loads slow a render down (docs/performance.md,
+    // "What was tried and not taken").
     void quiet_inactive() {
       for (int i = 0; i < kPacket; ++i) {
         const bool on = valid[i] != 0;

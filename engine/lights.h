@@ -26,7 +26,8 @@
 // the mesh by its power and is rescaled again within that triangle's interval. So a stratified 2D
 // sample stays stratified over each light and over the whole emitting mesh (a quad light's two
 // triangles), where a separate 1D pick would hand each light a random subset of the points
-// (veach-mis's three spheres: 22% more squared error outside its 20 worst pixels).
+// (more squared error on veach-mis's three spheres; docs/performance.md, "Many lights: the light
+// BVH").
 // If every power is 0 (say, only zero-area triangles), lights are picked uniformly.
 //
 // Selection that sees the shading point (RenderSettings::light_selection, "bvh", or "auto" with

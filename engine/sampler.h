@@ -103,8 +103,8 @@ inline constexpr std::array<uint32_t, 32> kSobolDimension1 = [] {
 // bit 31 - m set iff binomial(j, m) is odd, which by Lucas' theorem is iff the bits of m are a
 // subset of those of j. So bit m of the reversed sample is the XOR of the index bits k whose
 // positions are supersets of m: a superset (zeta) transform over the 5-bit positions, one
-// shift-mask-XOR per position bit, with no table (a table lookup per byte was four scalar loads
-// per lane in the SIMD draws, sampler.cpp).
+// shift-mask-XOR per position bit, with no table (not a lookup per byte: that is four scalar
+// loads per lane in the SIMD draws, sampler.cpp).
 inline uint32_t sobol_sample_reversed(uint32_t index, int dimension) {
   if (dimension == 0) return index;
   uint32_t y = index;

@@ -37,10 +37,10 @@ const std::vector<std::string>& known_samplers() {
 
 // gcd(spp, 16), halved while it exceeds 4 and leaves a pass fewer than 64 samples per pixel: a
 // Sobol pass stratifies only its own samples (passes are independent replicates), so its error
-// falls faster with samples per pass than with passes (Cornell box 256^2, 64 spp, path:
-// MSE 1.86e-4 in 16 passes, 9.6e-5 in 4, 7.3e-5 in 1), while at least 4 passes keep a batch-means
-// variance (3 degrees of freedom at least) and progressive merges. 64 -> 4, 256 -> 4, 512 -> 8,
-// 1024 -> 16, 100 -> 4, 24 -> 8 -> 4.
+// falls faster with samples per pass than with passes (docs/performance.md, "One Sobol sequence
+// across passes (`sobol-sequence`)"), while at least 4 passes keep a batch-means variance (3
+// degrees of freedom at least) and progressive merges. 64 -> 4, 256 -> 4, 512 -> 8, 1024 -> 16,
+// 100 -> 4, 24 -> 8 -> 4.
 uint32_t default_passes(uint64_t spp) {
   uint64_t p = std::gcd(spp, uint64_t(16));
   while (p > 4 && spp / p < 64) p /= 2;

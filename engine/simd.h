@@ -7,8 +7,9 @@
 #include "engine/math.h"
 
 // Flattened too: a loop vectorises only with every call in it inlined, and GCC's inliner, whose
-// budget is per translation unit, stopped inlining one into a lane loop when other code was added
-// to path.cpp (the loop then ran scalar: x0.54 on the Cornell box).
+// budget is per translation unit, can stop inlining one into a lane loop when other code is added
+// to the unit, and the loop then runs scalar (docs/performance.md, "The path tracer's inner
+// loop").
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define RF_SIMD_CLONES \
   [[gnu::flatten,      \

@@ -19,9 +19,9 @@
 //   box-filtered levels that keep the image's mean, and points the TextureSystem at it. This
 //   streams 64 rows at a time, so it needs a few strips of memory whatever the image size (plus
 //   whatever the decoder holds; PNG and JPEG decoders may hold the image). The peak RSS is then
-//   the cache plus a few MB. The cost is a pass over each image at start-up (0.2 s for 4 x 1024^2
-//   RGB float) and its uncompressed scratch copy on disk ($TMPDIR, 4/3 of the texels), removed
-//   with the evaluator; ready-made .tx files skip both.
+//   the cache plus a few MB. The cost is a pass over each image at start-up and its
+//   uncompressed scratch copy on disk ($TMPDIR, 4/3 of the texels), removed with the evaluator;
+//   ready-made .tx files skip both.
 // - A checkerboard is colour a where floor(u') + floor(v') is even, else b; with a footprint it is
 //   box-filtered in closed form over a square of that width.
 // - Colour channels are read as stored, never multiplied by the image's alpha (OIIO associates

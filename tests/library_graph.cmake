@@ -78,12 +78,8 @@ endfunction()
 
 # docs/design.md's table of the project's targets and the project libraries each links directly
 # must be CMake's graph, edge for edge (test and tool targets aside).
-file(READ ${SOURCE_DIR}/docs/design.md design)
-string(REGEX MATCH "<!-- library-graph:begin -->(.*)<!-- library-graph:end -->" _ "${design}")
-if(NOT CMAKE_MATCH_1)
-  message(FATAL_ERROR "docs/design.md has no library-graph table")
-endif()
-string(REPLACE "\n" ";" rows "${CMAKE_MATCH_1}")
+include(${CMAKE_CURRENT_LIST_DIR}/design_table.cmake)
+design_table(${SOURCE_DIR} library-graph rows)
 set(documented "")
 foreach(row IN LISTS rows)
   if(row MATCHES "^\\| (rayfarm[a-z_]*) \\|([^|]*)\\|")

@@ -49,10 +49,10 @@
 // seen through a mirror (light -> specular -> diffuse -> specular -> camera: no strategy can
 // connect), and reflected caustics of small lights remain noisy (that needs photon mapping or
 // vertex merging). Infinite lights get only the path tracer's two strategies. A camera sample
-// costs about two to three path-tracer samples (two subpaths plus O(s t) shadow rays): on the
-// Cornell box (directly lit, the path tracer's home ground) BDPT reaches about half the path
-// tracer's relMSE per sample but takes ~2.5x longer, so at equal time path wins by ~2x; in a
-// room lit indirectly by a point light with glass and a mirror BDPT wins ~25-50x at equal time
+// costs several path-tracer samples (two subpaths plus O(s t) shadow rays): on the Cornell box
+// (directly lit, the path tracer's home ground) BDPT's lower relMSE per sample does not pay for
+// that, so at equal time path wins (docs/performance.md, "What was tried and not taken"); in a
+// room lit indirectly by a point light with glass and a mirror BDPT wins by far at equal time
 // (tests/bdpt_test.cpp prints both).
 #pragma once
 

@@ -53,8 +53,9 @@ void occluded(const Accel& accel, SingleRay& p, int, int* blocked) {
 // cos_sin_turn).
 // The arrays are in lane space: slot i is packet lane i, so the packet query writes the hits
 // (Accel::PacketHits), Sampler::get_lanes the numbers and lanes_to_packets the next rays where
-// the next step reads them, with no copies between (a compacted layout cost 5% of a Cornell box
-// render in those copies); lane[0..m) lists the plain vertices' lanes for the one-by-one parts.
+// the next step reads them, with no copies between (not a compacted layout: it would spend its
+// time in those copies; docs/performance.md, "The path tracer's inner loop"); lane[0..m) lists
+// the plain vertices' lanes for the one-by-one parts.
 // The loops run over all N slots, the plain vertices and whatever the others hold (zeros or
 // earlier vertices; their results are never read; likewise a diffuse loop's results on a
 // conductor's slot and the conductor loops' on a diffuse one): with a trip count that is a
@@ -64,9 +65,10 @@ void occluded(const Accel& accel, SingleRay& p, int, int* blocked) {
 enum { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };
 // The first vertex's light point and direction are stratified jointly with the camera sample's
 // filter offset (Sampler::get_2d_joint, pairs 0 and 1), the second vertex's with the first
-// vertex's direction (pairs 2 and 3); later vertices' draws are padded. veach-mis, whose error sits
-// in the small light's image in the smoothest plate: 2.2x less MSE at 256 spp; the Cornell box's
-// one-bounce light: 8.6% less variance (docs/performance.md).
+// vertex's direction (pairs 2 and 3); later vertices' draws are padded. This lowers the error
+// where veach-mis's sits, the small light's image in the smoothest plate, and the variance of the
+// Cornell box's one-bounce light (docs/performance.md, "Draws stratified with the pixel: joint
+// pairs").
 constexpr int kPointPair = 0, kDirPair = 1, kJointDepths = 2;
 // The joint pair of a vertex's light point or direction (kPointPair or kDirPair), or -1 (padded).
 inline int joint_pair(int depth, int pair) { return depth < kJointDepths ? pair + 2 * depth : -1; }
@@ -493,8 +495,8 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   // The numbers nothing reads are skipped, in the lockstep draws too (a skip consumes the dimension
   // a draw would, so no later number changes): the light choice is read only by the light BVH
   // (selection by power takes the point sample's x), the lobe choice only by the vertices shaded
-  // one by one, which a scene whose materials all have a lane kind never has. Drawing them was ~2
-  // of a vertex's 7 dimensions of Owen-scrambled Sobol arithmetic (docs/performance.md).
+  // one by one, which a scene whose materials all have a lane kind never has. A skip saves the
+  // draw's Owen-scrambled Sobol arithmetic (docs/performance.md, "What the Sobol draws cost").
   const uint8_t light_choice = ctx.lights.uses_bvh();
   const uint8_t lobe_choice = !(K > 1 && ctx.all_in_lanes);
   int shading[K], generic[K];
@@ -530,9 +532,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
   for (int depth = first_depth; live > 0; ++depth) {
     // One live lane left after the camera rays: the one-lane loop takes it over, with Embree's
     // single-ray queries and the one-vertex code (a packet step with one lane costs about what
-    // sixteen slots of loops and a 16-wide query cost, ~1,400 cycles on the Cornell box against
-    // ~750 alone). The lane's numbers and terms are those it gets traced alone from its camera
-    // ray (the packet test), so its radiance keeps its bits.
+    // sixteen slots of loops and a 16-wide query cost, well above a one-lane step;
+    // docs/performance.md, "Where a render's time goes"). The lane's numbers and terms are those
+    // it gets traced alone from its camera ray (the packet test), so its radiance keeps its bits.
     if constexpr (K > 1) {
       if (live == 1 && depth > 0) {
         int i = 0;
@@ -545,9 +547,9 @@ void trace_paths(const RenderContext& ctx, const Ray* camera_rays, Sampler* samp
       }
     }
     counters.rays += uint64_t(live);
-    // The camera rays of one pixel as a coherent packet (x1.03-1.04 on the Cornell box and
-    // veach-mis); the shadow rays of the first vertices towards one light gained on the Cornell
-    // box and lost on veach-mis's three lights, the later rays lost (docs/performance.md).
+    // The camera rays of one pixel as a coherent packet (docs/performance.md, "The path tracer's
+    // inner loop"); the later rays and the shadow rays as incoherent ones: marked coherent they
+    // are no faster (docs/performance.md, "What was tried and not taken").
     intersect(ctx.accel, rays, n, hits, depth == 0);
     const bool roulette = depth + 1 >= settings.rr_min_depth;
     // A diffuse vertex at the last depth ends its path after its light sample, which takes the

@@ -11,7 +11,7 @@ namespace rf {
 
 void PpmIntegrator::parse(const JsonReader& r, const Json& j, const std::string& p) {
   // At most 2^24 photons per pass: each costs about 64 bytes in the photon map and its tree, so
-  // the cap bounds a pass's map to about 1 GiB (2^28 asked for 16 GiB and ended in bad_alloc).
+  // the cap bounds a pass's map to about 1 GiB (2^28 would ask for 16 GiB and end in bad_alloc).
   if (const Json* v = r.find(j, "photons"))
     photons = int(r.integer(*v, p + ".photons", 1, 1 << 24));
   if (const Json* v = r.find(j, "radius")) {
