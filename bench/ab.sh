@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # A/B timing of two rayfarm binaries on one render (docs/performance.md): ROUNDS rounds, each
-# running A then B with one thread, the render seconds read from the summary line; prints both
+# running A then B with one thread (THREADS=N in the environment for more), the render seconds
+# read from the summary line; prints both
 # lists, the medians and the minima, and the speed-up A/B of each. Alternating the two spreads a
 # shared VM's slow spells over both; the minimum is the run least disturbed.
 #
@@ -19,7 +20,7 @@ trap 'rm -rf "$out"' EXIT
 seconds() {  # BINARY OPTIONS...: the render seconds of the summary line "spp N | X s | ..."
   local bin=$1
   shift
-  "$bin" --threads 1 render "$SCENE" "$@" -o "$out/x.exr" 2>&1 | awk -F'|' '/^spp/ {print $2+0}'
+  "$bin" --threads "${THREADS:-1}" render "$SCENE" "$@" -o "$out/x.exr" 2>&1 | awk -F'|' '/^spp/ {print $2+0}'
 }
 ta=() tb=()
 for ((i = 0; i < ROUNDS; i++)); do

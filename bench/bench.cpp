@@ -17,7 +17,7 @@
 #include "engine/camera.h"
 #include "engine/frame_accumulator.h"
 #include "engine/integrators/drivers.h"
-#include "engine/integrators/path.h"
+#include "engine/integrators/path/path_tracer.h"
 #include "engine/render.h"
 #include "engine/sampler.h"
 #include "engine/sampling.h"
@@ -133,15 +133,16 @@ void packet_comparison(const Renderer& r, int spp) {
       cam1 / 1e6, cam8 / 1e6, cam8 / cam1, b1 / 1e6, b8 / 1e6, b8 / b1);
 }
 
-// The path tracer's two ways of casting (path_radiance): each pixel's samples one at a time with
-// single-ray queries, and 16 at a time in lockstep with packet queries; one pass of the frame
+// The path tracer's two ways of casting (PathTracer::radiance): each pixel's samples one at a time
+// with single-ray queries, and 16 at a time in lockstep with packet queries; one pass of the frame
 // through the render driver on all cores each, three rounds alternating the two (the best of
 // each: a shared VM's speed drifts over seconds; docs/performance.md, "Machines and how to read
-// the figures"). Samples/s of both, and how many pixel sums differ in any bit (0 is path.cpp's
-// contract, except where a ray meets two triangles at one distance and Embree's two kernels
-// report different ones: see trace_paths).
+// the figures"). Samples/s of both, and how many pixel sums differ in any bit (0 is the path
+// tracer's contract, except where a ray meets two triangles at one distance and Embree's two
+// kernels report different ones: see integrators/path/packets.h).
 void path_packet_comparison(const Renderer& r) {
   const RenderContext& ctx = r.context();
+  const PathTracer tracer(ctx);
   const TaskKey task{0, Rect{0, 0, r.scene().film.width, r.scene().film.height}, 0};
   SampleBuffer out[2];
   double rate[2] = {0, 0};
@@ -151,7 +152,7 @@ void path_packet_comparison(const Renderer& r) {
     out[packets] = render_camera_paths<false>(
         ctx, task, true,
         [&](const Ray* rays, Sampler* samplers, int n, RGB* radiance, TraceCounters& counters) {
-          path_radiance(ctx, rays, samplers, n, radiance, counters, packets);
+          tracer.radiance(rays, samplers, n, radiance, counters, packets);
         });
     rate[packets] =
         std::max(rate[packets], double(out[packets].total_samples()) / seconds_since(t0));

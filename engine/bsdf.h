@@ -171,7 +171,7 @@ class Bsdf {
     return std::visit([](const auto& l) { return std::decay_t<decltype(l)>::kDelta; }, lobe_);
   }
   // Whether the lobe is Lambertian (the path tracer ends a path at such a vertex of the last depth
-  // after its light sample: path.cpp).
+  // after its light sample: path/path.cpp).
   bool is_diffuse() const { return std::holds_alternative<DiffuseBxdf>(lobe_); }
   // Whether the lobe can transmit (light from below the surface can leave above it).
   bool transmits() const {

@@ -11,7 +11,7 @@
 #include "engine/accel.h"
 #include "engine/camera.h"
 #include "engine/integrators/common.h"
-#include "engine/lights.h"
+#include "engine/lights/light_set.h"
 #include "engine/sample_buffer.h"
 #include "engine/scene.h"
 #include "engine/texture.h"

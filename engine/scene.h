@@ -164,9 +164,9 @@ struct RenderSettings {
   uint64_t seed = 0;
   double noise_target = 0;    // relMSE to stop at; 0 = render all passes
   std::string sampler = "sobol";  // or "independent"; sobol: Owen-scrambled, scrambled per pass
-  // Light selection for next-event estimation (lights.h): "power", "bvh" (a light BVH that sees
-  // the shading point), or "auto" (the BVH when more than LightSet::kAutoBvhLights lights have a
-  // position).
+  // Light selection for next-event estimation (lights/light_selection.h): "power", "bvh" (a light
+  // BVH that sees the shading point), or "auto" (the BVH when more than
+  // LightSelection::kAutoBvhLights lights have a position).
   std::string light_selection = "auto";
   AovSet aovs;                // auxiliary outputs (engine/aov.h, docs/outputs.md)
   uint64_t spp_per_pass() const { return spp / passes; }
@@ -236,11 +236,12 @@ void check_overrides(const SceneOverrides& overrides);
 // Prepares instancing for rendering (load_scene calls it after the importer): checks every
 // instance (object index, finite invertible transform) and moves lights out of objects: each
 // instance of an object with an emissive mesh gets a world-space copy of that mesh in
-// Scene::meshes, because area lights are sampled per world-space triangle (lights.h). Everything
-// else stays instanced: the accelerator (accel.h) places one copy of each object's geometry with
-// Embree instances, however many times it is placed. Objects placed by no instance are dropped
-// from rendering (they cost nothing); throws SceneError naming the instance. The scene's elements
-// and the triangles those copies add may be at most `max_elements` (ImportLimits::elements).
+// Scene::meshes, because area lights are sampled per world-space triangle (lights/light_set.h).
+// Everything else stays instanced: the accelerator (accel.h) places one copy of each object's
+// geometry with Embree instances, however many times it is placed. Objects placed by no instance
+// are dropped from rendering (they cost nothing); throws SceneError naming the instance. The
+// scene's elements and the triangles those copies add may be at most `max_elements`
+// (ImportLimits::elements).
 void prepare_instances(Scene& scene, uint64_t max_elements = ImportLimits{}.elements);
 // The scene's shapes, objects, instances, lights, materials and textures (what ImportLimits::
 // elements counts before instanced emitters are copied).

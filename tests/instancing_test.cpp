@@ -7,7 +7,7 @@
 #include <cstdio>
 
 #include "engine/accel.h"
-#include "engine/lights.h"
+#include "engine/lights/light_set.h"
 #include "tests/support/fixtures.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"

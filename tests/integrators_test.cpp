@@ -11,7 +11,7 @@
 #include "engine/filter.h"
 #include "engine/integrators/common.h"
 #include "engine/integrators/drivers.h"
-#include "engine/integrators/path.h"
+#include "engine/integrators/path/path_tracer.h"
 #include "engine/local_render.h"
 #include "engine/render.h"
 #include "engine/scene.h"
@@ -128,7 +128,7 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
     SurfaceHit hit;
     if (!ctx.accel.intersect(ray, hit)) break;
     Vec3 wo = -ray.d;
-    radiance += beta * LightSet::emitted(ctx.accel.mesh(hit.mesh), hit.ng, wo);
+    radiance += beta * emitted_radiance(ctx.accel.mesh(hit.mesh), hit.ng, wo);
     Bsdf bsdf = bsdf_at(ctx, hit, 0);
     Vec3 ns = bsdf.shading_normal();
     if (bsdf.is_delta()) {
@@ -152,7 +152,7 @@ RGB restricted_path(const RenderContext& ctx, Ray ray, Sampler& sampler) {
     if (bsdf.sample(wo, uc, sampler.get_2d(), TransportMode::Radiance, bs)) {
       SurfaceHit lh;
       if (ctx.accel.intersect(ctx.accel.spawn(hit, bs.wi), lh)) {
-        RGB le = LightSet::emitted(ctx.accel.mesh(lh.mesh), lh.ng, -bs.wi);
+        RGB le = emitted_radiance(ctx.accel.mesh(lh.mesh), lh.ng, -bs.wi);
         float w = bs.is_delta ? 1.0f
                               : power_heuristic(bs.pdf_solid_angle, ctx.lights.pdf_solid_angle(
                                                                         hit.p, Vec3(0.0f), lh.mesh,
@@ -296,13 +296,13 @@ TEST(IntegratorDeterminism, PassesAreReproducibleAndTileIndependent) {
 }
 
 // The path tracer traces the samples of a pixel in lockstep with Embree's packet queries
-// (path.cpp); each lane must get the bits it gets traced alone with single-ray queries: the same
-// numbers drawn in the same order, the same terms added in the same order. Exact equality, no
-// tolerance: any lane mix-up, a number drawn out of turn or a NEE term added at the wrong depth
-// changes bits. Scenes: triangles only (the Cornell boxes, JSON and the benchmark's Mitsuba XML:
-// their diffuse vertices are shaded in the vectorised lanes, whose loops must give the one-lane
-// bits too; broken once by scaling the lanes' BSDF pdf by 1.0001, and once by leaving out the
-// independent sampler's lobe-choice skip: 1,001 of 1,800 lanes differ; and, for the packet's
+// (integrators/path/packets.h); each lane must get the bits it gets traced alone with single-ray
+// queries: the same numbers drawn in the same order, the same terms added in the same order. Exact
+// equality, no tolerance: any lane mix-up, a number drawn out of turn or a NEE term added at the
+// wrong depth changes bits. Scenes: triangles only (the Cornell boxes, JSON and the benchmark's
+// Mitsuba XML: their diffuse vertices are shaded in the vectorised lanes, whose loops must give the
+// one-lane bits too; broken once by scaling the lanes' BSDF pdf by 1.0001, and once by leaving out
+// the independent sampler's lobe-choice skip: 1,001 of 1,800 lanes differ; and, for the packet's
 // triangle-hit loop (Accel::intersect_packet), by scaling its point by 1 + 1e-7: 898 and 867 of
 // 1,800 lanes differ), Embree's sphere primitive as lights with
 // rough conductors (veach-mis), and spheres of every material under an environment map with a
@@ -368,11 +368,13 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
       }
       Renderer r(s);
       const RenderContext& ctx = r.context();
-      if (one_light) EXPECT_EQ(ctx.lights.sphere_table().count, 1);
+      const PathTracer tracer(ctx);
+      const LaneLights lane_lights(ctx.lights);
+      if (one_light) EXPECT_EQ(lane_lights.sphere_table().count, 1);
       // Only spheres, by power: picked and their cones computed in the lanes (veach-mis; with the
       // dim sphere around it, the points inside that one sampled one by one after the lanes;
       // with one sphere light, one selection group).
-      EXPECT_EQ(ctx.lights.spheres_in_lanes(), file == "veach-mis/scene.xml" && !add_point);
+      EXPECT_EQ(lane_lights.spheres_in_lanes(), file == "veach-mis/scene.xml" && !add_point);
       const TaskKey task{0, Rect{0, 0, 24, 16}, 0};
       TraceCounters packet_rays, single_rays;
       int lanes = 0, differing = 0, nonzero = 0;
@@ -387,8 +389,8 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
               start_camera_sample(ctx, b[size_t(i)], task, x, y, uint64_t(i), w);
             }
             RGB packed[16], single[16];
-            path_radiance(ctx, rays, a.data(), n, packed, packet_rays, true);
-            path_radiance(ctx, rays, b.data(), n, single, single_rays, false);
+            tracer.radiance(rays, a.data(), n, packed, packet_rays, true);
+            tracer.radiance(rays, b.data(), n, single, single_rays, false);
             for (int i = 0; i < n; ++i, ++lanes) {
               differing += std::memcmp(&packed[i], &single[i], sizeof(RGB)) != 0;
               nonzero += !is_black(single[i]);
@@ -405,7 +407,7 @@ TEST(PathIntegrator, PacketsGiveEachSampleTheBitsOfSingleRays) {
       // picked by the light BVH; the Cornell box with a point light; the Cornell box inside a dim
       // two-sided sphere light, which has no cone from inside and is sampled one by one: broken
       // by scaling that sample's selection probability by 1.0001, 1,275 to 1,330 of 1,800 lanes
-      // differ). veach-mis's spheres are picked in the lanes too (LightSet::spheres_in_lanes):
+      // differ). veach-mis's spheres are picked in the lanes too (LaneLights::spheres_in_lanes):
       // broken by scaling the sphere table's selection probability by 1.0001 (1,531 to 1,604 of
       // 1,800 lanes differ, with three, four and one sphere lights), and, with the dim sphere
       // around veach-mis, the one-by-one sample of a point inside its sphere by scaling its

@@ -1,4 +1,5 @@
-// The light BVH (engine/light_bvh.h) and LightSet's selection with it (engine/lights.h):
+// The light BVH (engine/lights/light_bvh.h) and LightSet's selection with it
+// (engine/lights/light_selection.h):
 // - sample() follows the pmf exactly: the descent maps u monotonically onto one interval per
 //   light, of length pmf, so M stratified u pick each light M * pmf times to within 1 (the
 //   interval ends) plus float rounding. The pmfs sum to at most 1: where both children of a node
@@ -18,10 +19,10 @@
 
 #include "engine/accel.h"
 #include "engine/buffer_merge.h"
-#include "engine/light_bvh.h"
-#include "engine/lights.h"
-#include "engine/sampler.h"
+#include "engine/lights/light_bvh.h"
+#include "engine/lights/light_set.h"
 #include "engine/render.h"
+#include "engine/sampler.h"
 #include "engine/sampling.h"
 #include "tests/support/harness.h"
 #include "tests/support/test_support.h"

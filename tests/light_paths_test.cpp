@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "engine/lights.h"
+#include "engine/lights/light_set.h"
 #include "engine/render.h"
 #include "engine/sampler.h"
 #include "engine/scene.h"

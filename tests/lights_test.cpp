@@ -1,4 +1,4 @@
-// Lights (engine/lights.h, engine/envmap.h): sampling against pdfs by chi-square, delta lights
+// Lights (engine/lights/, engine/envmap.h): sampling against pdfs by chi-square, delta lights
 // against their analytic irradiance, selection against the documented powers, and the
 // environment map's direction <-> texel mapping.
 //
@@ -17,7 +17,7 @@
 
 #include "engine/accel.h"
 #include "engine/envmap.h"
-#include "engine/lights.h"
+#include "engine/lights/light_set.h"
 #include "engine/sampler.h"
 #include "tests/support/chisq.h"
 #include "tests/support/test_support.h"
@@ -184,7 +184,7 @@ TEST(LightsChiSquare, AreaLightDirectionsFollowPdf) {
   auto pdf = [&](Vec3 d) -> double {
     SurfaceHit hit;
     if (!accel.intersect(Ray{p0, d, kInf}, hit)) return 0.0;
-    if (is_black(LightSet::emitted(s.meshes[hit.mesh], hit.ng, -d))) return 0.0;
+    if (is_black(emitted_radiance(s.meshes[hit.mesh], hit.ng, -d))) return 0.0;
     return lights.pdf_solid_angle(p0, Vec3(0.0f), hit.mesh, hit.prim, hit.p, hit.ng);
   };
   std::vector<double> prob = grid.integrate(pdf, 6);
@@ -484,7 +484,7 @@ double triangle_area(const Mesh& m, size_t t) {
   return 0.5 * length(cross(b - a, c - a));
 }
 
-// The documented powers (lights.h), computed here from the scene; the pmfs must be them
+// The documented powers (lights/light_set.h), computed here from the scene; the pmfs must be them
 // normalised (to float rounding: 1e-6 absolute plus 1e-5 relative).
 TEST(Lights, SelectionFollowsDocumentedPowersOverAllKinds) {
   TempImage map = write_test_map();

@@ -255,7 +255,7 @@ struct Tracer {
       if (pt.kind == VertexKind::Light)
         c = pt.beta * ctx.lights.environment_radiance(pt.dir);
       else if (pt.light != kNoLight)
-        c = pt.beta * LightSet::emitted(ctx.accel.mesh(pt.hit.mesh), pt.hit.ng, pt.wo);
+        c = pt.beta * emitted_radiance(ctx.accel.mesh(pt.hit.mesh), pt.hit.ng, pt.wo);
     } else if (t == 1) {
       const Vertex& qs = light[s - 1];
       Vec2 u_lens = sampler.get_2d();
@@ -271,7 +271,7 @@ struct Tracer {
       if (!ctx.accel.visible(qs.hit, cc.p_lens, Vec3(0.0f), cc.wi)) return RGB(0.0f);
       raster = cc.raster;
     } else if (s == 1) {
-      sampler.skip_1d();  // the light is picked by u_point.x (LightSet::select)
+      sampler.skip_1d();  // the light is picked by u_point.x (LightSelection::select)
       Vec2 u_point = sampler.get_2d();
       LightSample ls;
       if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_point, ls)) return RGB(0.0f);

@@ -17,7 +17,7 @@
 #include "engine/accel.h"
 #include "engine/bsdf.h"
 #include "engine/camera.h"
-#include "engine/lights.h"
+#include "engine/lights/light_set.h"
 #include "engine/sampler.h"
 #include "engine/scene.h"
 #include "engine/texture.h"
@@ -60,9 +60,9 @@ class PassCache {
   mutable std::map<uint64_t, std::shared_ptr<Entry>> entries_;
 };
 
-// How the path tracer's packets shade the vertices of a material (engine/integrators/path.cpp):
-// in the vectorised lanes, as a constant Lambertian lobe or as a constant rough conductor (not
-// smooth enough to be a mirror), else one by one.
+// How the path tracer's packets shade the vertices of a material
+// (engine/integrators/path/surface_lanes.h): in the vectorised lanes, as a constant Lambertian lobe
+// or as a constant rough conductor (not smooth enough to be a mirror), else one by one.
 enum class LaneKind : uint8_t { OneByOne, Diffuse, RoughConductor };
 LaneKind lane_kind(const Material& m);
 

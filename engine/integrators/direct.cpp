@@ -26,7 +26,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
   ++counters.rays;
   if (!ctx.accel.intersect(ray, hit)) return ctx.lights.environment_radiance(ray.d);
   Vec3 wo = -ray.d;
-  RGB radiance = LightSet::emitted(ctx.accel.mesh(hit.mesh), hit.ng, wo);
+  RGB radiance = emitted_radiance(ctx.accel.mesh(hit.mesh), hit.ng, wo);
   Bsdf bsdf = bsdf_at(ctx, hit, ctx.pixel_spread * hit.t);
   Vec3 ns = bsdf.shading_normal();
   const Vec3 n_receiver = receiver_normal(bsdf, wo);  // light selection (LightSet::sample)
@@ -71,7 +71,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
     RGB le;
     float light_pdf;
     if (ctx.accel.intersect(r, light_hit)) {
-      le = LightSet::emitted(ctx.accel.mesh(light_hit.mesh), light_hit.ng, -bs.wi);
+      le = emitted_radiance(ctx.accel.mesh(light_hit.mesh), light_hit.ng, -bs.wi);
       if (is_black(le)) continue;
       light_pdf = ctx.lights.pdf_solid_angle(hit.p, n_receiver, light_hit.mesh, light_hit.prim,
                                              light_hit.p, light_hit.ng);

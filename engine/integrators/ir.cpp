@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "engine/integrators/camera_path.h"
 #include "engine/integrators/drivers.h"
 #include "engine/integrators/light_path.h"
 #include "engine/json_reader.h"
@@ -256,51 +257,38 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
   const IntegratorSettings& s = ctx.scene.render.integrator;
   const int n_u = 3 * ir.vpl_samples;  // the VPL picks' numbers, drawn at every vertex
   float u_vpl[3 * kMaxVplSamples];
-  RGB radiance(0.0f), beta(1.0f);
-  float eta_scale = 1, prev_bsdf_pdf = 0, cone_width = 0;
-  bool prev_delta = true;
-  Vec3 prev_p = ray.o, prev_ns(0.0f), prev_n(0.0f);  // prev_n: receiver normal (light selection)
+  RGB radiance(0.0f);
+  CameraPath path(ray.o);
+  Vec3 prev_ns(0.0f);  // the previous vertex's shading normal (the residual's geometry term)
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
     if (!ctx.accel.intersect(ray, hit)) {
       // The environment, as emission found by the previous vertex's BSDF sample (its direct
       // light, MIS-weighted; the VPLs stand only for light that scattered on a surface).
-      add_escaped(ctx, ray.d, prev_delta, prev_bsdf_pdf, beta, radiance);
+      path.escape(ctx, ray.d, radiance);
       break;
     }
-    const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
-    cone_width += ctx.pixel_spread * hit.t;
-
-    RGB le = LightSet::emitted(mesh, hit.ng, wo);
-    if (!is_black(le)) {
-      if (prev_delta) {
-        radiance += beta * le;
-      } else {
-        float light_pdf =
-            ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
-        radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
-      }
-    }
+    path.arrive(ctx, hit, wo, radiance);
     if (depth == s.max_depth) break;
 
     float residual = 1;
-    if (!prev_delta) {
-      Vec3 d = hit.p - prev_p;
+    if (!path.prev_delta) {
+      Vec3 d = hit.p - path.prev_p;
       float d2 = dot(d, d);
       float g = d2 > 0 ? std::fabs(dot(ray.d, prev_ns)) * std::fabs(dot(ray.d, hit.ng)) / d2 : 0;
       residual = ir.compensation && g > set.clamp_g ? 1 - set.clamp_g / g : 0;
     }
 
-    Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
+    Bsdf bsdf = bsdf_at(ctx, hit, path.cone_width);
     float u_light = sampler.get_1d();
     Vec2 u_point = sampler.get_2d();
     for (int i = 0; i < n_u; ++i) u_vpl[i] = sampler.get_1d();
     if (!bsdf.is_delta() && residual > 0) {
       RGB terms = light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters) +
                   gather_vpls(ir, ctx, set, hit, bsdf, wo, depth, u_vpl, counters);
-      radiance += beta * terms * residual;
+      radiance += path.beta * terms * residual;
     }
 
     BsdfSample bs;
@@ -309,24 +297,13 @@ RGB ir_radiance(const IrIntegrator& ir, const RenderContext& ctx, const VplSet& 
     if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) break;
     if (!bs.is_delta) {
       if (residual == 0) break;
-      beta *= residual;
+      path.beta *= residual;
     }
-    float cos_i = std::fabs(dot(bs.wi, bsdf.shading_normal()));
-    beta *= bs.f * (cos_i / bs.pdf_solid_angle);
-    if (bs.is_transmission) eta_scale *= sqr(bs.eta);
-    prev_bsdf_pdf = bs.pdf_solid_angle;
-    prev_delta = bs.is_delta;
-    prev_p = hit.p;
+    ray = path.scatter(ctx, hit, bsdf, wo, bs);
     prev_ns = bsdf.shading_normal();
-    prev_n = receiver_normal(bsdf, wo);
-    ray = ctx.accel.spawn(hit, bs.wi);
 
     float u_rr = sampler.get_1d();
-    if (depth + 1 >= s.rr_min_depth) {
-      float survive = std::min(1.0f, max_component(beta * eta_scale));
-      if (u_rr >= survive) break;
-      beta = beta / survive;
-    }
+    if (depth + 1 >= s.rr_min_depth && !path.survives_roulette(u_rr)) break;
   }
   return radiance;
 }

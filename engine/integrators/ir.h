@@ -6,7 +6,7 @@
 // vertex y: its BSDF, the direction the light arrived from, its throughput / N and its depth k
 // (scattering events on the light path up to and including y). The camera path follows delta
 // BSDFs to a non-delta vertex x; there
-//   L(x) = Le(x) + direct(x) [next-event estimation, MIS with the BSDF sample, as path.cpp]
+//   L(x) = Le(x) + direct(x) [next-event estimation, MIS with the BSDF sample, as path/path.cpp]
 //        + sum_j f_x f_yj Phi_j V min(G, b)     G = |w.ns_x| |w.ng_y| / |x - y|^2
 //        + compensation.
 // The VPL sum is estimated from M VPLs (vpl_samples) picked by resampled importance sampling
@@ -26,7 +26,7 @@
 // full weight. Hence the estimator is unbiased and converges to path's image at the same max
 // depth: a VPL of depth k gathered at a camera vertex with d scattering events before it makes a
 // path of d + 1 + k events, and it is used only when that is at most max_depth (Russian roulette
-// as path.cpp on the continuation).
+// as the path tracer on the continuation).
 // Compensation off: the (G - b)^+ part is dropped, i.e. the clamped light is lost. The image is
 // then biased: darker, in concave corners and wherever surfaces see each other from closer than
 // d_c. Measured on the Cornell box (box 2 wide, tests/ir_ppm_test.cpp): image means 0.6% / 0.5% /

@@ -38,7 +38,7 @@ struct CameraConnector {
     Vec2 u_lens = sampler.get_2d();
     CameraConnection c;
     if (!es.is_area || !ctx.camera.connect(es.p, u_lens, c)) return;
-    RGB le = LightSet::emitted(ctx.accel.mesh(es.mesh), es.n, c.wi);
+    RGB le = emitted_radiance(ctx.accel.mesh(es.mesh), es.n, c.wi);
     if (is_black(le)) return;
     ++counters.rays;
     SurfaceHit at;

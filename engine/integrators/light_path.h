@@ -92,7 +92,7 @@ void trace_subpath(const RenderContext& ctx, Sampler& sampler, Ray ray, RGB beta
 // (LightSet::sample_emission); without (BDPT), a pick of one is false.
 inline bool sample_light_path_start(const RenderContext& ctx, Sampler& sampler, EmissionSample& es,
                                     bool infinite_lights) {
-  sampler.skip_1d();  // the light is picked by u_pos.x (LightSet::select)
+  sampler.skip_1d();  // the light is picked by u_pos.x (LightSelection::select)
   Vec2 u_pos = sampler.get_2d(), u_dir = sampler.get_2d();
   return ctx.lights.sample_emission(u_pos, u_dir, es, infinite_lights);
 }

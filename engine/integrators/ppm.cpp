@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "engine/integrators/camera_path.h"
 #include "engine/integrators/drivers.h"
 #include "engine/integrators/light_path.h"
 #include "engine/integrators/photon_grid.h"
@@ -90,60 +91,35 @@ RGB gather_photons(const RenderContext& ctx, const PhotonMap& map, const Surface
 RGB ppm_radiance(const RenderContext& ctx, const PhotonMap& map, Ray ray, Sampler& sampler,
                  TraceCounters& counters) {
   const IntegratorSettings& s = ctx.scene.render.integrator;
-  RGB radiance(0.0f), beta(1.0f);
-  float eta_scale = 1, prev_bsdf_pdf = 0, cone_width = 0;
-  bool prev_delta = true;
-  Vec3 prev_p = ray.o, prev_n(0.0f);  // prev_n: receiver normal (light selection)
+  RGB radiance(0.0f);
+  CameraPath path(ray.o);
   for (int depth = 0;; ++depth) {
     SurfaceHit hit;
     ++counters.rays;
     if (!ctx.accel.intersect(ray, hit)) {
-      add_escaped(ctx, ray.d, prev_delta, prev_bsdf_pdf, beta, radiance);
+      path.escape(ctx, ray.d, radiance);
       break;
     }
-    const Mesh& mesh = ctx.accel.mesh(hit.mesh);
     Vec3 wo = -ray.d;
-    cone_width += ctx.pixel_spread * hit.t;
-
-    RGB le = LightSet::emitted(mesh, hit.ng, wo);
-    if (!is_black(le)) {
-      if (prev_delta) {
-        radiance += beta * le;
-      } else {
-        float light_pdf =
-            ctx.lights.pdf_solid_angle(prev_p, prev_n, hit.mesh, hit.prim, hit.p, hit.ng);
-        radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
-      }
-    }
+    path.arrive(ctx, hit, wo, radiance);
     // A non-delta BSDF sample only looks for emission: the photons stand for the rest.
-    if (!prev_delta || depth == s.max_depth) break;
+    if (!path.prev_delta || depth == s.max_depth) break;
 
-    Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
+    Bsdf bsdf = bsdf_at(ctx, hit, path.cone_width);
     float u_light = sampler.get_1d();
     Vec2 u_point = sampler.get_2d();
     if (!bsdf.is_delta())
-      radiance += beta * (light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters) +
-                          gather_photons(ctx, map, hit, bsdf, wo, depth));
+      radiance += path.beta * (light_sample_mis(ctx, hit, bsdf, wo, u_light, u_point, counters) +
+                               gather_photons(ctx, map, hit, bsdf, wo, depth));
 
     BsdfSample bs;
     float uc = sampler.get_1d();
     Vec2 u = sampler.get_2d();
     if (!bsdf.sample(wo, uc, u, TransportMode::Radiance, bs)) break;
-    float cos_i = std::fabs(dot(bs.wi, bsdf.shading_normal()));
-    beta *= bs.f * (cos_i / bs.pdf_solid_angle);
-    if (bs.is_transmission) eta_scale *= sqr(bs.eta);
-    prev_bsdf_pdf = bs.pdf_solid_angle;
-    prev_delta = bs.is_delta;
-    prev_p = hit.p;
-    prev_n = receiver_normal(bsdf, wo);
-    ray = ctx.accel.spawn(hit, bs.wi);
+    ray = path.scatter(ctx, hit, bsdf, wo, bs);
 
     float u_rr = sampler.get_1d();
-    if (bs.is_delta && depth + 1 >= s.rr_min_depth) {
-      float survive = std::min(1.0f, max_component(beta * eta_scale));
-      if (u_rr >= survive) break;
-      beta = beta / survive;
-    }
+    if (bs.is_delta && depth + 1 >= s.rr_min_depth && !path.survives_roulette(u_rr)) break;
   }
   return radiance;
 }

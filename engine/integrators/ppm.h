@@ -11,7 +11,7 @@
 // non-delta surface hit except the first (k >= 2): direct light is not taken from photons.
 // The camera path follows delta BSDFs to the first non-delta vertex x (d scattering events before
 // it) and there estimates
-//   L(x) = Le(x) + direct(x) [next-event estimation, MIS with the BSDF sample, as path.cpp]
+//   L(x) = Le(x) + direct(x) [next-event estimation, MIS with the BSDF sample, as path/path.cpp]
 //        + sum over photons within r_i with k + d <= max_depth of
 //          f_x(wo, wi_j) Phi_j |wi_j.ns| / |wi_j.ng| / (pi r_i^2)      (constant kernel).
 // A photon of depth k stands for a path of k + d scattering events (the photon's vertex is x), so
@@ -32,7 +32,7 @@
 // nor BDPT samples well.
 // Environment and directional lights emit photons from a disk outside the scene facing the light
 // (LightSet::sample_emission); a camera path that leaves the scene takes the environment's
-// radiance (MIS-weighted after a non-delta scattering, as path.cpp).
+// radiance (MIS-weighted after a non-delta scattering, as the path tracer: camera_path.h).
 // Limits: biased for any finite pass count; memory per pass grows with M; glossy receivers blur.
 #pragma once
 

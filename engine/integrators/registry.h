@@ -15,7 +15,7 @@
 #include "engine/integrators/direct.h"
 #include "engine/integrators/ir.h"
 #include "engine/integrators/light.h"
-#include "engine/integrators/path.h"
+#include "engine/integrators/path/path.h"
 #include "engine/integrators/ppm.h"
 #include "engine/integrators/whitted.h"
 

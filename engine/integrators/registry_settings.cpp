@@ -172,8 +172,8 @@ void apply_fixed_max_depth(IntegratorSettings& settings) {
 // 7: the concentric disk's cosine and sine by polynomials (sin_cos_quarter_pi), not libm.
 // 8: the sphere cone's and the visible-normal sample's phi by polynomials (cos_sin_turn).
 // 9: the path tracer's diffuse vertices at the last depth take their light sample at full weight
-// and trace no BSDF ray (path.cpp).
-// 10: power selection picks the light's group by u_point.x too, rescaled (LightSet::select).
+// and trace no BSDF ray (path/path.cpp).
+// 10: power selection picks the light's group by u_point.x too, rescaled (LightSelection::select).
 // 11: the Sobol kinds draw the first vertex's light point and direction (path) and the first
 // round of each strategy (direct) jointly with the filter offset (Sampler::get_2d_joint).
 // 12: the path tracer's second vertex draws them jointly with the first vertex's direction.

@@ -20,7 +20,7 @@ RGB whitted_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceC
     }
     Vec3 wo = -ray.d;
     cone_width += ctx.pixel_spread * hit.t;
-    radiance += beta * LightSet::emitted(ctx.accel.mesh(hit.mesh), hit.ng, wo);
+    radiance += beta * emitted_radiance(ctx.accel.mesh(hit.mesh), hit.ng, wo);
     if (depth == max_depth) break;
     Bsdf bsdf = bsdf_at(ctx, hit, cone_width);
     float u_light = sampler.get_1d();

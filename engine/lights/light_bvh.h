@@ -74,9 +74,9 @@ class LightBvh {
   double first_child_probability(uint32_t index, Vec3 p, Vec3 n) const;
 
   std::vector<Node> nodes_;
-  std::vector<uint64_t> trail_;     // per light: bit k = 1 when the path from the root takes the
-                                    // second child at depth k
-  std::vector<uint8_t> in_tree_;    // per light: 1 when the light is a leaf of the tree
+  std::vector<uint64_t> trail_;   // per light: bit k = 1 when the path from the root takes the
+                                  // second child at depth k
+  std::vector<uint8_t> in_tree_;  // per light: 1 when the light is a leaf of the tree
   int depth_ = 0;
 };
 

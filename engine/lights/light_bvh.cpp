@@ -1,4 +1,4 @@
-#include "engine/light_bvh.h"
+#include "engine/lights/light_bvh.h"
 
 #include <algorithm>
 #include <array>
@@ -78,8 +78,8 @@ double split_cost(const LightBounds& b, Vec3 parent_lo, Vec3 parent_hi, int axis
 }
 
 constexpr int kBuckets = 12;
-constexpr int kMaxDepth = 64;         // the trail is 64 bits
-constexpr int kMedianSplitDepth = 40; // from here on, halve by count so the depth stays bounded
+constexpr int kMaxDepth = 64;          // the trail is 64 bits
+constexpr int kMedianSplitDepth = 40;  // from here on, halve by count so the depth stays bounded
 
 }  // namespace
 
@@ -108,8 +108,8 @@ float LightBounds::importance(Vec3 p, Vec3 n) const {
     float sin_o = safe_sqrt(1.0f - cos_theta_o * cos_theta_o);
     float cos_x = cos_sub_clamped(cos_w, sin_w, cos_theta_o, sin_o);  // theta_w - theta_o
     float sin_x = safe_sqrt(1.0f - cos_x * cos_x);
-    cos_theta_p = cos_sub_clamped(cos_x, sin_x, cos_b, sin_b);         // ... - theta_b
-    if (cos_theta_p <= cos_theta_e) return 0.0f;                       // beyond the emission
+    cos_theta_p = cos_sub_clamped(cos_x, sin_x, cos_b, sin_b);  // ... - theta_b
+    if (cos_theta_p <= cos_theta_e) return 0.0f;                // beyond the emission
   }
   float receiver = 1.0f;
   if (!inside && !(n.x == 0 && n.y == 0 && n.z == 0)) {
@@ -185,7 +185,9 @@ uint32_t LightBvh::build(std::vector<Item>& items, size_t begin, size_t end, int
     clo = vmin(clo, c), chi = vmax(chi, c);
   }
   size_t mid = begin + (end - begin) / 2;
-  auto centroid = [](const Item& it, int axis) { return 0.5f * (it.bounds.lo[axis] + it.bounds.hi[axis]); };
+  auto centroid = [](const Item& it, int axis) {
+    return 0.5f * (it.bounds.lo[axis] + it.bounds.hi[axis]);
+  };
   int best_axis = -1, best_bucket = -1;
   if (depth < kMedianSplitDepth) {
     double best_cost = std::numeric_limits<double>::infinity();
@@ -194,7 +196,8 @@ uint32_t LightBvh::build(std::vector<Item>& items, size_t begin, size_t end, int
       if (!(extent > 0)) continue;
       std::array<LightBounds, kBuckets> bucket;
       for (size_t i = begin; i < end; ++i) {
-        int b = std::min(kBuckets - 1, int(kBuckets * ((centroid(items[i], axis) - clo[axis]) / extent)));
+        int b = std::min(kBuckets - 1,
+                         int(kBuckets * ((centroid(items[i], axis) - clo[axis]) / extent)));
         bucket[b] = union_bounds(bucket[b], items[i].bounds);
       }
       // Costs of splitting after bucket k: prefix unions from the left, suffix from the right.
@@ -205,7 +208,8 @@ uint32_t LightBvh::build(std::vector<Item>& items, size_t begin, size_t end, int
       for (int k = 0; k < kBuckets - 1; ++k) {
         left = union_bounds(left, bucket[k]);
         if (!(left.phi > 0) || !(right[k + 1].phi > 0)) continue;
-        double cost = split_cost(left, all.lo, all.hi, axis) + split_cost(right[k + 1], all.lo, all.hi, axis);
+        double cost =
+            split_cost(left, all.lo, all.hi, axis) + split_cost(right[k + 1], all.lo, all.hi, axis);
         if (cost < best_cost) best_cost = cost, best_axis = axis, best_bucket = k;
       }
     }

@@ -12,20 +12,18 @@
 // Strengths: unbiased, simple, robust for diffuse and glossy scenes with visible light sources.
 // Cannot do well: caustics from small lights seen through specular surfaces (found only by
 // chance; from point lights never), light arriving through narrow openings; see bdpt and ppm.
+//
+// The module's files (engine/integrators/path/): this header (the parameters: the scene layer);
+// path_tracer.h (the estimator: a pixel's samples traced alone or in packets, and the one-lane
+// loop); packets.h (the packet orchestration, one function per phase of a depth); surface_lanes.h
+// (the vectorised kernels that shade a packet's plain vertices); lane_lights.h (the light tables
+// those kernels read, built from a LightSet). The sample-dimension layout is
+// integrators/sample_layout.h.
 #pragma once
 
-#include <string>
-
 #include "engine/integrators/module.h"
-#include "engine/math.h"
 
 namespace rf {
-
-// The radiances of n <= Accel::kPacket camera samples of one pixel (rays started with their
-// samplers): traced together with Embree's packet queries when `packets` and n > 1, else one by
-// one with single-ray queries; the same bits either way.
-void path_radiance(const RenderContext& ctx, const Ray* rays, Sampler* samplers, int n,
-                   RGB* radiance, TraceCounters& counters, bool packets = true);
 
 struct PathIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "path";
