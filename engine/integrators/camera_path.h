@@ -29,24 +29,30 @@ struct CameraPath {
   void escape(const RenderContext& ctx, Vec3 dir, RGB& radiance) const {
     add_escaped(ctx, dir, prev_delta, prev_bsdf_pdf, beta, radiance);
   }
-  // The ray reached point p (geometric normal ng) of triangle prim of surface `mesh` at distance
-  // t, seen from direction wo: the ray cone widens, and the point's emission towards wo goes into
-  // `radiance`, unweighted after the camera or a delta scattering, else by the power heuristic
-  // against the light-sampling density of the point from the previous vertex.
-  void arrive(const RenderContext& ctx, uint32_t mesh, uint32_t prim, Vec3 p, Vec3 ng, float t,
-              Vec3 wo, RGB& radiance) {
-    cone_width += ctx.pixel_spread * t;
-    const RGB le = emitted_radiance(ctx.accel.mesh(mesh), ng, wo);
-    if (is_black(le)) return;
+  // The ray reached a point at distance t: the ray cone widens.
+  void widen_cone(const RenderContext& ctx, float t) { cone_width += ctx.pixel_spread * t; }
+  // The emission found at point p (geometric normal ng) of triangle prim of surface `mesh` (the
+  // mesh m), seen from direction wo, as the path's term: beta Le, unweighted after the camera or a
+  // delta scattering, else weighted by the power heuristic against the light-sampling density of
+  // the point from the previous vertex. False when the point sends nothing towards wo.
+  bool emission(const RenderContext& ctx, const Mesh& m, uint32_t mesh, uint32_t prim, Vec3 p,
+                Vec3 ng, Vec3 wo, RGB& term) const {
+    const RGB le = emitted_radiance(m, ng, wo);
+    if (is_black(le)) return false;
     if (prev_delta) {
-      radiance += beta * le;
+      term = beta * le;
     } else {
       const float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, mesh, prim, p, ng);
-      radiance += beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
+      term = beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
     }
+    return true;
   }
+  // Both at a hit: the cone widens and the emission goes into `radiance`.
   void arrive(const RenderContext& ctx, const SurfaceHit& hit, Vec3 wo, RGB& radiance) {
-    arrive(ctx, hit.mesh, hit.prim, hit.p, hit.ng, hit.t, wo, radiance);
+    widen_cone(ctx, hit.t);
+    RGB term;
+    if (emission(ctx, ctx.accel.mesh(hit.mesh), hit.mesh, hit.prim, hit.p, hit.ng, wo, term))
+      radiance += term;
   }
   // The path goes on by the BSDF sample bs taken at hit (outgoing direction wo): the throughput
   // takes f |cos| / pdf, the state remembers the vertex for the next one's MIS weights; returns

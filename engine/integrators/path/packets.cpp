@@ -11,12 +11,11 @@
 
 namespace rf {
 
-namespace {
-SurfaceLanes& thread_surface_lanes() {
-  thread_local SurfaceLanes lanes{};
-  return lanes;
-}
-}  // namespace
+// The phases are functions of their own for the reader, and one function for the compiler: a
+// depth's state stays in registers across them, as it did when they were one loop.
+#define RF_PHASE [[gnu::always_inline]] inline
+
+thread_local SurfaceLanes PacketPaths::dl_{};
 
 PacketPaths::PacketPaths(const RenderContext& ctx, const LaneLights& lights, Sampler* samplers,
                          int n, TraceCounters& counters)
@@ -31,30 +30,10 @@ PacketPaths::PacketPaths(const RenderContext& ctx, const LaneLights& lights, Sam
       lobe_choice_(!ctx.all_in_lanes),
       given_light_(!lights.triangles_by_power()),
       spheres_in_lanes_(lights.spheres_in_lanes()),
-      dl_(thread_surface_lanes()),
       live_(n) {
   RF_CHECK(n >= 2 && n <= K, std::to_string(n) + " paths for a packet of " + std::to_string(K));
   static_assert(K <= Sampler::kMaxLanes);
   static_assert(SurfaceLanes::N == LaneLights::kLanes);  // pick_entries fills all its lanes
-}
-
-void PacketPaths::trace(const Ray* camera_rays, RGB* radiance) {
-  for (int i = 0; i < K; ++i) S::put(sum_, i, RGB(0.0f));
-  for (int i = 0; i < n_; ++i) {
-    rays_.set(i, camera_rays[i]);
-    lanes_[i].prev_p = camera_rays[i].o;
-  }
-  for (int depth = 0; live_ > 0; ++depth) {
-    if (hand_off(depth)) break;
-    intersect(depth);
-    draw(depth);
-    arrive(depth);
-    shade_lanes();
-    shade_rest(depth);
-    cast_shadows();
-    add();
-  }
-  for (int i = 0; i < n_; ++i) radiance[i] = S::get(sum_, i);
 }
 
 // One live lane left after the camera rays: the one-lane loop takes it over, with Embree's
@@ -62,7 +41,7 @@ void PacketPaths::trace(const Ray* camera_rays, RGB* radiance) {
 // sixteen slots of loops and a 16-wide query cost, well above a one-lane step;
 // docs/performance.md, "Where a render's time goes"). The lane's numbers and terms are those it
 // gets traced alone from its camera ray (the packet test), so its radiance keeps its bits.
-bool PacketPaths::hand_off(int depth) {
+RF_PHASE bool PacketPaths::hand_off(int depth) {
   if (live_ != 1 || depth == 0) return false;
   int i = 0;
   while (!rays_.active(i)) ++i;
@@ -75,7 +54,7 @@ bool PacketPaths::hand_off(int depth) {
 // The camera rays of one pixel as a coherent packet (docs/performance.md, "The path tracer's
 // inner loop"); the later rays and the shadow rays as incoherent ones: marked coherent they are
 // no faster (docs/performance.md, "What was tried and not taken").
-void PacketPaths::intersect(int depth) {
+RF_PHASE void PacketPaths::intersect(int depth) {
   counters_.rays += uint64_t(live_);
   ctx_.accel.intersect_packet(rays_, n_, dl_.hit, depth == 0);
   roulette_ = depth + 1 >= settings_.rr_min_depth;
@@ -85,7 +64,7 @@ void PacketPaths::intersect(int depth) {
 }
 
 // With lockstep draws, the numbers of every lane that hits something, at once.
-void PacketPaths::draw(int depth) {
+RF_PHASE void PacketPaths::draw(int depth) {
   if (!lockstep_draws_ || depth >= settings_.max_depth) return;
   int m = 0;
   for (int i = 0; i < n_; ++i)  // without a branch (found: traced and hit)
@@ -97,7 +76,7 @@ void PacketPaths::draw(int depth) {
 
 // The lanes' hits: escaped rays and emission, then plain vertices to the kernels (dl_.lane) and
 // the others to shade_rest (generic_).
-void PacketPaths::arrive(int depth) {
+RF_PHASE void PacketPaths::arrive(int depth) {
   Accel::PacketHits& hits = dl_.hit;
   Sampler::LaneDraws* u = dl_.u;
   any_shadow_ = false, conductors_ = false;
@@ -115,15 +94,16 @@ void PacketPaths::arrive(int depth) {
       rays_.clear(i), --live_;
       continue;
     }
-    RGB r = S::get(sum_, i);
-    a.arrive(ctx_, hits.mesh[i], hits.prim[i], D::get(hits.p, i), D::get(hits.ng, i), hits.t[i], wo,
-             r);
-    S::put(sum_, i, r);
+    const Mesh& mesh = ctx_.accel.mesh(hits.mesh[i]);
+    a.widen_cone(ctx_, hits.t[i]);
+    RGB term;
+    if (a.emission(ctx_, mesh, hits.mesh[i], hits.prim[i], D::get(hits.p, i), D::get(hits.ng, i),
+                   wo, term))
+      S::put(sum_, i, S::get(sum_, i) + term);
     if (depth == settings_.max_depth) {
       rays_.clear(i), --live_;
       continue;
     }
-    const Mesh& mesh = ctx_.accel.mesh(hits.mesh[i]);
     const Material& material = ctx_.scene.materials[mesh.material];
     const LaneKind kind = ctx_.lane_kinds[mesh.material];
     const bool rough_conductor = kind == LaneKind::RoughConductor;
@@ -166,7 +146,7 @@ void PacketPaths::arrive(int depth) {
 // The plain vertices' light samples as light_sample_mis_unshadowed() takes them, one by one
 // (other lights than triangles by power or spheres in lanes): a sphere seen from outside goes to
 // the sphere loops, any other light is sampled here into the given sample (g_*).
-void PacketPaths::sample_lights_one_by_one() {
+RF_PHASE void PacketPaths::sample_lights_one_by_one() {
   const Accel::PacketHits& hits = dl_.hit;
   Sampler::LaneDraws* u = dl_.u;
   for (int j = 0; j < dl_.m; ++j) {
@@ -198,7 +178,7 @@ void PacketPaths::sample_lights_one_by_one() {
 
 // Spheres in lanes: a plain vertex inside its picked sphere samples it one by one
 // (sample_selected), into the given sample.
-void PacketPaths::sample_spheres_inside(const uint32_t* entry) {
+RF_PHASE void PacketPaths::sample_spheres_inside(const uint32_t* entry) {
   const Accel::PacketHits& hits = dl_.hit;
   const LaneLights::SphereTable& st = lane_lights_.sphere_table();
   for (int j = 0; j < dl_.m; ++j) {
@@ -214,7 +194,7 @@ void PacketPaths::sample_spheres_inside(const uint32_t* entry) {
 
 // A light sample taken one by one (ok: it succeeded) into slot i's given sample and shadow ray,
 // which the sphere loops select where the slot's light is not a sphere seen from outside.
-void PacketPaths::give_light_sample(int i, bool ok, const LightSample& ls) {
+RF_PHASE void PacketPaths::give_light_sample(int i, bool ok, const LightSample& ls) {
   dl_.g_ok[i] = ok;
   D::put(dl_.g_wi, i, ls.wi), D::put(dl_.g_radiance, i, ls.radiance);
   dl_.g_pdf[i] = ls.pdf_solid_angle, dl_.l_delta[i] = ls.is_delta;
@@ -227,7 +207,7 @@ void PacketPaths::give_light_sample(int i, bool ok, const LightSample& ls) {
 
 // The plain vertices in the kernels: their light samples (picked in lane space where the lights
 // allow it), NEE terms, BSDF samples and continuations, then their rays into the packets.
-void PacketPaths::shade_lanes() {
+RF_PHASE void PacketPaths::shade_lanes() {
   if (dl_.m == 0) return;
   counters_.lane_vertices += uint64_t(dl_.m);
   Sampler::LaneDraws* u = dl_.u;
@@ -286,7 +266,7 @@ void PacketPaths::shade_lanes() {
 
 // The kernels' results into the lanes' states, without branches (the lanes' patterns mispredict
 // them): a lane that ends keeps the state it is given here unread.
-void PacketPaths::lane_results() {
+RF_PHASE void PacketPaths::lane_results() {
   int shadows = 0, ends = 0;
   for (int j = 0; j < dl_.m; ++j) {
     const int i = dl_.lane[j];
@@ -316,7 +296,7 @@ void PacketPaths::lane_results() {
 
 // The other vertices, one by one, as trace_alone shades them (their numbers from the lockstep
 // draws where there are some).
-void PacketPaths::shade_rest(int depth) {
+RF_PHASE void PacketPaths::shade_rest(int depth) {
   const Accel::PacketHits& hits = dl_.hit;
   Sampler::LaneDraws* u = dl_.u;
   for (int g = 0; g < generics_; ++g) {
@@ -361,19 +341,38 @@ void PacketPaths::shade_rest(int depth) {
   }
 }
 
-void PacketPaths::cast_shadows() {
+RF_PHASE void PacketPaths::cast_shadows() {
   if (any_shadow_) ctx_.accel.occluded_packet(shadow_, n_, blocked_);
 }
 
 // The NEE terms whose shadow rays got through, as selects in lane space (a lane's shadow ray is
 // active only after its term is written; branches on the lanes' patterns mispredict).
-void PacketPaths::add() {
+RF_PHASE void PacketPaths::add() {
   for (int i = 0; i < K; ++i) {
     const bool add = shadow_.active(i) & (blocked_[i] == 0);
     sum_[0][i] = add ? sum_[0][i] + nee_term_[0][i] : sum_[0][i];
     sum_[1][i] = add ? sum_[1][i] + nee_term_[1][i] : sum_[1][i];
     sum_[2][i] = add ? sum_[2][i] + nee_term_[2][i] : sum_[2][i];
   }
+}
+
+void PacketPaths::trace(const Ray* camera_rays, RGB* radiance) {
+  for (int i = 0; i < K; ++i) S::put(sum_, i, RGB(0.0f));
+  for (int i = 0; i < n_; ++i) {
+    rays_.set(i, camera_rays[i]);
+    lanes_[i].prev_p = camera_rays[i].o;
+  }
+  for (int depth = 0; live_ > 0; ++depth) {
+    if (hand_off(depth)) break;
+    intersect(depth);
+    draw(depth);
+    arrive(depth);
+    shade_lanes();
+    shade_rest(depth);
+    cast_shadows();
+    add();
+  }
+  for (int i = 0; i < n_; ++i) radiance[i] = S::get(sum_, i);
 }
 
 }  // namespace rf

@@ -78,7 +78,7 @@ class PacketPaths {
   // All lights spheres by power: their pick and cones in lane space too (lanes_sphere_lights).
   const bool spheres_in_lanes_;
   // Per thread, zeroed once: the slots no vertex has filled hold zeros or earlier vertices.
-  SurfaceLanes& dl_;
+  static thread_local SurfaceLanes dl_;
 
   CameraPath lanes_[K];
   Accel::RayPacket rays_, shadow_;
