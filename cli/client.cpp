@@ -18,7 +18,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   struct Args {
     OverrideArgs overrides;
     SubmitArgs submit;
-    std::string job, fetch_dir, health_addr;
+    std::string job, fetch_dir, fetch_frames, health_addr;
     bool json = false, services = false;
     StatusPage page;
     std::optional<uint32_t> fetch_frame;
@@ -72,13 +72,22 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   auto* fetch = app.add_subcommand("fetch", "write a job's frames (EXR + PNG), also mid-job");
   add_addr(fetch, &a->timeout);
   fetch->add_option("job", a->job, "job id")->required();
-  fetch->add_option("-o,--output", a->fetch_dir, "output directory")->required();
-  fetch->add_option("--frame", a->fetch_frame, "only this frame")
-      ->check(finite_in(0, 4294967295.0));
+  fetch
+      ->add_option("-o,--output", a->fetch_dir,
+                   "output directory (JOB.####.exr in it), or a frame template ending in .exr "
+                   "(shot.####.exr, shot.%04d.exr)")
+      ->required();
+  auto* fetch_frame = fetch->add_option("--frame", a->fetch_frame, "only this frame")
+                          ->check(finite_in(0, 4294967295.0));
+  fetch->add_option("--frames", a->fetch_frames, "only these frames (1-24, 1-24:2, 1,5,9)")
+      ->excludes(fetch_frame);
   fetch->add_option("--exposure", a->fetch_exposure, "PNG exposure in stops")
       ->check(finite_in(-64, 64));
   out.push_back({fetch, [a, ep] {
-                   return cmd_fetch(ep(), a->job, a->fetch_dir, a->fetch_frame, a->fetch_exposure);
+                   return cmd_fetch(
+                       ep(), a->job, a->fetch_dir,
+                       a->fetch_frame ? std::to_string(*a->fetch_frame) : a->fetch_frames,
+                       a->fetch_exposure);
                  }});
 
   auto* cancel = app.add_subcommand("cancel", "cancel a job");

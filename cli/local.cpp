@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <regex>
 
 #include <spdlog/spdlog.h>
@@ -14,6 +15,7 @@
 #include "engine/local_render.h"
 #include "engine/progress.h"
 #include "engine/render.h"
+#include "farm/frame_range.h"
 
 namespace rf::cli {
 
@@ -96,7 +98,7 @@ void print_summary(const SampleBuffer& frame, double seconds, uint64_t rays) {
 }
 
 struct RenderArgs {
-  std::string scene, output, partial, pass_range;
+  std::string scene, output, partial, pass_range, frames;
   OverrideArgs overrides;
   std::optional<uint32_t> frame;
   double time_budget = 0;
@@ -105,21 +107,45 @@ struct RenderArgs {
   bool quiet = false;
 };
 
-int cmd_render(const RenderArgs& a) {
-  SceneOverrides ov = overrides_of(a.overrides);
-  if (a.output.empty() && a.partial.empty())
-    throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
-  if (!a.partial.empty() && a.pass_range.empty())
-    throw UsageError("--partial needs --pass-range FIRST-LAST");
-  if (!a.output.empty()) check_extension("-o", a.output, {".exr"});
-  check_outputs({{"-o", a.output},
-                 {"the PNG preview", a.output.empty() ? "" : png_path_for(a.output)},
-                 {"--partial", a.partial}});
+// One frame of a render: its number and its files (the scene, -o and --partial expanded).
+struct FrameFiles {
+  uint32_t frame;
+  std::string scene, output, partial;
+};
 
-  Scene scene = load_scene(a.scene, ov);
+// The frames a render covers (--frame, --frames, or frame 0) and their files. Several frames need
+// a frame template in every output; the scene may be one file or a per-frame pattern.
+std::vector<FrameFiles> frame_files(const RenderArgs& a) {
+  if (a.frame && !a.frames.empty()) throw UsageError("render: give --frame or --frames, not both");
+  std::vector<uint32_t> frames;
+  if (a.frames.empty()) {
+    frames = {a.frame.value_or(0)};
+  } else {
+    try {
+      frames = parse_frame_range(a.frames);
+    } catch (const FrameRangeError& e) {
+      throw UsageError(std::string("--frames: ") + e.what());
+    }
+  }
+  if (frames.size() > 1)
+    for (const auto& [flag, path] : {std::pair{"-o", a.output}, std::pair{"--partial", a.partial}})
+      if (!path.empty() && !is_frame_pattern(path, true))
+        throw UsageError(std::string(flag) + " " + path + ": " + std::to_string(frames.size()) +
+                         " frames need a frame template in the name (shot.####.exr or "
+                         "shot.%04d.exr)");
+  std::vector<FrameFiles> files;
+  for (uint32_t f : frames)
+    files.push_back({f, expand_frame_pattern(a.scene, f), expand_frame_pattern(a.output, f, true),
+                     expand_frame_pattern(a.partial, f, true)});
+  return files;
+}
+
+// Renders one frame of a loaded scene and writes its files.
+void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& renderer,
+                  const FrameFiles& f, bool name_frame) {
   LocalRenderOptions opt;
   opt.tile_size = a.tile;
-  opt.frame = a.frame.value_or(0);
+  opt.frame = f.frame;
   if (!a.pass_range.empty()) {
     auto [p0, p1] = parse_pass_range(a.pass_range, scene.render.passes);
     opt.first_pass = p0;
@@ -131,13 +157,7 @@ int cmd_render(const RenderArgs& a) {
   opt.time_budget_s = a.time_budget;
   ProgressPrinter printer(a.quiet);
   opt.progress = [&](const LocalProgress& p) { printer(p); };
-
-  Renderer renderer(scene);
-  if (!renderer.has_lights() && integrator_needs_lights(scene.render.integrator.method))
-    spdlog::warn(
-        "{}: the scene has no lights (no emitter, light or environment): the {} image "
-        "will be black",
-        a.scene, scene.render.integrator.type());
+  if (name_frame && !a.quiet) std::fprintf(stderr, "frame %u\n", f.frame);
   LocalRenderResult res;
   try {
     res = render_local(renderer, opt);
@@ -148,24 +168,27 @@ int cmd_render(const RenderArgs& a) {
                   "out of memory rendering a %dx%d film (about %.1f GiB at 104 "
                   "bytes per pixel for the frame, more per pass in flight)",
                   scene.film.width, scene.film.height, gib);
-    throw std::runtime_error(a.scene + ": " + buf);
+    throw std::runtime_error(f.scene + ": " + buf);
   }
   if (res.passes_merged == 0 && res.stopped_on_time)
     throw std::runtime_error(
-        a.scene + ": the time budget of " + std::to_string(a.time_budget) +
+        f.scene + ": the time budget of " + std::to_string(a.time_budget) +
         " s ran out before the first pass completed (a pass here is " +
         std::to_string(scene.render.spp_per_pass()) +
         " samples per pixel); nothing is written. Give more --passes, fewer --spp or more time");
   warn_nonfinite(res.frame);
-  if (!a.partial.empty()) {
-    write_buffer_file(a.partial, res.frame);
-    std::fprintf(stderr, "wrote %s (passes %s)\n", a.partial.c_str(),
+  for (const std::string& path : {f.partial, f.output})  // out/shot.####.exr: out/ made here
+    if (std::filesystem::path parent = std::filesystem::path(path).parent_path(); !parent.empty())
+      std::filesystem::create_directories(parent);
+  if (!f.partial.empty()) {
+    write_buffer_file(f.partial, res.frame);
+    std::fprintf(stderr, "wrote %s (passes %s)\n", f.partial.c_str(),
                  res.frame.header.passes.to_string().c_str());
   }
-  if (!a.output.empty()) {
-    write_exr(a.output, res.frame);
-    write_png(png_path_for(a.output), res.frame, a.exposure);
-    std::fprintf(stderr, "wrote %s and %s\n", a.output.c_str(), png_path_for(a.output).c_str());
+  if (!f.output.empty()) {
+    write_exr(f.output, res.frame);
+    write_png(png_path_for(f.output), res.frame, a.exposure);
+    std::fprintf(stderr, "wrote %s and %s\n", f.output.c_str(), png_path_for(f.output).c_str());
   }
   if (res.stopped_on_target)
     std::fprintf(stderr, "noise target %.4g reached after %u of %u passes\n",
@@ -174,6 +197,48 @@ int cmd_render(const RenderArgs& a) {
     std::fprintf(stderr, "time budget %.1f s reached after %u of %u passes\n", a.time_budget,
                  res.passes_merged, scene.render.passes);
   print_summary(res.frame, res.seconds, res.rays);
+}
+
+// A frame, or a frame range: frames of one scene file share its parse and its BVH (a frame only
+// selects the seed stream); a per-frame pattern loads each frame's file. Every name is checked
+// and every per-frame scene file found before the first frame renders.
+int cmd_render(const RenderArgs& a) {
+  SceneOverrides ov = overrides_of(a.overrides);
+  if (a.output.empty() && a.partial.empty())
+    throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
+  if (!a.partial.empty() && a.pass_range.empty())
+    throw UsageError("--partial needs --pass-range FIRST-LAST");
+  if (!a.output.empty()) check_extension("-o", a.output, {".exr"});
+  const std::vector<FrameFiles> frames = frame_files(a);
+  // Each frame's names (distinct frames get distinct names from a template).
+  for (const FrameFiles& f : frames)
+    check_outputs({{"-o", f.output},
+                   {"the PNG preview", f.output.empty() ? "" : png_path_for(f.output)},
+                   {"--partial", f.partial}});
+  if (frames.size() > 1 && is_frame_pattern(a.scene))
+    for (const FrameFiles& f : frames) {
+      std::error_code ec;
+      if (!std::filesystem::is_regular_file(f.scene, ec))
+        throw std::runtime_error(f.scene + ": frame " + std::to_string(f.frame) +
+                                 "'s scene file does not exist (scene pattern " + a.scene +
+                                 "); nothing is rendered");
+    }
+
+  std::unique_ptr<Scene> scene;
+  std::unique_ptr<Renderer> renderer;
+  for (const FrameFiles& f : frames) {
+    if (!scene || f.scene != scene->path) {
+      renderer.reset();
+      scene = std::make_unique<Scene>(load_scene(f.scene, ov));
+      renderer = std::make_unique<Renderer>(*scene);
+      if (!renderer->has_lights() && integrator_needs_lights(scene->render.integrator.method))
+        spdlog::warn(
+            "{}: the scene has no lights (no emitter, light or environment): the {} image "
+            "will be black",
+            f.scene, scene->render.integrator.type());
+    }
+    render_frame(a, *scene, *renderer, f, frames.size() > 1);
+  }
   return 0;
 }
 
@@ -270,11 +335,16 @@ int cmd_compare(const std::string& image, const std::string& reference,
 void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
   auto ra = std::make_shared<RenderArgs>();
   auto* render = app.add_subcommand("render", "render a scene locally to EXR + PNG");
-  render->add_option("scene", ra->scene, "scene file (JSON)")->required();
+  render->add_option("scene", ra->scene, "scene file, or a per-frame pattern (shot.####.json)")
+      ->required();
   render->add_option("-o,--output", ra->output, "output EXR (a PNG preview is written beside it)");
   add_override_options(*render, ra->overrides);
   render->add_option("--frame", ra->frame, "frame number (selects the seed stream)")
       ->check(finite_in(0, 4294967295.0));
+  render->add_option("--frames", ra->frames,
+                     "frame range (1-24, 1-24:2, 1,5,9): one render per frame; -o and --partial "
+                     "then need a frame template (shot.####.exr or shot.%04d.exr), and the scene "
+                     "may be one file or a per-frame pattern (shot.####.json)");
   render->add_option("--threads", shared.threads, "worker threads (default: all cores)")
       ->check(finite_in(0, 4096));
   render

@@ -433,9 +433,24 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
   }
 }
 
-int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out_dir,
-              std::optional<uint32_t> only_frame, float exposure) {
+int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out,
+              const std::string& frames, float exposure) {
   const std::string& addr = ep.address;
+  std::set<uint32_t> wanted;
+  if (!frames.empty()) {
+    try {
+      for (uint32_t f : parse_frame_range(frames)) wanted.insert(f);
+    } catch (const FrameRangeError& e) {
+      throw FarmError(std::string("fetch --frames: ") + e.what(), 2);
+    }
+  }
+  // An output template names each frame's EXR; anything else is a directory.
+  const bool to_template = fs::path(out).extension() == ".exr";
+  if (to_template && wanted.size() != 1 && !is_frame_pattern(out, true))
+    throw FarmError("fetch -o " + out +
+                        ": several frames need a frame template in the name (shot.####.exr or "
+                        "shot.%04d.exr), or a directory",
+                    2);
   auto stub = job_stub(ep);
   Retry retry(ep);
   pb::JobStatus status;
@@ -445,10 +460,9 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->GetJob(&ctx, ref, &status); }),
           "fetch", ep, &retry);
   }
-  fs::create_directories(out_dir);
   int written = 0;
   for (const pb::FrameStatus& f : status.frames()) {
-    if (only_frame && f.frame() != *only_frame) continue;
+    if (!wanted.empty() && !wanted.count(f.frame())) continue;
     if (f.passes_merged() == 0) {
       std::fprintf(stderr, "frame %u: no complete pass yet; skipped\n", f.frame());
       continue;
@@ -475,8 +489,11 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     SampleBuffer frame = decode_buffer(chunks.take(), "frame " + std::to_string(f.frame()));
     char name[64];
     std::snprintf(name, sizeof name, "%s.%04u", job.c_str(), f.frame());
-    std::string exr = (fs::path(out_dir) / (std::string(name) + ".exr")).string();
-    std::string png = (fs::path(out_dir) / (std::string(name) + ".png")).string();
+    const std::string exr = to_template ? expand_frame_pattern(out, f.frame(), true)
+                                        : (fs::path(out) / (std::string(name) + ".exr")).string();
+    const std::string png = fs::path(exr).replace_extension(".png").string();
+    if (fs::path parent = fs::path(exr).parent_path(); !parent.empty())
+      fs::create_directories(parent);
     write_exr(exr, frame, {{"job", job}});
     write_png(png, frame, exposure);
     std::fprintf(stderr, "frame %u: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
@@ -484,8 +501,8 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
                  exr.c_str());
     ++written;
   }
-  if (only_frame && written == 0)
-    throw FarmError("job " + job + " has no fetchable frame " + std::to_string(*only_frame), 2);
+  if (!wanted.empty() && written == 0)
+    throw FarmError("job " + job + " has no fetchable frame in " + frames, 2);
   if (written == 0)  // nothing to write is not a success: say why, and exit 1
     throw FarmError("fetch: job " + job + " has no frame with a complete pass to write" +
                         (status.error().empty() ? std::string()

@@ -49,8 +49,11 @@ struct StatusPage {
 int cmd_status(const Endpoint& ep, const std::string& job, bool json, const StatusPage& page);
 int cmd_watch(const Endpoint& ep,
               const std::string& job);  // 0 completed, 1 failed, 3 cancelled
-int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out_dir,
-              std::optional<uint32_t> frame, float exposure);
+// fetch: every frame with a complete pass, or those of `frames` (a frame range; empty: all), to
+// `out`: a directory (JOB.####.exr and .png in it) or an output template ending in .exr
+// (shot.####.exr, shot.%04d.exr; a plain name for one frame only).
+int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out,
+              const std::string& frames, float exposure);
 int cmd_cancel(const Endpoint& ep, const std::string& job);
 int cmd_health(const Endpoint& ep, bool list_services);
 

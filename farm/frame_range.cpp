@@ -82,21 +82,55 @@ std::vector<uint32_t> parse_frame_range(const std::string& text) {
   return frames;
 }
 
-std::string expand_frame_pattern(const std::string& pattern, uint32_t frame) {
+namespace {
+// The length of a printf-style frame field at pattern[i] ('%d', '%0Nd'; 0 when there is none) and
+// its zero-padded width.
+size_t printf_field(const std::string& pattern, size_t i, size_t& width) {
+  if (pattern[i] != '%' || i + 1 >= pattern.size()) return 0;
+  if (pattern[i + 1] == 'd') {
+    width = 0;
+    return 2;
+  }
+  if (pattern[i + 1] != '0') return 0;
+  size_t j = i + 2, w = 0;
+  while (j < pattern.size() && j < i + 4 && pattern[j] >= '0' && pattern[j] <= '9')
+    w = 10 * w + size_t(pattern[j++] - '0');
+  if (j == i + 2 || j >= pattern.size() || pattern[j] != 'd' || w < 1 || w > 10) return 0;
+  width = w;
+  return j + 1 - i;
+}
+
+std::string padded(uint32_t frame, size_t width) {
+  std::string digits = std::to_string(frame);
+  return digits.size() < width ? std::string(width - digits.size(), '0') + digits : digits;
+}
+}  // namespace
+
+std::string expand_frame_pattern(const std::string& pattern, uint32_t frame, bool printf_style) {
   std::string out;
   for (size_t i = 0; i < pattern.size();) {
-    if (pattern[i] != '#') {
+    size_t width = 0;
+    if (pattern[i] == '#') {
+      size_t n = 0;
+      while (i + n < pattern.size() && pattern[i + n] == '#') ++n;
+      out += padded(frame, n);
+      i += n;
+    } else if (printf_style && pattern.compare(i, 2, "%%") == 0) {
+      out += '%';
+      i += 2;
+    } else if (size_t n = printf_style ? printf_field(pattern, i, width) : 0; n > 0) {
+      out += padded(frame, width);
+      i += n;
+    } else {
       out += pattern[i++];
-      continue;
     }
-    size_t n = 0;
-    while (i + n < pattern.size() && pattern[i + n] == '#') ++n;
-    std::string digits = std::to_string(frame);
-    if (digits.size() < n) out.append(n - digits.size(), '0');
-    out += digits;
-    i += n;
   }
   return out;
+}
+
+bool is_frame_pattern(const std::string& pattern, bool printf_style) {
+  return expand_frame_pattern(pattern, 0, printf_style) !=
+         expand_frame_pattern(pattern, 1, printf_style);
 }
 
 }  // namespace rf

@@ -21,6 +21,11 @@ std::vector<uint32_t> parse_frame_range(const std::string& text);
 
 // A per-frame file pattern: each run of '#' becomes the frame number, zero-padded to the run's
 // length ("shot.####.json", 7 -> "shot.0007.json"). A name without '#' is returned unchanged.
-std::string expand_frame_pattern(const std::string& pattern, uint32_t frame);
+// With `printf_style` (output templates), "%d" and "%0Nd" (N from 1 to 10) are frame numbers
+// too, "%%" a percent sign; any other '%' stays as written.
+std::string expand_frame_pattern(const std::string& pattern, uint32_t frame,
+                                 bool printf_style = false);
+// Whether a pattern names the frame at all (expand_frame_pattern gives each frame its own name).
+bool is_frame_pattern(const std::string& pattern, bool printf_style = false);
 
 }  // namespace rf

@@ -74,6 +74,20 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
   // Frames differ from each other (each has its own seed stream).
   Exr f1 = read_exr(farm.fetched(a, 1)), f2 = read_exr(farm.fetched(a, 2));
   EXPECT_NE(f1.px, f2.px);
+  // The same range through output templates: fetched into shot.%04d.exr, and rendered locally
+  // as one frame range into local.####.exr, frame by frame the same image.
+  test::CommandResult r =
+      farm.client("fetch " + a + " --frames 2-3 -o " + farm.dir() + "/tpl/shot.%04d.exr");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(farm.dir() + "/tpl/shot.0001.exr"));
+  r = test::run_command("cd " + test::source_dir() + " && " + test::rayfarm_binary() + " render " +
+                        tiled + " --frames 2-3 -q -o " + farm.dir() + "/range/local.####.exr");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* f : {"0002", "0003"})
+    expect_same_image(farm.dir() + "/tpl/shot." + f + ".exr",
+                      farm.dir() + "/range/local." + f + ".exr");
+  EXPECT_EQ(farm.client("fetch " + a + " -o " + farm.dir() + "/one.exr").exit_code, 2)
+      << "several frames into one name";
   // Each worker built at most one BVH per job, not one per frame: a frame only changes the seeds.
   for (const std::string& log : {farm.worker_log(0), farm.worker_log(1)}) {
     size_t builds = 0;

@@ -47,6 +47,24 @@ TEST(ExpandFramePattern, PadsEachRunOfHashes) {
   EXPECT_EQ(expand_frame_pattern("a#b##", 3), "a3b03");
   EXPECT_EQ(expand_frame_pattern("scene.json", 42), "scene.json");
   EXPECT_EQ(expand_frame_pattern("#", 0), "0");
+  // Scene patterns take '#' only: a '%' in a bundle's file name stays as written.
+  EXPECT_EQ(expand_frame_pattern("a%04d.json", 7), "a%04d.json");
+}
+
+// Output templates (render -o): '#' runs and printf's %d and %0Nd, %% a percent sign, any other
+// '%' as written; is_frame_pattern says whether a name changes with the frame.
+TEST(ExpandFramePattern, OutputTemplatesTakePrintfFields) {
+  EXPECT_EQ(expand_frame_pattern("shot.%04d.exr", 7, true), "shot.0007.exr");
+  EXPECT_EQ(expand_frame_pattern("shot.%d.exr", 7, true), "shot.7.exr");
+  EXPECT_EQ(expand_frame_pattern("shot.%010d.exr", 42, true), "shot.0000000042.exr");
+  EXPECT_EQ(expand_frame_pattern("100%%-#.exr", 3, true), "100%-3.exr");
+  EXPECT_EQ(expand_frame_pattern("a%s%4d%011d%0d.exr", 3, true), "a%s%4d%011d%0d.exr");
+  EXPECT_EQ(expand_frame_pattern("shot.%04d.exr", 12345, true), "shot.12345.exr");
+  EXPECT_TRUE(is_frame_pattern("shot.%04d.exr", true));
+  EXPECT_FALSE(is_frame_pattern("shot.%04d.exr"));
+  EXPECT_TRUE(is_frame_pattern("shot.#.exr"));
+  EXPECT_FALSE(is_frame_pattern("shot.exr", true));
+  EXPECT_FALSE(is_frame_pattern("100%%.exr", true));
 }
 
 }  // namespace
