@@ -48,13 +48,12 @@ class PerspectiveCamera {
   // Ray through raster position (x, y) in pixels ((0, 0) = top-left corner of the film), through
   // the lens point chosen by u_lens (ignored by a pinhole).
   Ray generate_ray(float x, float y, Vec2 u_lens) const {
-    Vec3 d{(2.0f * x / float(width_) - 1.0f) * half_w_, (1.0f - 2.0f * y / float(height_)) * half_h_,
-           -1.0f};
-    if (lens_radius_ <= 0) return {origin_, normalize(to_world_.vector(d)), kInf};
-    Vec2 l = sample_concentric_disk(u_lens);
-    Vec3 o{lens_radius_ * l.x, lens_radius_ * l.y, 0.0f};
-    Vec3 focus = d * focus_distance_;  // d.z = -1, so this lies on z = -f
-    return {to_world_.point(o), normalize(to_world_.vector(focus - o)), kInf};
+    return generate_ray(x, y, u_lens, to_world_, origin_);
+  }
+  // The same ray from the camera placed by `camera_to_world` (a moving camera at a sample's
+  // time); the bits generate_ray gives when that is the camera's own transform.
+  Ray generate_ray(float x, float y, Vec2 u_lens, const Mat4& camera_to_world) const {
+    return generate_ray(x, y, u_lens, camera_to_world, camera_to_world.point(Vec3(0.0f)));
   }
 
   // Raster position a world-space ray from a lens point reaches; false outside the film.
@@ -105,6 +104,16 @@ class PerspectiveCamera {
   float lens_radius() const { return lens_radius_; }
 
  private:
+  Ray generate_ray(float x, float y, Vec2 u_lens, const Mat4& to_world, Vec3 origin) const {
+    Vec3 d{(2.0f * x / float(width_) - 1.0f) * half_w_,
+           (1.0f - 2.0f * y / float(height_)) * half_h_, -1.0f};
+    if (lens_radius_ <= 0) return {origin, normalize(to_world.vector(d)), kInf};
+    Vec2 l = sample_concentric_disk(u_lens);
+    Vec3 o{lens_radius_ * l.x, lens_radius_ * l.y, 0.0f};
+    Vec3 focus = d * focus_distance_;  // d.z = -1, so this lies on z = -f
+    return {to_world.point(o), normalize(to_world.vector(focus - o)), kInf};
+  }
+
   Mat4 to_world_, to_camera_;
   int width_, height_;
   float lens_radius_, focus_distance_;

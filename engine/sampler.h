@@ -75,6 +75,11 @@ class IndependentSampler {
   void skip_1d() { ++dimension_; }
   void skip_2d() { dimension_ += 2; }
   uint32_t dimension() const { return dimension_; }
+  // The number at `slot` of a hashed stream (Sampler::kStreamSlots and up), the counter left
+  // where it is.
+  float get_1d_at(uint32_t slot) {
+    return bits_to_unit_float(mix64(base_ + 0x9e3779b97f4a7c15ULL * (uint64_t(slot) + 1)));
+  }
 
  private:
   uint64_t base_ = 0;
@@ -268,6 +273,15 @@ class SobolSampler {
   void skip_1d() { ++dimension_; }
   void skip_2d() { ++dimension_; }
   uint32_t dimension() const { return dimension_; }
+  // A 1D draw at `slot` of a hashed stream (Sampler::kStreamSlots and up), stratified over a
+  // pixel's samples as every slot is; the counter is left where it is.
+  float get_1d_at(uint32_t slot) {
+    const uint32_t next = dimension_;
+    dimension_ = slot;
+    const float v = get_1d();
+    dimension_ = next;
+    return v;
+  }
 
  private:
   friend class Sampler;  // its lockstep draws (get_lanes) share dimension_hash() across lanes
@@ -329,6 +343,16 @@ class Sampler {
     return needed ? get_2d_joint(k) : (skip_2d(), Vec2{0.0f, 0.0f});
   }
   Kind kind() const { return kind_; }
+
+  // Hashed streams: slots from kStreamSlots up, which the dimension counter never reaches (no
+  // path draws 2^31 numbers). A stream's number is hashed like every slot's and read without
+  // moving the counter, so a feature that reads one (a camera sample's time) leaves every other
+  // number of the sample as it was (integrators/sample_layout.h).
+  static constexpr uint32_t kStreamSlots = 1u << 31;
+  float get_1d_stream(uint32_t slot) {
+    assert(slot >= kStreamSlots);
+    return sobol_active_ ? sobol_.get_1d_at(slot) : independent_.get_1d_at(slot);
+  }
 
   // Lockstep draws for the samples of one pixel traced together (the path tracer's packets).
   // draws[k] is 1 (a get_1d), 2 (a get_2d), 0 (a skip) or kJointDraw + p (a get_2d_joint(p)): for

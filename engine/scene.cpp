@@ -97,7 +97,37 @@ void override_passes(RenderSettings& rs, const SceneOverrides& o) {
 
 }  // namespace
 
+namespace {
+// --shutter's value: "OPEN,CLOSE" (frames, OPEN <= CLOSE) or one number T (the instant T).
+void parse_shutter(const std::string& text, double& open, double& close) {
+  auto number = [&](const std::string& s) {
+    size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(s, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (s.empty() || used != s.size() || !std::isfinite(v) || std::fabs(v) > kMaxShutterFrames)
+      flag_fail(
+          "--shutter",
+          "expected OPEN,CLOSE in frames (e.g. 0,0.5) or one instant (0), got '" + text + "'");
+    return v;
+  };
+  const size_t comma = text.find(',');
+  open = number(text.substr(0, comma));
+  close = comma == std::string::npos ? open : number(text.substr(comma + 1));
+  if (close < open)
+    flag_fail("--shutter", "closes (" + format_number(close) + ") before it opens (" +
+                               format_number(open) + ")");
+}
+}  // namespace
+
 void check_overrides(const SceneOverrides& o) {
+  if (o.shutter) {
+    double open, close;
+    parse_shutter(*o.shutter, open, close);
+  }
   if (o.integrator && !contains_name(known_integrators(), *o.integrator))
     flag_fail("--integrator", "unknown integrator '" + *o.integrator +
                                   "' (known: " + join_names(known_integrators()) + ")");
@@ -152,6 +182,7 @@ void apply_overrides(Scene& scene, const SceneOverrides& o) {
   if (o.noise_target) rs.noise_target = *o.noise_target;
   if (o.seed) rs.seed = *o.seed;
   override_passes(rs, o);
+  if (o.shutter) parse_shutter(*o.shutter, scene.time.shutter_open, scene.time.shutter_close);
   scene.film = film;
   scene.render = rs;
 }

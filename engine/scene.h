@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/animated_transform.h"
 #include "engine/aov.h"
 #include "engine/import_limits.h"
 #include "engine/integrators/registry.h"
@@ -99,6 +100,10 @@ struct Mesh {
 
 struct Camera {
   Mat4 camera_to_world;    // camera space: +x right, +y up, looking down -z
+  // A moving camera (JSON camera.keyframes): camera_to_world over time in seconds; not animated
+  // for a still camera, whose transform is camera_to_world alone.
+  AnimatedTransform motion;
+  bool moves() const { return motion.animated(); }
   float fov_deg = 40.0f;   // field of view across the shorter image axis (as pbrt)
   float lens_radius = 0;   // thin lens aperture radius in scene units; 0 = pinhole
   float focus_distance = 1;  // distance along the view axis of the plane in focus
@@ -140,6 +145,20 @@ struct Environment {
   std::string resolved_path;
   RGB scale{1.0f};              // multiplies the map (or is the constant radiance)
   Mat4 to_world;                // rotation of the map
+};
+
+// A shot's time (docs/scene-format.md "time"). Frame F starts at F / fps seconds; a camera sample
+// of frame F is taken at a time in the shutter interval [F + open, F + close] frames, uniform in
+// it (a box shutter). Only a scene with motion reads it.
+// The shutter's open and close, in frames, lie within this of the frame's start.
+inline constexpr double kMaxShutterFrames = 1e6;
+struct ShotTime {
+  double fps = 24;
+  double shutter_open = 0, shutter_close = 0.5;  // in frames, relative to the frame's start
+  // The time in seconds of frame `frame` at shutter position u in [0, 1].
+  double at(uint32_t frame, float u) const {
+    return (double(frame) + shutter_open + double(u) * (shutter_close - shutter_open)) / fps;
+  }
 };
 
 // The integrator and its settings: max depth and Russian roulette are common to all (DESIGN.md
@@ -190,6 +209,7 @@ struct Scene {
   Camera camera;
   FilmSettings film;
   RenderSettings render;
+  ShotTime time;
   std::vector<Material> materials;
   std::vector<Texture> textures;
   std::vector<Mesh> meshes;
@@ -215,6 +235,8 @@ struct SceneOverrides {
   std::optional<std::string> sampler;
   std::optional<std::string> aovs;  // comma-separated AOV names, "" for none
   std::optional<std::string> light_selection;  // auto, power, bvh
+  // --shutter: "OPEN,CLOSE" in frames, or one number for an instant (0: the frame's start).
+  std::optional<std::string> shutter;
   bool operator==(const SceneOverrides&) const = default;
 };
 

@@ -147,6 +147,7 @@ TEST(Cli, FrameRangesRenderEachFrameAsAlone) {
       {" --frames 1-3 -o " + dir + "/u.exr", "frame template"},
       {" --frames 1-3 --pass-range 0-0 --partial " + dir + "/u.rfb", "--partial"},
       {" --frames 3-1x -o " + dir + "/u.####.exr", "--frames"},
+      {" --shutter 0.5,0.25 -o " + dir + "/u.exr", "--shutter"},
   };
   for (const auto& [extra, said] : usage) {
     r = test::run_command(cli("render " + kScene + extra + args));

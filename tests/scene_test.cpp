@@ -689,7 +689,7 @@ const std::vector<BadScene>& bad_scenes() {
        },
        "line 3, column 12", "expected ':'"},
       {"UnknownTopLevelKey", edit([](json& j) { j["camrea"] = j["camera"]; }), "camrea",
-       "unknown key (expected one of: format, version, camera"},
+       "unknown key (expected one of: format, version, time, camera"},
       {"WrongVersion", edit([](json& j) { j["version"] = 2; }), "version",
        "unsupported format version 2 (this build reads version 1)"},
       {"MissingVersion", edit([](json& j) { j.erase("version"); }), "version",

@@ -319,8 +319,9 @@ Renderer& Worker::prepare(const pb::Task& task) {
     files += f.path() + "\t" + f.sha256() + "\n";
     bundle.push_back({f.path(), f.sha256()});
   }
-  // Not keyed by frame: a frame only selects the seed stream (it is part of the task), so a
-  // sequence of one scene file renders on one BVH.
+  // Not keyed by frame: a frame selects the seed stream and, for a moving camera, where the camera
+  // stands (evaluated per ray from the task's frame), so a sequence of one scene file renders on
+  // one BVH.
   std::string key =
       sha256_hex(task.scene_path() + "\n" + files + task.overrides().SerializeAsString());
   for (auto it = scenes_.begin(); it != scenes_.end(); ++it)

@@ -69,6 +69,7 @@ struct BdptIntegrator : IntegratorDefaults {
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
   static constexpr const char* kPbrtTypes = "bdpt";
   static constexpr const char* kMitsubaTypes = "bdpt";
+  static constexpr bool kMovingCamera = false;  // see IntegratorDefaults
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const BdptIntegrator&) const = default;

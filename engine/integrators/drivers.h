@@ -30,6 +30,7 @@
 #include "engine/filter.h"
 #include "engine/integrators/aov_sample.h"
 #include "engine/integrators/common.h"
+#include "engine/integrators/sample_layout.h"
 #include "engine/sample_buffer.h"
 #include "engine/work_units.h"
 
@@ -37,12 +38,16 @@ namespace rf {
 
 // The ray of pixel (x, y) through the filter offset u_filter picks and the lens point u_lens
 // picks, and the sample's filter weight.
-inline Ray camera_ray(const RenderContext& ctx, int x, int y, Vec2 u_filter, Vec2 u_lens,
-                      float& filter_weight) {
+// A moving camera takes the sample's time from its own hashed stream (kTimeStream), which moves
+// no other number of the sample, and is placed where it is at that time within frame's shutter.
+inline Ray camera_ray(const RenderContext& ctx, Sampler& sampler, uint32_t frame, int x, int y,
+                      Vec2 u_filter, Vec2 u_lens, float& filter_weight) {
   const FilterSample fs = sample_filter(ctx.scene.film.filter, u_filter);
   filter_weight = fs.weight;
-  return ctx.camera.generate_ray(float(x) + 0.5f + fs.offset.x, float(y) + 0.5f + fs.offset.y,
-                                 u_lens);
+  const float rx = float(x) + 0.5f + fs.offset.x, ry = float(y) + 0.5f + fs.offset.y;
+  if (!ctx.scene.camera.moves()) return ctx.camera.generate_ray(rx, ry, u_lens);
+  const double time = ctx.scene.time.at(frame, sampler.get_1d_stream(kTimeStream));
+  return ctx.camera.generate_ray(rx, ry, u_lens, ctx.scene.camera.motion.at(time));
 }
 
 // Camera sample `index` of pixel (x, y): starts the sampler for it, draws the filter offset
@@ -53,7 +58,7 @@ inline Ray start_camera_sample(const RenderContext& ctx, Sampler& sampler, const
   sampler.start_camera_sample(ctx.scene.render.seed, task.frame, task.pass, x, y, index);
   const Vec2 u_filter = sampler.get_2d();
   const Vec2 u_lens = sampler.get_2d_if(ctx.camera.lens_radius() > 0);  // a pinhole reads none
-  return camera_ray(ctx, x, y, u_filter, u_lens, filter_weight);
+  return camera_ray(ctx, sampler, task.frame, x, y, u_filter, u_lens, filter_weight);
 }
 
 // start_camera_sample() for samples first_index + i of pixel (x, y), i < n <= Sampler::kMaxLanes,
@@ -69,7 +74,7 @@ inline void start_camera_samples(const RenderContext& ctx, Sampler* s, int n, co
   if (n <= 1 || s[0].kind() == Sampler::Kind::Independent) {
     for (int i = 0; i < n; ++i) {
       const Vec2 u_filter = s[i].get_2d(), u_lens = s[i].get_2d_if(lens);
-      rays[i] = camera_ray(ctx, x, y, u_filter, u_lens, filter_weight[i]);
+      rays[i] = camera_ray(ctx, s[i], task.frame, x, y, u_filter, u_lens, filter_weight[i]);
     }
     return;
   }
@@ -80,7 +85,8 @@ inline void start_camera_samples(const RenderContext& ctx, Sampler* s, int n, co
   Sampler::get_lanes(s, lane, n, draws, 2, u);
   for (int i = 0; i < n; ++i) {
     const Vec2 u_lens = lens ? Vec2{u[1][0][i], u[1][1][i]} : Vec2{0.0f, 0.0f};
-    rays[i] = camera_ray(ctx, x, y, {u[0][0][i], u[0][1][i]}, u_lens, filter_weight[i]);
+    rays[i] =
+        camera_ray(ctx, s[i], task.frame, x, y, {u[0][0][i], u[0][1][i]}, u_lens, filter_weight[i]);
   }
 }
 

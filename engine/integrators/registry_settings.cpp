@@ -4,6 +4,7 @@
 // NAME_settings.cpp; registry.cpp (render dispatch) and each NAME.cpp are the renderer's.
 #include <cstdio>
 #include <stdexcept>
+#include <type_traits>
 #include <utility>
 
 #include "engine/integrators/registry.h"
@@ -189,13 +190,31 @@ std::string settings_text(const Scene& s) {
       kEstimatorVersion, i.max_depth, i.rr_min_depth, (unsigned long long)s.render.spp_per_pass(),
       filter_name(s.film.filter.type), double(s.film.filter.radius), double(s.film.filter.sigma),
       s.render.sampler.c_str(), s.render.light_selection.c_str());
-  return buf +
-         std::visit([](const auto& integrator) { return integrator.settings_text(); }, i.method);
+  std::string text =
+      buf + std::visit([](const auto& integrator) { return integrator.settings_text(); }, i.method);
+  // The shot's time changes the image only where something moves: a still scene's text stays as
+  // it was, so its buffers merge with those of builds before motion.
+  if (s.camera.moves()) {
+    char t[160];
+    std::snprintf(t, sizeof t, ";time=fps:%.17g:shutter:%.17g:%.17g", s.time.fps,
+                  s.time.shutter_open, s.time.shutter_close);
+    text += t;
+  }
+  return text;
 }
 
 void check_renderable(const Scene& scene) {
-  std::visit([&](const auto& integrator) { integrator.check(scene); },
-             scene.render.integrator.method);
+  std::visit(
+      [&](const auto& integrator) {
+        using Module = std::decay_t<decltype(integrator)>;
+        if (scene.camera.moves() && !Module::kMovingCamera)
+          throw SceneError(scene.path + ": camera.keyframes: the " + std::string(Module::kName) +
+                           " integrator does not render a moving camera yet (its camera "
+                           "connections would need the light path's time); path, direct, ao, "
+                           "whitted, ir and ppm do");
+        integrator.check(scene);
+      },
+      scene.render.integrator.method);
 }
 
 }  // namespace rf

@@ -25,9 +25,9 @@
 //   before. A per-sample number that every vertex may need (a camera sample's time) does not fit
 //   there;
 // - so per-sample numbers get their own hashed stream: a slot number outside the counter's
-//   range (kStreamSlots and up: no path has 2^31 slots), hashed like every slot, read without
-//   advancing the counter. Existing slots keep their numbers, and the stream is as well
-//   stratified as any 2D slot.
+//   range (Sampler::kStreamSlots and up: no path has 2^31 slots), hashed like every slot, read
+//   without advancing the counter (StreamSlot below; the camera sample's time is the first).
+//   Existing slots keep their numbers, and the stream is as well stratified as any 2D slot.
 // docs/design.md ("The sample-dimension layout") says the same for the reader of the design.
 #pragma once
 
@@ -40,8 +40,10 @@ namespace rf {
 // The camera sample's slots.
 enum CameraDraw { kCameraFilter, kCameraLens, kCameraDraws };
 
-// The first slot of the hashed streams (never reached by the counter).
-constexpr uint32_t kStreamSlots = 1u << 31;
+// The hashed streams (Sampler::get_1d_stream), one slot each.
+enum StreamSlot : uint32_t {
+  kTimeStream = Sampler::kStreamSlots,  // a camera sample's time in the shutter (moving scenes)
+};
 
 // A path vertex's draws, in slot order (each a skip where nothing reads it).
 enum VertexDraw { kULight, kUPoint, kUChoice, kUDir, kURoulette, kVertexDraws };

@@ -51,8 +51,9 @@ class SceneParser {
     r_.expect_object(root, "");
     parse_version(root);
     r_.check_keys(root, "",
-                  {"format", "version", "camera", "film", "render", "textures", "materials", "shapes",
-                   "lights", "environment", "objects", "instances"});
+                  {"format", "version", "time", "camera", "film", "render", "textures", "materials",
+                   "shapes", "lights", "environment", "objects", "instances"});
+    if (const json* t = r_.find(root, "time")) parse_time(*t);
     parse_camera(r_.require(root, "", "camera"));
     parse_film(r_.require(root, "", "film"));
     if (const json* j = r_.find(root, "render"))
@@ -85,9 +86,94 @@ class SceneParser {
                              std::to_string(kFormatVersion) + ")");
   }
 
+  // "time": {"fps": 24, "shutter": {"open": 0, "close": 0.5, "unit": "frames", "curve": "box"}}.
+  void parse_time(const json& j) {
+    const std::string p = "time";
+    r_.check_keys(j, p, {"fps", "shutter"});
+    ShotTime& t = scene_.time;
+    if (const json* f = r_.find(j, "fps")) {
+      t.fps = r_.real(*f, "time.fps");
+      if (!(t.fps > 0 && t.fps <= 1e6))
+        r_.fail("time.fps", "must be above 0 and at most 1000000, got " + f->dump());
+    }
+    if (const json* sh = r_.find(j, "shutter")) {
+      const std::string q = "time.shutter";
+      r_.check_keys(*sh, q, {"open", "close", "unit", "curve"});
+      double scale = 1;  // to frames
+      if (const json* u = r_.find(*sh, "unit")) {
+        const std::string unit = r_.string(*u, q + ".unit");
+        if (unit == "seconds")
+          scale = t.fps;
+        else if (unit != "frames")
+          r_.fail(q + ".unit", "unknown unit '" + unit + "' (known: frames, seconds)");
+      }
+      if (const json* c = r_.find(*sh, "curve"))
+        if (const std::string curve = r_.string(*c, q + ".curve"); curve != "box")
+          r_.fail(q + ".curve", "unknown shutter curve '" + curve + "' (known: box)");
+      auto frames = [&](const char* key, double fallback) {
+        const json* v = r_.find(*sh, key);
+        if (!v) return fallback;
+        const double x = r_.real(*v, q + "." + key) * scale;
+        if (!(std::fabs(x) <= kMaxShutterFrames))
+          r_.fail(q + "." + key, "must lie within " + format_number(kMaxShutterFrames) +
+                                     " frames of the frame's start, got " + v->dump());
+        return x;
+      };
+      t.shutter_open = frames("open", 0);
+      t.shutter_close = frames("close", t.shutter_open + 0.5);
+      if (t.shutter_close < t.shutter_open)
+        r_.fail(q + ".close", "the shutter closes (" + format_number(t.shutter_close) +
+                                  " frames) before it opens (" + format_number(t.shutter_open) +
+                                  ")");
+    }
+  }
+
+  // camera.keyframes: [{"frame": F or "time": SECONDS, "look_at": {...} or "to_world": [...]}],
+  // times increasing; the camera_to_world of a moving camera (Camera::motion).
+  void parse_camera_keyframes(const json& keys) {
+    r_.array(keys, "camera.keyframes");
+    if (keys.empty()) r_.fail("camera.keyframes", "needs at least one key");
+    std::vector<Keyframe> frames;
+    for (size_t i = 0; i < keys.size(); ++i) {
+      const std::string p = json_child("camera.keyframes", i);
+      const json& k = keys[i];
+      r_.expect_object(k, p);
+      r_.check_keys(k, p, {"frame", "time", "look_at", "to_world"});
+      const json* frame = r_.find(k, "frame");
+      const json* time = r_.find(k, "time");
+      if (!frame == !time) r_.fail(p, "give its 'frame' or its 'time' (seconds), one of them");
+      const double at =
+          frame ? r_.real(*frame, p + ".frame") / scene_.time.fps : r_.real(*time, p + ".time");
+      if (!std::isfinite(at)) r_.fail(p, "the key's time is not finite");
+      if (!frames.empty() && !(at > frames.back().time))
+        r_.fail(p + (frame ? ".frame" : ".time"),
+                "keys must be in increasing time: this one is not after " +
+                    json_child("camera.keyframes", i - 1));
+      frames.push_back({at, camera_transform(k, p)});
+    }
+    try {
+      scene_.camera.motion = AnimatedTransform(frames);
+    } catch (const std::invalid_argument& e) {
+      r_.fail("camera.keyframes", e.what());
+    }
+    scene_.camera.camera_to_world = frames.front().m;
+  }
+
+  // A camera's transform from its 'look_at' or 'to_world' (at path p).
+  Mat4 camera_transform(const json& j, const std::string& p) {
+    const json* look = r_.find(j, "look_at");
+    const json* to_world = r_.find(j, "to_world");
+    if (!look && !to_world) r_.fail(p, "needs either 'look_at' or 'to_world'");
+    if (look && to_world) r_.fail(p, "give either 'look_at' or 'to_world', not both");
+    return look ? parse_look_at(*look, p + ".look_at")
+                : parse_camera_matrix(*to_world, p + ".to_world");
+  }
+
   void parse_camera(const json& j) {
     const std::string p = "camera";
-    r_.check_keys(j, p, {"type", "fov_deg", "look_at", "to_world", "aperture_radius", "focus_distance"});
+    r_.check_keys(j, p,
+                  {"type", "fov_deg", "look_at", "to_world", "keyframes", "aperture_radius",
+                   "focus_distance"});
     if (const json* t = r_.find(j, "type"))
       if (std::string type = r_.string(*t, "camera.type"); type != "perspective")
         r_.fail("camera.type", "unknown camera type '" + type + "' (known: perspective)");
@@ -96,11 +182,15 @@ class SceneParser {
       r_.fail("camera.fov_deg",
               "must be between 0 and 180 degrees (exclusive), got " + format_number(fov));
     scene_.camera.fov_deg = fov;
-    const json* look = r_.find(j, "look_at");
-    const json* to_world = r_.find(j, "to_world");
-    if (!look && !to_world) r_.fail(p, "needs either 'look_at' or 'to_world'");
-    if (look && to_world) r_.fail(p, "give either 'look_at' or 'to_world', not both");
-    scene_.camera.camera_to_world = look ? parse_look_at(*look) : parse_camera_matrix(*to_world);
+    if (const json* keys = r_.find(j, "keyframes")) {
+      if (r_.find(j, "look_at") || r_.find(j, "to_world"))
+        r_.fail("camera.keyframes",
+                "give the camera's 'keyframes' or one 'look_at'/'to_world', "
+                "not both");
+      parse_camera_keyframes(*keys);
+    } else {
+      scene_.camera.camera_to_world = camera_transform(j, p);
+    }
     if (const json* a = r_.find(j, "aperture_radius")) {
       scene_.camera.lens_radius = r_.number(*a, "camera.aperture_radius");
       if (scene_.camera.lens_radius < 0)
@@ -115,8 +205,7 @@ class SceneParser {
     }
   }
 
-  Mat4 parse_look_at(const json& j) {
-    const std::string p = "camera.look_at";
+  Mat4 parse_look_at(const json& j, const std::string& p) {
     r_.check_keys(j, p, {"eye", "target", "up"});
     Vec3 eye = r_.vec3(r_.require(j, p, "eye"), p + ".eye");
     Vec3 target = r_.vec3(r_.require(j, p, "target"), p + ".target");
@@ -131,8 +220,7 @@ class SceneParser {
 
   // The camera matrix must be a rotation and a translation: a scale or shear would silently
   // change the field of view, a mirror the handedness.
-  Mat4 parse_camera_matrix(const json& j) {
-    const std::string p = "camera.to_world";
+  Mat4 parse_camera_matrix(const json& j, const std::string& p) {
     Mat4 m = r_.matrix(j, p);
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b) {
