@@ -5,6 +5,7 @@
 // cannot take a moving camera yet say so.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <nlohmann/json.hpp>
 
 #include "engine/render.h"
@@ -49,8 +50,10 @@ Scene still_at(const Scene& moving, double time) {
 // O(1/N) of the slice's share at an edge crossing it: a pixel's mean moves by at most ~1/16 of an
 // edge's contrast times the fraction of slices the edge crosses, below the per-pixel standard
 // error of 4 x 32 samples (about 10% of the pixel) in all but a few edge pixels, which the
-// harness's outlier allowance takes. With the camera held still (time ignored) the test fails:
-// the blurred edges are tens of standard errors from the sharp ones.
+// harness's outlier allowance takes. So the test sees a bias of about 3.5 per-pixel standard
+// errors (some 30% of a pixel's value) in more than 7 of the 1,728 cells; the image means are
+// known to about 1.3%, so their 1% check is weak here (the harness says so). With the camera held
+// still (time ignored) the test fails: the blurred edges are far outside that.
 TEST(Motion, BoxShutterBlurIsTheMeanOfStillsAcrossTheShutter) {
   const uint32_t passes = 32;
   const Scene moving = moving_cornell(4, passes);
@@ -79,6 +82,7 @@ TEST(Motion, BoxShutterBlurIsTheMeanOfStillsAcrossTheShutter) {
   }
   const test::Agreement a = test::compare(blurred, averaged);
   EXPECT_TRUE(a.passed) << a.message;
+  std::printf("blur against the mean of stills: %s\n", a.message.c_str());
   // And the blur is there: the still at the shutter's middle is not the blurred image.
   const test::Agreement sharp =
       test::compare(blurred, test::render_stats(still_at(moving, 0.5 / 24), passes, 1));
