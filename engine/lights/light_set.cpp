@@ -38,6 +38,7 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
     if (!m.emission || is_black(m.emission->radiance)) continue;
     double w = selection_weight(m.emission->radiance) * (m.emission->two_sided ? 2.0 : 1.0);
     mesh_first_light_[mi] = uint32_t(area_.size());
+    area_spheres_ |= m.sphere.has_value();
     groups.push_back({uint32_t(area_.size()), uint32_t(m.primitive_count())});
     for (uint32_t t = 0; t < m.primitive_count(); ++t) {
       float a = m.sphere ? 4 * kPi * sqr(m.sphere->radius) : triangle_area(m, t);

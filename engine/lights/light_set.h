@@ -56,6 +56,8 @@ class LightSet {
   bool empty() const { return size() == 0; }
   size_t size() const { return kinds_.size(); }
   size_t area_light_count() const { return area_.size(); }
+  // Whether some area light is an exact sphere (the others are triangles).
+  bool has_area_spheres() const { return area_spheres_; }
   LightKind kind(size_t light) const { return kinds_[light]; }
   // Light index of Scene::lights[k], and of the environment (only when has_environment()).
   size_t scene_light_index(size_t k) const { return area_.size() + k; }
@@ -161,6 +163,7 @@ class LightSet {
   std::unique_ptr<EnvironmentMap> env_;
   std::vector<LightKind> kinds_;
   std::vector<uint32_t> mesh_first_light_;  // per mesh: index of its first light triangle or ~0
+  bool area_spheres_ = false;
   LightSelection selection_;
 };
 

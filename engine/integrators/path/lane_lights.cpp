@@ -45,12 +45,10 @@ void pick_in_group_lanes(const double* __restrict cdf, int count, float* __restr
 
 LaneLights::LaneLights(const LightSet& lights) : selection_(lights.selection()) {
   const std::vector<LightSelection::Group>& groups = selection_.groups();
-  bool no_sphere = true;
-  for (size_t i = 0; i < lights.area_light_count(); ++i)
-    no_sphere &= lights.area_light(i).sphere == nullptr;
+  // (O(1) in the lights: built once per task.)
   triangles_by_power_ = lights.area_light_count() > 0 &&
                         lights.area_light_count() == lights.size() && !lights.uses_bvh() &&
-                        no_sphere;
+                        !lights.has_area_spheres();
   const auto positive = [&](uint32_t i) { return selection_.pmf(i) > 0; };
   // One emissive mesh of 2 to kLanes triangles, none of zero probability.
   bool one_mesh = groups.size() == 1 && groups[0].count >= 2 && groups[0].count <= uint32_t(kLanes);
