@@ -189,8 +189,11 @@ AnimatedTransform::AnimatedTransform(std::vector<Keyframe> keys) {
 Mat4 AnimatedTransform::at(double time) const {
   if (keys_.size() == 1 || !(time > keys_.front().time)) return keys_.front().m;
   if (!(time < keys_.back().time)) return keys_.back().m;
-  size_t i = 0;
-  while (keys_[i + 1].time <= time) ++i;  // keys_[i].time <= time < keys_[i + 1].time
+  // keys_[i].time <= time < keys_[i + 1].time (a binary search: camera rays ask per ray).
+  const size_t i = size_t(std::upper_bound(keys_.begin(), keys_.end(), time,
+                                           [](double t, const Keyframe& k) { return t < k.time; }) -
+                          keys_.begin()) -
+                   1;
   if (time == keys_[i].time) return keys_[i].m;
   const double u = (time - keys_[i].time) / (keys_[i + 1].time - keys_[i].time);
   return compose(interpolate(u, parts_[i], parts_[i + 1]));
