@@ -1,5 +1,6 @@
 #include "engine/accel.h"
 
+#include "engine/animated_transform.h"
 #include "engine/shapes.h"
 #include "engine/simd.h"
 
@@ -76,12 +77,12 @@ inline Vec2 triangle_uv(const Mesh& m, uint32_t i0, uint32_t i1, uint32_t i2, fl
   return {b0 * a.x + b1 * b.x + b2 * c.x, b0 * a.y + b1 * b.y + b2 * c.y};
 }
 
-void init_ray(RTCRay& r, Vec3 o, Vec3 d, float tmax) {
+void init_ray(RTCRay& r, Vec3 o, Vec3 d, float tmax, float time) {
   r.org_x = o.x, r.org_y = o.y, r.org_z = o.z;
   r.dir_x = d.x, r.dir_y = d.y, r.dir_z = d.z;
   r.tnear = 0.0f;
   r.tfar = tmax;
-  r.time = 0.0f;
+  r.time = time;
   r.mask = 0xFFFFFFFFu;  // Debian builds Embree with ray masks on: all ones hits everything
   r.id = 0;
   r.flags = 0;
@@ -113,6 +114,47 @@ void attach_mesh(RTCDevice device, RTCScene scene, const Mesh& m, unsigned id) {
   rtcCommitGeometry(g);
   rtcAttachGeometryByID(scene, g, id);
   rtcReleaseGeometry(g);
+}
+
+// Embree's quaternion decomposition of an affine matrix, M = T R S with S upper triangular (its
+// RTCQuaternionDecomposition): the QR decomposition of M's linear part by Gram-Schmidt on its
+// columns, in double, R made a rotation (determinant +1) by moving a mirror into S's last scale.
+RTCQuaternionDecomposition quaternion_decomposition(const Mat4& m) {
+  double c[3][3];  // c[j]: column j of the linear part
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) c[j][i] = m.m[i][j];
+  auto dot3 = [](const double* a, const double* b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  };
+  double q[3][3], u[3][3] = {};
+  for (int j = 0; j < 3; ++j) {
+    double v[3] = {c[j][0], c[j][1], c[j][2]};
+    for (int k = 0; k < j; ++k) {
+      u[k][j] = dot3(q[k], c[j]);
+      for (int i = 0; i < 3; ++i) v[i] -= u[k][j] * q[k][i];
+    }
+    u[j][j] = std::sqrt(dot3(v, v));
+    for (int i = 0; i < 3; ++i) q[j][i] = v[i] / u[j][j];
+  }
+  const double det = q[0][0] * (q[1][1] * q[2][2] - q[1][2] * q[2][1]) -
+                     q[1][0] * (q[0][1] * q[2][2] - q[0][2] * q[2][1]) +
+                     q[2][0] * (q[0][1] * q[1][2] - q[0][2] * q[1][1]);
+  if (det < 0) {
+    for (int i = 0; i < 3; ++i) q[2][i] = -q[2][i];
+    u[2][2] = -u[2][2];
+  }
+  double r[3][3];  // row-major rotation: its columns are q[0], q[1], q[2]
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r[i][j] = q[j][i];
+  const Quaternion quat = matrix_to_quaternion(r);
+  RTCQuaternionDecomposition d;
+  rtcInitQuaternionDecomposition(&d);
+  d.scale_x = float(u[0][0]), d.scale_y = float(u[1][1]), d.scale_z = float(u[2][2]);
+  d.skew_xy = float(u[0][1]), d.skew_xz = float(u[0][2]), d.skew_yz = float(u[1][2]);
+  d.quaternion_r = float(quat.w), d.quaternion_i = float(quat.x);
+  d.quaternion_j = float(quat.y), d.quaternion_k = float(quat.z);
+  d.translation_x = m.m[0][3], d.translation_y = m.m[1][3], d.translation_z = m.m[2][3];
+  return d;
 }
 
 // Moves an object-space hit point to world space with pbrt-v4's error bound of a transformed
@@ -150,7 +192,17 @@ float sphere_distance(const SphereShape& s, Vec3 o, Vec3 d, float t_embree) {
 
 }  // namespace
 
-Accel::Accel(const Scene& scene) : scene_(scene) {
+uint32_t motion_time_steps(const AnimatedTransform& motion, double open, double close) {
+  if (!motion.animated() || !(close > open)) return 1;
+  const std::vector<Keyframe>& keys = motion.keys();
+  if (close <= keys.front().time || open >= keys.back().time) return 1;  // held still
+  uint32_t segments = 1;  // the key segments the shutter overlaps
+  for (const Keyframe& k : keys) segments += k.time > open && k.time < close;
+  if (segments == 1 && motion.rigid_at((open + close) / 2)) return 2;
+  return std::min<uint32_t>(kMaxTimeSteps, 1 + kStepsPerSegment * segments);
+}
+
+Accel::Accel(const Scene& scene, uint32_t frame) : scene_(scene) {
   // RAYFARM_EMBREE_CONFIG=isa=NAME: Embree's kernels for another CPU kind (e.g. isa=avx2 on an
   // AVX-512 machine, as Accel.PacketQueriesOnEmbreesAvx2Kernels does; docs/design.md). Only that
   // key: Embree's other settings (its thread count among them) are not ours to hand out.
@@ -198,13 +250,33 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
     }
     object_scenes_.push_back(os);
   }
+  // Instances: a moving one samples its track at uniform time steps over the frame's shutter
+  // (Embree's time 0 at the shutter's opening, 1 at its closing), quaternion-decomposed so that
+  // Embree slerps the rotation between steps; motion_time_steps says how many.
+  const double open = scene.time.at(frame, 0.0f), close = scene.time.at(frame, 1.0f);
+  instance_geometry_.assign(scene.instances.size(), nullptr);
+  instance_to_world_.reserve(scene.instances.size());
   for (size_t i = 0; i < scene.instances.size(); ++i) {
     const Instance& inst = scene.instances[i];
+    const uint32_t steps = inst.moves() ? motion_time_steps(inst.motion, open, close) : 1;
+    instance_to_world_.push_back(inst.moves() ? inst.motion.at(open) : inst.to_world);
     RTCScene os = object_scenes_[inst.object];
     if (!os) continue;
     RTCGeometry g = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
     rtcSetGeometryInstancedScene(g, os);
-    rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, &inst.to_world.m[0][0]);
+    if (steps == 1) {
+      rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, &instance_to_world_[i].m[0][0]);
+    } else {
+      rtcSetGeometryTimeStepCount(g, steps);
+      for (uint32_t k = 0; k < steps; ++k) {
+        const double t = k + 1 == steps ? close : open + (close - open) * k / (steps - 1);
+        const RTCQuaternionDecomposition d = quaternion_decomposition(inst.motion.at(t));
+        rtcSetGeometryTransformQuaternion(g, k, &d);
+      }
+      rtcRetainGeometry(g);
+      instance_geometry_[i] = g;
+      time_steps_ = std::max(time_steps_, steps);
+    }
     rtcCommitGeometry(g);
     rtcAttachGeometryByID(rtc_scene_, g, unsigned(scene.meshes.size() + i));
     rtcReleaseGeometry(g);
@@ -215,11 +287,13 @@ Accel::Accel(const Scene& scene) : scene_(scene) {
              m->normals.size() * sizeof(Vec3) + m->uvs.size() * sizeof(Vec2);
   prefetch_ = bytes > kPrefetchAboveBytes;
   instance_inverse_.reserve(scene.instances.size());
-  for (const Instance& inst : scene.instances) instance_inverse_.push_back(inst.to_world.inverse());
+  for (const Mat4& m : instance_to_world_) instance_inverse_.push_back(m.inverse());
   rtcCommitScene(rtc_scene_);
 }
 
 Accel::~Accel() {
+  for (RTCGeometry g : instance_geometry_)
+    if (g) rtcReleaseGeometry(g);
   if (rtc_scene_) rtcReleaseScene(rtc_scene_);
   for (RTCScene os : object_scenes_)
     if (os) rtcReleaseScene(os);
@@ -230,7 +304,7 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh;
-  init_ray(rh.ray, ray.o, ray.d, ray.tmax);
+  init_ray(rh.ray, ray.o, ray.d, ray.tmax, ray.time);
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
@@ -304,6 +378,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
       const Vec2 uv = triangle_uv(*m, idx[0], idx[1], idx[2], h.u[i], h.v[i]);
       out.uv[0][i] = uv.x, out.uv[1][i] = uv.y;
       out.t[i] = packet.rh.ray.tfar[i];
+      out.time[i] = packet.rh.ray.time[i];
       out.mesh[i] = h.geomID[i];
       out.prim[i] = h.primID[i];
     } else {
@@ -324,29 +399,46 @@ void Accel::occluded_packet(RayPacket& packet, int n, int* blocked) const {
     blocked[i] = packet.active(i) & (packet.rh.ray.tfar[i] < 0);
 }
 
+Mat4 Accel::instance_transform_at(size_t i, float time) const {
+  RTCGeometry g = instance_geometry_[i];
+  if (!g) return instance_to_world_[i];
+  // Embree's own interpolation between its time steps: the transform its traversal used.
+  float xfm[12];
+  rtcGetGeometryTransform(g, time, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, xfm);
+  Mat4 m;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) m.m[r][c] = xfm[4 * r + c];
+  return m;
+}
+
 void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsigned inst_id, float u,
                             float v, float t, SurfaceHit& hit) const {
-  const Instance* inst = nullptr;
-  if (inst_id != RTC_INVALID_GEOMETRY_ID) inst = &scene_.instances[inst_id - scene_.meshes.size()];
+  const bool instanced = inst_id != RTC_INVALID_GEOMETRY_ID;
+  const size_t inst = instanced ? inst_id - scene_.meshes.size() : 0;
+  const bool moving = instanced && instance_geometry_[inst] != nullptr;
+  Mat4 moved;  // a moving instance's transform at the ray's time
+  if (moving) moved = instance_transform_at(inst, ray.time);
+  const Mat4& to_world = moving || !instanced ? moved : instance_to_world_[inst];
   const uint32_t surface = surface_of(geom, inst_id);
   const Mesh& m = *surfaces_[surface];
   hit.mesh = surface;
   hit.prim = prim;
+  hit.time = ray.time;
   if (m.sphere) {
     // Rebuilt from the ray (in the object's space for an instance) at our own distance and
     // projected onto the sphere.
     Vec3 o = ray.o, d = ray.d;
-    if (inst) {
-      const Mat4& inv = instance_inverse_[inst_id - scene_.meshes.size()];
+    if (instanced) {
+      const Mat4 inv = moving ? moved.inverse() : instance_inverse_[inst];
       o = inv.point(o), d = inv.vector(d);
     }
     hit.t = sphere_distance(*m.sphere, o, d, t);
     Vec3 near = o + d * hit.t;
     sphere_surface_point(*m.sphere, near, hit.p, hit.p_error, hit.ng, &hit.uv);
     hit.ns = hit.ng;
-    if (inst) {
-      transform_hit_point(inst->to_world, hit.p, hit.p_error);
-      hit.ng = hit.ns = normalize(inst->to_world.normal(hit.ng));
+    if (instanced) {
+      transform_hit_point(to_world, hit.p, hit.p_error);
+      hit.ng = hit.ns = normalize(to_world.normal(hit.ng));
     }
     return;
   }
@@ -356,19 +448,19 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
   triangle_hit(m.positions[i0], m.positions[i1], m.positions[i2],
                normals ? m.normals[i0] : Vec3(0.0f), normals ? m.normals[i1] : Vec3(0.0f),
                normals ? m.normals[i2] : Vec3(0.0f), u, v, hit.p, hit.p_error, hit.ng, hit.ns);
-  if (inst) {  // object space to world space (flatten_instances' placement)
-    transform_hit_point(inst->to_world, hit.p, hit.p_error);
-    hit.ng = normalize(inst->to_world.normal(hit.ng));
-    hit.ns = normalize(inst->to_world.normal(hit.ns));
+  if (instanced) {  // object space to world space (flatten_instances' placement)
+    transform_hit_point(to_world, hit.p, hit.p_error);
+    hit.ng = normalize(to_world.normal(hit.ng));
+    hit.ns = normalize(to_world.normal(hit.ns));
   }
   hit.uv = triangle_uv(m, i0, i1, i2, u, v);
 }
 
-bool Accel::occluded(Vec3 o, Vec3 d, float tmax) const {
+bool Accel::occluded(const Ray& ray) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay r;
-  init_ray(r, o, d, tmax);
+  init_ray(r, ray.o, ray.d, ray.tmax, ray.time);
   rtcOccluded1(rtc_scene_, &ctx, &r);
   return r.tfar < 0;  // Embree sets tfar to -inf on a hit
 }
@@ -402,7 +494,7 @@ float Accel::cast(Vec3 o, Vec3 d) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRayHit rh;
-  init_ray(rh.ray, o, d, kInf);
+  init_ray(rh.ray, o, d, kInf, 0.0f);
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
   rtcIntersect1(rtc_scene_, &ctx, &rh);

@@ -22,9 +22,14 @@
 
 namespace rf {
 
+// A ray at a time: `time` is the position in the frame's shutter, 0 at its opening and 1 at its
+// closing (Embree's ray time; docs/design.md "Time"). A path keeps its camera sample's time:
+// spawned and shadow rays take it from the hit they leave (SurfaceHit::time). A scene without
+// moving geometry ignores it.
 struct Ray {
   Vec3 o, d;
   float tmax = kInf;
+  float time = 0;
 };
 
 struct SurfaceHit {
@@ -34,6 +39,7 @@ struct SurfaceHit {
   Vec3 ns;       // unit shading normal (interpolated vertex normals, else ng), same side as ng
   Vec2 uv;
   float t = 0;
+  float time = 0;               // the time of the ray that found it (Ray::time)
   uint32_t mesh = 0, prim = 0;  // mesh: surface id (Accel::mesh); prim: its triangle
 };
 
@@ -80,17 +86,29 @@ inline Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
   return {away(po.x, offset.x), away(po.y, offset.y), away(po.z, offset.z)};
 }
 
+// Embree's time steps for an instance moving along `motion` during the shutter [open, close]
+// (seconds): 1 when it does not move then (a static placement at `open`); 2 when the shutter lies
+// within one key segment that only translates and rotates (Embree's interpolation between the two
+// steps, translation linear and rotation by slerp, is then the track's own); otherwise the track
+// resampled uniformly, kStepsPerSegment steps per key segment the shutter overlaps, at most
+// kMaxTimeSteps (Embree's limit): Embree's time steps are uniform per geometry, so keys that fall
+// between steps are approximated by their neighbours' interpolation (docs/design.md "Time").
+inline constexpr uint32_t kMaxTimeSteps = RTC_MAX_TIME_STEP_COUNT, kStepsPerSegment = 8;
+uint32_t motion_time_steps(const AnimatedTransform& motion, double open, double close);
+
 class Accel {
  public:
-  explicit Accel(const Scene& scene);
+  // The scene's BVH for frame `frame`: the placements of moving instances over that frame's
+  // shutter (a scene without moving geometry builds the same BVH for every frame).
+  explicit Accel(const Scene& scene, uint32_t frame = 0);
   ~Accel();
   Accel(const Accel&) = delete;
   Accel& operator=(const Accel&) = delete;
 
   // Closest hit along ray within (0, tmax). Returns false on a miss.
   bool intersect(const Ray& ray, SurfaceHit& hit) const;
-  // True when anything blocks the segment o + t d, t in (0, tmax).
-  bool occluded(Vec3 o, Vec3 d, float tmax) const;
+  // True when anything blocks the segment o + t d, t in (0, tmax), at the ray's time.
+  bool occluded(const Ray& ray) const;
 
   // The same queries for up to kPacket rays at once, through Embree's 16-wide packet queries.
   // A RayPacket holds the rays in Embree's layout between queries: set(i, ray) makes lane i
@@ -110,7 +128,8 @@ class Accel {
       rh.ray.org_x[i] = r.o.x, rh.ray.org_y[i] = r.o.y, rh.ray.org_z[i] = r.o.z;
       rh.ray.dir_x[i] = r.d.x, rh.ray.dir_y[i] = r.d.y, rh.ray.dir_z[i] = r.d.z;
       rh.ray.tfar[i] = r.tmax;
-      rh.ray.mask[i] = 0xFFFFFFFFu;  // tnear, time, id and flags stay 0
+      rh.ray.time[i] = r.time;
+      rh.ray.mask[i] = 0xFFFFFFFFu;  // tnear, id and flags stay 0
       rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
       rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
       valid[i] = -1;
@@ -145,7 +164,8 @@ class Accel {
     Ray ray(int i) const {
       return {{rh.ray.org_x[i], rh.ray.org_y[i], rh.ray.org_z[i]},
               {rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]},
-              kInf};
+              kInf,
+              rh.ray.time[i]};
     }
     alignas(64) RTCRayHit16 rh;
     alignas(64) int valid[kPacket];
@@ -157,20 +177,21 @@ class Accel {
     static constexpr int N = kPacket;
     using V3 = float[3][N];
     V3 p, p_error, ng, ns;
-    float uv[2][N], t[N];
+    float uv[2][N], t[N], time[N];
     uint32_t mesh[N], prim[N];
     int found[N];
     static Vec3 get(const V3& a, int i) { return {a[0][i], a[1][i], a[2][i]}; }
     SurfaceHit hit(int i) const {
       SurfaceHit h;
       h.p = get(p, i), h.p_error = get(p_error, i), h.ng = get(ng, i), h.ns = get(ns, i);
-      h.uv = {uv[0][i], uv[1][i]}, h.t = t[i], h.mesh = mesh[i], h.prim = prim[i];
+      h.uv = {uv[0][i], uv[1][i]}, h.t = t[i], h.time = time[i], h.mesh = mesh[i], h.prim = prim[i];
       return h;
     }
     void set(int i, const SurfaceHit& h) {
       for (int a = 0; a < 3; ++a)
         p[a][i] = h.p[a], p_error[a][i] = h.p_error[a], ng[a][i] = h.ng[a], ns[a][i] = h.ns[a];
-      uv[0][i] = h.uv.x, uv[1][i] = h.uv.y, t[i] = h.t, mesh[i] = h.mesh, prim[i] = h.prim;
+      uv[0][i] = h.uv.x, uv[1][i] = h.uv.y, t[i] = h.t, time[i] = h.time, mesh[i] = h.mesh;
+      prim[i] = h.prim;
     }
   };
   // Closest hits of the active lanes i < n: hits.found[i], and lane i's hit in slot i when found.
@@ -187,24 +208,24 @@ class Accel {
 
   // Spawns a ray from a hit towards w.
   Ray spawn(const SurfaceHit& from, Vec3 w) const {
-    return {offset_ray_origin(from.p, from.p_error, from.ng, w), w, kInf};
+    return {offset_ray_origin(from.p, from.p_error, from.ng, w), w, kInf, from.time};
   }
   // The shadow ray between surface point `from` and point `to` (itself on a surface with normal
   // to_ng and error to_error): both ends offset off their surfaces, the direction unnormalised
   // so that t in (0, 1) spans the segment, tmax just short of the target.
   Ray shadow_ray(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const {
-    return shadow_segment(from.p, from.p_error, from.ng, to, to_error, to_ng);
+    return shadow_segment(from.p, from.p_error, from.ng, to, to_error, to_ng, from.time);
   }
-  // The same from a point p with error p_error on a surface with geometric normal ng.
-  static Ray shadow_segment(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 to, Vec3 to_error, Vec3 to_ng) {
+  // The same from a point p with error p_error on a surface with geometric normal ng, at `time`.
+  static Ray shadow_segment(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 to, Vec3 to_error, Vec3 to_ng,
+                            float time) {
     Vec3 o = offset_ray_origin(p, p_error, ng, to - p);
     Vec3 target = offset_ray_origin(to, to_error, to_ng, o - to);
-    return {o, target - o, 1.0f - 1e-4f};
+    return {o, target - o, 1.0f - 1e-4f, time};
   }
   // Shadow test along shadow_ray(from, to, to_error, to_ng); true when unoccluded.
   bool visible(const SurfaceHit& from, Vec3 to, Vec3 to_error, Vec3 to_ng) const {
-    Ray r = shadow_ray(from, to, to_error, to_ng);
-    return !occluded(r.o, r.d, r.tmax);
+    return !occluded(shadow_ray(from, to, to_error, to_ng));
   }
 
   // Embree's bare cast for the baseline benchmark: hit distance or infinity, no shading.
@@ -214,6 +235,11 @@ class Accel {
   void cast8(const Ray* rays, int n, float* t) const;
 
   const Scene& scene() const { return scene_; }
+  // The most time steps of any instance (1 when nothing moves during the frame).
+  uint32_t time_steps() const { return time_steps_; }
+  // Instance i's object-to-world transform at shutter position `time` (Ray::time): Embree's
+  // interpolation for a moving instance, the placement otherwise.
+  Mat4 instance_transform_at(size_t i, float time) const;
   // The mesh of a surface id (see above): its material, emission and object-space geometry.
   const Mesh& mesh(uint32_t surface) const { return *surfaces_[surface]; }
 
@@ -239,7 +265,11 @@ class Accel {
   // path, which ignores the valid mask (RayPacket::quiet_inactive).
   bool quiet_packets_ = false;
   std::vector<RTCScene> object_scenes_;         // one per object (nullptr: placed by no instance)
+  std::vector<Mat4> instance_to_world_;         // per instance: its placement (a moving one's at
+                                                // the shutter's opening)
   std::vector<Mat4> instance_inverse_;          // world to object space, per instance
+  std::vector<RTCGeometry> instance_geometry_;  // a moving instance's Embree geometry, else null
+  uint32_t time_steps_ = 1;
   RTCDevice device_ = nullptr;
   RTCScene rtc_scene_ = nullptr;
 };

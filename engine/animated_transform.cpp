@@ -199,4 +199,21 @@ Mat4 AnimatedTransform::at(double time) const {
   return compose(interpolate(u, parts_[i], parts_[i + 1]));
 }
 
+bool AnimatedTransform::rigid_at(double time) const {
+  if (keys_.size() == 1 || !(time > keys_.front().time) || !(time < keys_.back().time)) return true;
+  const size_t i = size_t(std::upper_bound(keys_.begin(), keys_.end(), time,
+                                           [](double t, const Keyframe& k) { return t < k.time; }) -
+                          keys_.begin()) -
+                   1;
+  // The polar decomposition's S of equal matrices agrees to rounding: 1e-6 of S's largest entry.
+  const auto& a = parts_[i].s;
+  const auto& b = parts_[i + 1].s;
+  double largest = 0, diff = 0;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      largest = std::max(largest, std::fabs(a[r][c])),
+      diff = std::max(diff, std::fabs(a[r][c] - b[r][c]));
+  return diff <= 1e-6 * largest;
+}
+
 }  // namespace rf

@@ -65,6 +65,9 @@ class AnimatedTransform {
   const std::vector<Keyframe>& keys() const { return keys_; }
   // The transform at `time`.
   Mat4 at(double time) const;
+  // Whether, around `time`, the transform only translates and rotates: the key segment holding
+  // `time` keeps its scale-and-shear part (or the track is held still there).
+  bool rigid_at(double time) const;
 
  private:
   static DecomposedTransform decompose_or_keep(const Mat4& m);

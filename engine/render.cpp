@@ -9,15 +9,47 @@ namespace rf {
 
 Renderer::Renderer(const Scene& scene)
     : scene_(scene),
-      accel_(std::make_unique<Accel>(scene)),
+      per_frame_(geometry_moves(scene)),
       lights_(std::make_unique<LightSet>(scene)),
       textures_(std::make_unique<TextureEvaluator>(scene)),
-      camera_(std::make_unique<PerspectiveCamera>(scene.camera, scene.film.width,
-                                                  scene.film.height)) {
+      camera_(
+          std::make_unique<PerspectiveCamera>(scene.camera, scene.film.width, scene.film.height)) {
   check_renderable(scene);
   float t = std::tan(0.5f * scene.camera.fov_deg * kPi / 180.0f);
-  context_.reset(new RenderContext(scene_, *accel_, *lights_, *textures_, *camera_, pass_cache_,
-                                   2 * t / float(std::min(scene.film.width, scene.film.height))));
+  pixel_spread_ = 2 * t / float(std::min(scene.film.width, scene.film.height));
+  if (!per_frame_) still_ = build_frame(0);
+}
+
+std::unique_ptr<Renderer::FrameState> Renderer::build_frame(uint32_t frame) const {
+  auto f = std::make_unique<FrameState>();
+  f->accel = std::make_unique<Accel>(scene_, frame);
+  f->context = std::make_unique<RenderContext>(scene_, *f->accel, *lights_, *textures_, *camera_,
+                                               pass_cache_, pixel_spread_, stop_);
+  return f;
+}
+
+std::shared_ptr<const Renderer::FrameState> Renderer::frame_state(uint32_t frame) const {
+  if (!per_frame_) return still_;
+  std::shared_ptr<Entry> entry;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto [it, inserted] = frames_.try_emplace(frame);
+    if (inserted) it->second = std::make_shared<Entry>();
+    entry = it->second;
+    recent_.erase(std::remove(recent_.begin(), recent_.end(), frame), recent_.end());
+    recent_.push_back(frame);
+    while (recent_.size() > kKeepFrames) {  // tasks in flight hold their state
+      frames_.erase(recent_.front());
+      recent_.erase(recent_.begin());
+    }
+  }
+  tbb::collaborative_call_once(entry->once, [&] { entry->state = build_frame(frame); });
+  return entry->state;
+}
+
+const Renderer::FrameState& Renderer::first_frame() const {
+  std::call_once(first_once_, [&] { first_ = frame_state(0); });
+  return *first_;
 }
 
 bool Renderer::has_lights() const { return !lights_->empty(); }
@@ -32,7 +64,8 @@ SampleBuffer Renderer::render(const TaskKey& task, bool parallel) const {
   const Rect film{0, 0, scene_.film.width, scene_.film.height};
   RF_CHECK(task.rect.w > 0 && task.rect.h > 0 && film.contains(task.rect),
            "task rect " + to_string(task.rect) + " in a " + to_string(film) + " film");
-  return render_task(*context_, task, parallel);
+  const std::shared_ptr<const FrameState> state = frame_state(task.frame);
+  return render_task(*state->context, task, parallel);
 }
 
 }  // namespace rf

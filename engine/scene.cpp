@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numeric>
 
+#include "engine/check.h"
 #include "engine/json_reader.h"
 #include "engine/scene.h"
 #include "engine/shapes.h"
@@ -219,6 +220,13 @@ Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::st
 
 }  // namespace
 
+bool geometry_moves(const Scene& scene) {
+  return std::any_of(scene.instances.begin(), scene.instances.end(),
+                     [](const Instance& i) { return i.moves(); });
+}
+
+bool scene_moves(const Scene& scene) { return scene.camera.moves() || geometry_moves(scene); }
+
 uint64_t scene_elements(const Scene& scene) {
   uint64_t n = scene.meshes.size() + scene.objects.size() + scene.instances.size() +
                scene.lights.size() + scene.materials.size() + scene.textures.size();
@@ -241,9 +249,12 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
     if (inst.object >= scene.objects.size())
       throw SceneError(scene.path + ": " + where + ": object " + std::to_string(inst.object) +
                        " does not exist (" + std::to_string(scene.objects.size()) + " objects)");
-    if (!inst.to_world.is_finite() || !(std::fabs(inst.to_world.det3()) > 0))
-      throw SceneError(scene.path + ": " + where + " of '" + scene.objects[inst.object].name +
-                       "': the transform must be finite and invertible");
+    for (const Keyframe& k :
+         inst.moves() ? inst.motion.keys() : std::vector<Keyframe>{{0, inst.to_world}})
+      if (!k.m.is_finite() || !(std::fabs(k.m.det3()) > 0))
+        throw SceneError(scene.path + ": " + where + " of '" + scene.objects[inst.object].name +
+                         "': the transform must be finite and invertible" +
+                         (inst.moves() ? " (the key at " + std::to_string(k.time) + " s)" : ""));
   }
   for (uint32_t o = 0; o < scene.objects.size(); ++o) {
     SceneObject& obj = scene.objects[o];
@@ -252,7 +263,17 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
     uint64_t triangles = 0, placements = 0;
     for (const Mesh& m : obj.meshes)
       if (emissive(m)) triangles += m.primitive_count();
-    for (const Instance& inst : scene.instances) placements += inst.object == o;
+    for (size_t i = 0; i < scene.instances.size(); ++i) {
+      const Instance& inst = scene.instances[i];
+      placements += inst.object == o;
+      // Area lights are sampled per world-space triangle: a moving emitter would need its
+      // triangles at the path's time (issue 46's next part).
+      if (inst.object == o && inst.moves())
+        throw SceneError(scene.path + ": instance " + std::to_string(i) + " of '" + obj.name +
+                         "' moves, and '" + obj.name +
+                         "' holds an emitter: moving area lights are not supported yet; keep "
+                         "the emitter still (its own shape without keyframes)");
+    }
     if (placements && triangles > (max_elements - elements) / placements)
       throw over("object '" + obj.name + "' holds " + std::to_string(triangles) +
                  " emissive triangles, placed " + std::to_string(placements) +
@@ -267,6 +288,7 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
 }
 
 void flatten_instances(Scene& scene) {
+  RF_CHECK(!geometry_moves(scene), "flatten_instances of a scene whose instances move");
   for (size_t i = 0; i < scene.instances.size(); ++i) {
     const Instance& inst = scene.instances[i];
     const SceneObject& obj = scene.objects.at(inst.object);
@@ -293,10 +315,29 @@ void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi) {
   for (const Instance& inst : scene.instances) {
     auto [a, b] = object_box.at(inst.object);
     if (a.x > b.x) continue;
-    for (int c = 0; c < 8; ++c) {
-      Vec3 q = inst.to_world.point({(c & 1) ? b.x : a.x, (c & 2) ? b.y : a.y, (c & 4) ? b.z : a.z});
-      lo = vmin(lo, q), hi = vmax(hi, q);
+    auto place = [&](const Mat4& m) {
+      for (int c = 0; c < 8; ++c) {
+        Vec3 q = m.point({(c & 1) ? b.x : a.x, (c & 2) ? b.y : a.y, (c & 4) ? b.z : a.z});
+        lo = vmin(lo, q), hi = vmax(hi, q);
+      }
+    };
+    if (!inst.moves()) {
+      place(inst.to_world);
+      continue;
     }
+    // A moving instance: its box at kBoundSteps times per key segment (the box swept between two
+    // of them by a rotation leaves their union by at most 1 - cos(pi / kBoundSteps) of its
+    // radius for a half turn per segment, 0.05% at 100), then grown by 1% of its extent.
+    constexpr int kBoundSteps = 100;
+    Vec3 mlo(kInf), mhi(-kInf);
+    std::swap(lo, mlo), std::swap(hi, mhi);
+    const std::vector<Keyframe>& keys = inst.motion.keys();
+    for (size_t k = 0; k + 1 < keys.size(); ++k)
+      for (int j = 0; j <= kBoundSteps; ++j)
+        place(inst.motion.at(keys[k].time + (keys[k + 1].time - keys[k].time) * j / kBoundSteps));
+    const Vec3 pad = (hi - lo) * 0.01f;
+    mlo = vmin(mlo, lo - pad), mhi = vmax(mhi, hi + pad);
+    lo = mlo, hi = mhi;
   }
 }
 

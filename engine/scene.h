@@ -197,9 +197,15 @@ struct SceneObject {
   std::string name;
   std::vector<Mesh> meshes;  // object space
 };
+// A moving instance (JSON keyframes, glTF animations, pbrt's two transforms) has its
+// object-to-world transform over time in seconds in `motion`; to_world is then motion's first key.
 struct Instance {
+  Instance() = default;
+  Instance(uint32_t object_, const Mat4& to_world_) : object(object_), to_world(to_world_) {}
   uint32_t object = 0;  // index into Scene::objects
   Mat4 to_world;
+  AnimatedTransform motion;  // not animated for an instance that does not move
+  bool moves() const { return motion.animated(); }
 };
 
 struct Scene {
@@ -221,6 +227,11 @@ struct Scene {
   // directive (also logged as warnings when the scene is loaded).
   std::vector<std::string> warnings;
 };
+
+// Whether some geometry moves (an instance with an animated transform): its BVH is then one per
+// frame (Accel). And whether anything moves: that, or the camera.
+bool geometry_moves(const Scene& scene);
+bool scene_moves(const Scene& scene);
 
 // Command-line overrides of the scene's settings; each is validated like the scene's own value.
 struct SceneOverrides {

@@ -212,7 +212,7 @@ TEST(Accel, PacketQueriesOnEmbreesAvx2Kernels) {
       if (found) {
         EXPECT_NEAR(out.t[i], single.t, 1e-5f * single.t);
       }
-      const bool occluded = accel.occluded(ray[i].o, ray[i].d, tmax[i]);
+      const bool occluded = accel.occluded(Ray{ray[i].o, ray[i].d, tmax[i]});
       EXPECT_EQ(blocked[i] != 0, occluded) << "packet " << packet << " lane " << i;
       (found ? hits : misses) += 1;
       blocked_lanes += blocked[i] != 0;

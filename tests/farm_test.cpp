@@ -88,8 +88,8 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
                       farm.dir() + "/range/local." + f + ".exr");
   EXPECT_EQ(farm.client("fetch " + a + " -o " + farm.dir() + "/one.exr").exit_code, 2)
       << "several frames into one name";
-  // A moving camera (camera.keyframes, motion blur over the shutter): each frame the farm renders
-  // is the bits of the local frame-range render, and the frames differ (the camera moved).
+  // A moving camera and a moving ball (keyframes, motion blur over the shutter): each frame the
+  // farm renders is the bits of the local frame-range render, and the frames differ (they moved).
   const std::string moving = "tests/data/motion/moving_camera.json";
   const std::string m = farm.submit(moving + " --frames 1-3");
   farm.worker();  // (the first two left when the queue ran dry)
@@ -105,7 +105,8 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
                       farm.dir() + "/moving/local." + f + ".exr");
   EXPECT_NE(read_exr(farm.dir() + "/moving/local.0001.exr").px,
             read_exr(farm.dir() + "/moving/local.0003.exr").px);
-  // Each worker built at most one BVH per job, not one per frame: a frame only changes the seeds.
+  // Each worker built at most one BVH per still job, not one per frame: a frame only changes the
+  // seeds (the moving ball's job builds one per frame, and says so).
   for (const std::string& log : {farm.worker_log(0), farm.worker_log(1)}) {
     size_t builds = 0;
     for (size_t p = 0; (p = log.find("BVH built", p)) != std::string::npos; ++p) ++builds;

@@ -60,26 +60,11 @@ TEST(Motion, BoxShutterBlurIsTheMeanOfStillsAcrossTheShutter) {
   ASSERT_TRUE(moving.camera.moves());
   test::ImageStats blurred = test::render_stats(moving, passes, 1);
   constexpr int kSlices = 16;
-  std::vector<std::unique_ptr<Scene>> stills;
-  std::vector<std::unique_ptr<Renderer>> renderers;
-  for (int i = 0; i < kSlices; ++i) {
-    stills.push_back(std::make_unique<Scene>(still_at(moving, (i + 0.5) / kSlices / 24.0)));
-    renderers.push_back(std::make_unique<Renderer>(*stills.back()));
-  }
-  const int w = moving.film.width, h = moving.film.height;
-  test::ImageStats averaged(w, h, 1);
-  for (uint32_t pass = 0; pass < passes; ++pass) {
-    std::vector<double> rgb(size_t(w) * size_t(h) * 3, 0.0);
-    for (const auto& r : renderers) {
-      const SampleBuffer b = r->render(TaskKey{0, Rect{0, 0, w, h}, pass}, true);
-      for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
-          for (int c = 0; c < 3; ++c)
-            rgb[3 * (size_t(y) * size_t(w) + size_t(x)) + size_t(c)] +=
-                double(b.estimate(x, y)[c]) / kSlices;
-    }
-    averaged.add_pass_image(rgb);
-  }
+  std::vector<Scene> stills;
+  for (int i = 0; i < kSlices; ++i) stills.push_back(still_at(moving, (i + 0.5) / kSlices / 24.0));
+  std::vector<const Scene*> views;
+  for (const Scene& s : stills) views.push_back(&s);
+  const test::ImageStats averaged = test::mean_of_renders(views, passes, 1);
   const test::Agreement a = test::compare(blurred, averaged);
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("blur against the mean of stills: %s\n", a.message.c_str());

@@ -366,8 +366,9 @@ Renderer& Worker::prepare(const pb::Task& task) {
                       task.scene_digest() + " (another build or a corrupted cache?)");
   auto t0 = Clock::now();
   c.renderer = std::make_unique<Renderer>(*c.scene);
-  spdlog::info("scene {} ({}): BVH built in {:.2f} s", task.scene_path(),
-               c.scene->digest.substr(0, 12),
+  // A scene whose geometry moves builds its BVH per frame, at the frame's first task (Renderer).
+  spdlog::info("scene {} ({}): {} in {:.2f} s", task.scene_path(), c.scene->digest.substr(0, 12),
+               geometry_moves(*c.scene) ? "renderer set up (a BVH per frame)" : "BVH built",
                std::chrono::duration<double>(Clock::now() - t0).count());
   scenes_.push_front(std::move(c));
   while (scenes_.size() > kScenesKept) scenes_.pop_back();

@@ -35,8 +35,9 @@ RGB AoIntegrator::radiance(const RenderContext& ctx, Ray ray, Sampler& sampler,
     Vec3 w = frame.to_world(local);
     if (dot(w, ng) <= 0) continue;  // below the geometric surface: occluded by the surface itself
     Ray r = ctx.accel.spawn(hit, w);
+    r.tmax = s.max_distance;
     ++counters.rays;
-    if (!ctx.accel.occluded(r.o, r.d, s.max_distance)) sum += weight;
+    if (!ctx.accel.occluded(r)) sum += weight;
   }
   return RGB(float(sum / s.samples));
 }

@@ -329,6 +329,7 @@ RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, Spla
   cam[0] = Vertex{};
   cam[0].kind = VertexKind::Camera;
   cam[0].hit.p = ray.o;
+  cam[0].hit.time = ray.time;  // the light subpath and every connection are made at this time
   cam[0].beta = RGB(1.0f);
   float pdf_pos, pdf_dir;
   ctx.camera.pdf_ray(ray.d, pdf_pos, pdf_dir);
@@ -348,9 +349,10 @@ RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, Spla
     y0.hit.p = es.p;
     y0.hit.p_error = es.p_error;
     y0.hit.ng = y0.hit.ns = es.n;
+    y0.hit.time = ray.time;
     y0.beta = es.radiance;
     y0.pdf_fwd = es.pdf_pos;
-    n_light = tr.walk<TransportMode::Importance>(light, light_path_ray(ctx, es), es.beta,
+    n_light = tr.walk<TransportMode::Importance>(light, light_path_ray(ctx, es, ray.time), es.beta,
                                                  es.pdf_dir, max_depth + 1);
   }
 

@@ -55,7 +55,7 @@ Ray light_shadow_ray(const RenderContext& ctx, const SurfaceHit& hit, const Ligh
 
 bool light_visible(const RenderContext& ctx, const SurfaceHit& hit, const LightSample& ls) {
   Ray r = light_shadow_ray(ctx, hit, ls);
-  return !ctx.accel.occluded(r.o, r.d, r.tmax);
+  return !ctx.accel.occluded(r);
 }
 
 bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf& bsdf,
@@ -81,6 +81,6 @@ RGB light_sample_mis(const RenderContext& ctx, const SurfaceHit& hit, const Bsdf
   if (!light_sample_mis_unshadowed(ctx, hit, bsdf, wo, u_light, u_point, c, shadow))
     return RGB(0.0f);
   ++counters.rays;
-  return ctx.accel.occluded(shadow.o, shadow.d, shadow.tmax) ? RGB(0.0f) : c;
+  return ctx.accel.occluded(shadow) ? RGB(0.0f) : c;
 }
 }  // namespace rf

@@ -74,14 +74,16 @@ struct RenderStopped : std::runtime_error {
 struct RenderContext {
   RenderContext(const Scene& scene_, const Accel& accel_, const LightSet& lights_,
                 const TextureEvaluator& textures_, const PerspectiveCamera& camera_,
-                const PassCache& pass_cache_, float pixel_spread_)
+                const PassCache& pass_cache_, float pixel_spread_, const std::atomic<bool>& stop_)
       : scene(scene_),
         accel(accel_),
         lights(lights_),
         textures(textures_),
         camera(camera_),
         pass_cache(pass_cache_),
-        pixel_spread(pixel_spread_) {
+        pixel_spread(pixel_spread_),
+        stop(stop_),
+        moves(scene_moves(scene_)) {
     for (const Material& m : scene.materials) lane_kinds.push_back(lane_kind(m));
     for (LaneKind k : lane_kinds) all_in_lanes &= k != LaneKind::OneByOne;
   }
@@ -96,7 +98,9 @@ struct RenderContext {
   std::vector<LaneKind> lane_kinds;
   bool all_in_lanes = true;
   // Renderer::request_stop(): the drivers check it at every camera sample and light path.
-  mutable std::atomic<bool> stop{false};
+  const std::atomic<bool>& stop;
+  // scene_moves(scene): camera samples and light paths draw a time (Ray::time).
+  bool moves = false;
   void throw_if_stopped() const {
     if (stop.load(std::memory_order_relaxed)) throw RenderStopped("the render was stopped");
   }

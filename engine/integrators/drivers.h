@@ -38,16 +38,22 @@ namespace rf {
 
 // The ray of pixel (x, y) through the filter offset u_filter picks and the lens point u_lens
 // picks, and the sample's filter weight.
-// A moving camera takes the sample's time from its own hashed stream (kTimeStream), which moves
-// no other number of the sample, and is placed where it is at that time within frame's shutter.
+// In a scene where something moves, the sample's time (its position in the frame's shutter, the
+// ray's time) comes from its own hashed stream (kTimeStream), which moves no other number of the
+// sample, and a moving camera is placed where it is at that time.
 inline Ray camera_ray(const RenderContext& ctx, Sampler& sampler, uint32_t frame, int x, int y,
                       Vec2 u_filter, Vec2 u_lens, float& filter_weight) {
   const FilterSample fs = sample_filter(ctx.scene.film.filter, u_filter);
   filter_weight = fs.weight;
   const float rx = float(x) + 0.5f + fs.offset.x, ry = float(y) + 0.5f + fs.offset.y;
-  if (!ctx.scene.camera.moves()) return ctx.camera.generate_ray(rx, ry, u_lens);
-  const double time = ctx.scene.time.at(frame, sampler.get_1d_stream(kTimeStream));
-  return ctx.camera.generate_ray(rx, ry, u_lens, ctx.scene.camera.motion.at(time));
+  if (!ctx.moves) return ctx.camera.generate_ray(rx, ry, u_lens);
+  const float u = sampler.get_1d_stream(kTimeStream);  // the shutter position: the ray's time
+  Ray ray = ctx.scene.camera.moves()
+                ? ctx.camera.generate_ray(rx, ry, u_lens,
+                                          ctx.scene.camera.motion.at(ctx.scene.time.at(frame, u)))
+                : ctx.camera.generate_ray(rx, ry, u_lens);
+  ray.time = u;
+  return ray;
 }
 
 // Camera sample `index` of pixel (x, y): starts the sampler for it, draws the filter offset

@@ -126,7 +126,8 @@ std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderCont
     EmissionSample es;
     if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
     VplDeposit deposit{ctx, out, inv_paths};
-    trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
+    trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es, 0.0f),
+                                             es.beta,  // still geometry: kMovingGeometry
                                              max_vpl_depth, deposit, c);
   };
   set->vpls = trace_light_paths<Vpl>(ctx, frame, pass, paths, trace_one, counters);

@@ -61,6 +61,7 @@ namespace rf {
 
 struct IrIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "ir";
+  static constexpr bool kMovingGeometry = false;  // see IntegratorDefaults
   static constexpr bool kSplats = false;
   static constexpr const char* kKeys[] = {"type",           "max_depth",   "rr_min_depth",
                                           "vpl_paths",      "vpl_samples", "vpl_candidates",

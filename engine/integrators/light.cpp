@@ -14,6 +14,7 @@ struct CameraConnector {
   Sampler& sampler;
   SplatTarget& target;
   TraceCounters& counters;
+  float time;  // the light path's (light_path_time)
 
   // Light from a path of v.depth scattering events, scattered at v towards a lens point (drawn
   // at every vertex, so a material change does not reshuffle later numbers).
@@ -41,9 +42,7 @@ struct CameraConnector {
     RGB le = emitted_radiance(ctx.accel.mesh(es.mesh), es.n, c.wi);
     if (is_black(le)) return;
     ++counters.rays;
-    SurfaceHit at;
-    at.p = es.p, at.p_error = es.p_error, at.ng = es.n, at.ns = es.n;
-    if (ctx.accel.visible(at, c.p_lens, Vec3(0.0f), c.wi))
+    if (ctx.accel.visible(emission_point(es, time), c.p_lens, Vec3(0.0f), c.wi))
       splat_to_film(
           target, c.raster,
           le * (std::fabs(dot(es.n, c.wi)) * c.importance / (es.pdf_pos * c.pdf_solid_angle)));
@@ -61,12 +60,13 @@ SampleBuffer LightIntegrator::render(const RenderContext& ctx, const TaskKey& ta
   const int max_depth = ctx.scene.render.integrator.max_depth;
   return render_light_paths(
       ctx, task, parallel, paths, [&](Sampler& sampler, SplatTarget& target, TraceCounters& c) {
+        const float time = light_path_time(ctx, sampler);
         EmissionSample es;
         if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
-        CameraConnector connector{ctx, sampler, target, c};
+        CameraConnector connector{ctx, sampler, target, c, time};
         connector.emitter(es);
-        trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
-                                                 max_depth, connector, c);
+        trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es, time),
+                                                 es.beta, max_depth, connector, c);
       });
 }
 

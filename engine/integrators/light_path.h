@@ -15,6 +15,7 @@
 
 #include "engine/integrators/common.h"
 #include "engine/integrators/drivers.h"
+#include "engine/integrators/sample_layout.h"
 
 namespace rf {
 
@@ -97,12 +98,24 @@ inline bool sample_light_path_start(const RenderContext& ctx, Sampler& sampler, 
   return ctx.lights.sample_emission(u_pos, u_dir, es, infinite_lights);
 }
 
-// The first ray of a light path leaving its emission point.
-inline Ray light_path_ray(const RenderContext& ctx, const EmissionSample& es) {
-  if (!es.is_area) return Ray{es.p, es.dir, kInf};
-  SurfaceHit start;
-  start.p = es.p, start.p_error = es.p_error, start.ng = es.n, start.ns = es.n;
-  return ctx.accel.spawn(start, es.dir);
+// A light path's time (Ray::time): in a scene where something moves, a number from the path's
+// own hashed stream (kTimeStream, as a camera sample's), else 0; its every ray and connection is
+// made at that time.
+inline float light_path_time(const RenderContext& ctx, Sampler& sampler) {
+  return ctx.moves ? sampler.get_1d_stream(kTimeStream) : 0.0f;
+}
+
+// The emission point as a surface point at `time`, for the rays that leave it.
+inline SurfaceHit emission_point(const EmissionSample& es, float time) {
+  SurfaceHit at;
+  at.p = es.p, at.p_error = es.p_error, at.ng = es.n, at.ns = es.n, at.time = time;
+  return at;
+}
+
+// The first ray of a light path leaving its emission point at `time`.
+inline Ray light_path_ray(const RenderContext& ctx, const EmissionSample& es, float time) {
+  if (!es.is_area) return Ray{es.p, es.dir, kInf, time};
+  return ctx.accel.spawn(emission_point(es, time), es.dir);
 }
 
 // Traces light paths 0..paths-1 of (frame, pass), trace_one(sampler, out, counters) each, in

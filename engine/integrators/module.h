@@ -64,6 +64,10 @@ struct IntegratorDefaults {
   // Whether it renders a moving camera (Camera::motion): estimators that connect light paths to
   // the camera (light, bdpt) need the camera at a light path's time, which they do not take yet.
   static constexpr bool kMovingCamera = true;
+  // Whether it renders moving geometry (geometry_moves): estimators that build per-pass state
+  // shared by camera samples at every time of the shutter (ir's virtual point lights, ppm's
+  // photons) would gather light from where the geometry was at another time.
+  static constexpr bool kMovingGeometry = true;
 
   void parse(const JsonReader&, const Json&, const std::string&) {}
   std::string settings_text() const { return {}; }

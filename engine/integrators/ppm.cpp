@@ -58,7 +58,8 @@ std::shared_ptr<const PhotonMap> build_photon_map(const PpmIntegrator& s, const 
     EmissionSample es;
     if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
     PhotonDeposit deposit{out, inv_paths};
-    trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es), es.beta,
+    trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es, 0.0f),
+                                             es.beta,  // still geometry: kMovingGeometry
                                              max_depth, deposit, c);
   };
   std::vector<Photon> photons =

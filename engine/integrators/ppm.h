@@ -44,6 +44,7 @@ namespace rf {
 
 struct PpmIntegrator : IntegratorDefaults {
   static constexpr const char* kName = "ppm";
+  static constexpr bool kMovingGeometry = false;  // see IntegratorDefaults
   static constexpr bool kSplats = false;
   static constexpr const char* kKeys[] = {"type",    "max_depth", "rr_min_depth",
                                           "photons", "radius",    "alpha"};

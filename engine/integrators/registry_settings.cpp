@@ -194,7 +194,7 @@ std::string settings_text(const Scene& s) {
       buf + std::visit([](const auto& integrator) { return integrator.settings_text(); }, i.method);
   // The shot's time changes the image only where something moves: a still scene's text stays as
   // it was, so its buffers merge with those of builds before motion.
-  if (s.camera.moves()) {
+  if (scene_moves(s)) {
     char t[160];
     std::snprintf(t, sizeof t, ";time=fps:%.17g:shutter:%.17g:%.17g", s.time.fps,
                   s.time.shutter_open, s.time.shutter_close);
@@ -212,6 +212,16 @@ void check_renderable(const Scene& scene) {
                            " integrator does not render a moving camera yet (its camera "
                            "connections would need the light path's time); path, direct, ao, "
                            "whitted, ir and ppm do");
+        if (!Module::kMovingGeometry)
+          for (size_t i = 0; i < scene.instances.size(); ++i)
+            if (scene.instances[i].moves())
+              throw SceneError(
+                  scene.path + ": '" + scene.objects.at(scene.instances[i].object).name +
+                  "' (instance " + std::to_string(i) + ") moves during the shot: the " +
+                  std::string(Module::kName) +
+                  " integrator shares its per-pass light state between camera samples at "
+                  "different times, so it does not render moving geometry; path, direct, ao, "
+                  "whitted, light and bdpt do");
         integrator.check(scene);
       },
       scene.render.integrator.method);

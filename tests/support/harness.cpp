@@ -4,6 +4,7 @@
 #include <cmath>
 #include <iomanip>
 #include <limits>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 
@@ -236,6 +237,28 @@ ImageStats render_stats(const Scene& scene, uint32_t passes, int block) {
   Rect frame{0, 0, scene.film.width, scene.film.height};
   for (uint32_t pass = 0; pass < passes; ++pass) {
     stats.add_pass(renderer.render(TaskKey{0, frame, pass}, /*parallel=*/true));
+  }
+  return stats;
+}
+
+ImageStats mean_of_renders(const std::vector<const Scene*>& scenes, uint32_t passes, int block) {
+  if (scenes.empty()) throw std::invalid_argument("mean_of_renders: no scenes");
+  std::vector<std::unique_ptr<Renderer>> renderers;
+  for (const Scene* s : scenes) renderers.push_back(std::make_unique<Renderer>(*s));
+  if (block <= 0) block = renderers.front()->splats() ? 4 : 1;
+  const int w = scenes.front()->film.width, h = scenes.front()->film.height;
+  ImageStats stats(w, h, block);
+  for (uint32_t pass = 0; pass < passes; ++pass) {
+    std::vector<double> rgb(size_t(w) * size_t(h) * 3, 0.0);
+    for (const auto& r : renderers) {
+      const SampleBuffer b = r->render(TaskKey{0, Rect{0, 0, w, h}, pass}, true);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          for (int c = 0; c < 3; ++c)
+            rgb[3 * (size_t(y) * size_t(w) + size_t(x)) + size_t(c)] +=
+                double(b.estimate(x, y)[c]) / double(renderers.size());
+    }
+    stats.add_pass_image(rgb);
   }
   return stats;
 }

@@ -99,6 +99,11 @@ ImageStats render_stats(const Scene& scene, uint32_t passes, int block);
 
 inline constexpr uint32_t kMinPasses = 32;
 
+// The same passes of several scenes of one film size (stills at times across a shutter), each
+// pass the mean of the scenes' renders of that pass: the time integral a motion-blurred render
+// estimates, by the midpoint rule when the scenes stand at the midpoints of equal slices.
+ImageStats mean_of_renders(const std::vector<const Scene*>& scenes, uint32_t passes, int block);
+
 // A render's per-channel image mean and the standard error of that mean.
 struct ImageMeans {
   double mean[3] = {0, 0, 0}, std_error[3] = {0, 0, 0};

@@ -64,7 +64,7 @@ class SceneParser {
     parse_materials(r_.require(root, "", "materials"));
     const json& shapes = r_.array(r_.require(root, "", "shapes"), "shapes");
     for (size_t i = 0; i < shapes.size(); ++i)
-      scene_.meshes.push_back(parse_shape(shapes[i], json_child("shapes", i)));
+      parse_world_shape(shapes[i], json_child("shapes", i));
     if (const json* o = r_.find(root, "objects")) parse_objects(*o);
     if (const json* i = r_.find(root, "instances")) parse_instances(*i);
     if (const json* l = r_.find(root, "lights")) {
@@ -128,35 +128,56 @@ class SceneParser {
     }
   }
 
-  // camera.keyframes: [{"frame": F or "time": SECONDS, "look_at": {...} or "to_world": [...]}],
-  // times increasing; the camera_to_world of a moving camera (Camera::motion).
-  void parse_camera_keyframes(const json& keys) {
-    r_.array(keys, "camera.keyframes");
-    if (keys.empty()) r_.fail("camera.keyframes", "needs at least one key");
+  // A keyframe list at path p: [{"frame": F or "time": SECONDS, ...}], times increasing, each
+  // key's matrix from transform_of(key, key path), whose keys are `keys` besides frame and time.
+  template <class TransformOf>
+  AnimatedTransform parse_keyframes(const json& list, const std::string& p,
+                                    std::initializer_list<const char*> keys,
+                                    TransformOf&& transform_of) {
+    r_.array(list, p);
+    if (list.empty()) r_.fail(p, "needs at least one key");
+    std::vector<std::string> allowed = {"frame", "time"};
+    allowed.insert(allowed.end(), keys.begin(), keys.end());
     std::vector<Keyframe> frames;
-    for (size_t i = 0; i < keys.size(); ++i) {
-      const std::string p = json_child("camera.keyframes", i);
-      const json& k = keys[i];
-      r_.expect_object(k, p);
-      r_.check_keys(k, p, {"frame", "time", "look_at", "to_world"});
+    for (size_t i = 0; i < list.size(); ++i) {
+      const std::string q = json_child(p, i);
+      const json& k = list[i];
+      r_.expect_object(k, q);
+      r_.check_keys(k, q, allowed);
       const json* frame = r_.find(k, "frame");
       const json* time = r_.find(k, "time");
-      if (!frame == !time) r_.fail(p, "give its 'frame' or its 'time' (seconds), one of them");
+      if (!frame == !time) r_.fail(q, "give its 'frame' or its 'time' (seconds), one of them");
       const double at =
-          frame ? r_.real(*frame, p + ".frame") / scene_.time.fps : r_.real(*time, p + ".time");
-      if (!std::isfinite(at)) r_.fail(p, "the key's time is not finite");
+          frame ? r_.real(*frame, q + ".frame") / scene_.time.fps : r_.real(*time, q + ".time");
+      if (!std::isfinite(at)) r_.fail(q, "the key's time is not finite");
       if (!frames.empty() && !(at > frames.back().time))
-        r_.fail(p + (frame ? ".frame" : ".time"),
-                "keys must be in increasing time: this one is not after " +
-                    json_child("camera.keyframes", i - 1));
-      frames.push_back({at, camera_transform(k, p)});
+        r_.fail(q + (frame ? ".frame" : ".time"),
+                "keys must be in increasing time: this one is not after " + json_child(p, i - 1));
+      frames.push_back({at, transform_of(k, q)});
     }
     try {
-      scene_.camera.motion = AnimatedTransform(frames);
+      return AnimatedTransform(frames);
     } catch (const std::invalid_argument& e) {
-      r_.fail("camera.keyframes", e.what());
+      r_.fail(p, e.what());
     }
-    scene_.camera.camera_to_world = frames.front().m;
+  }
+
+  // camera.keyframes: keys with a 'look_at' or a 'to_world'; the camera_to_world of a moving
+  // camera (Camera::motion).
+  void parse_camera_keyframes(const json& keys) {
+    scene_.camera.motion = parse_keyframes(
+        keys, "camera.keyframes", {"look_at", "to_world"},
+        [&](const json& k, const std::string& q) { return camera_transform(k, q); });
+    scene_.camera.camera_to_world = scene_.camera.motion.keys().front().m;
+  }
+
+  // A shape's or an instance's "keyframes": keys with a 'transform' (the transform list; a key
+  // without one is the identity).
+  AnimatedTransform parse_motion(const json& keys, const std::string& p) {
+    return parse_keyframes(keys, p, {"transform"}, [&](const json& k, const std::string& q) {
+      const json* t = r_.find(k, "transform");
+      return t ? parse_transform(*t, q + ".transform") : Mat4::identity();
+    });
   }
 
   // A camera's transform from its 'look_at' or 'to_world' (at path p).
@@ -578,7 +599,7 @@ class SceneParser {
     for (size_t i = 0; i < j.size(); ++i) {
       const std::string p = json_child("instances", i);
       r_.expect_object(j[i], p);
-      r_.check_keys(j[i], p, {"object", "transform"});
+      r_.check_keys(j[i], p, {"object", "transform", "keyframes"});
       std::string name = r_.string(r_.require(j[i], p, "object"), p + ".object");
       auto it = object_ids_.find(name);
       if (it == object_ids_.end()) {
@@ -589,17 +610,45 @@ class SceneParser {
       }
       Instance inst;
       inst.object = it->second;
-      if (const json* t = r_.find(j[i], "transform")) inst.to_world = parse_transform(*t, p + ".transform");
+      const json* keys = r_.find(j[i], "keyframes");
+      if (keys && r_.find(j[i], "transform"))
+        r_.fail(p + ".keyframes", "give the instance's 'keyframes' or its 'transform', not both");
+      if (keys) {
+        inst.motion = parse_motion(*keys, p + ".keyframes");
+        inst.to_world = inst.motion.keys().front().m;
+      } else if (const json* t = r_.find(j[i], "transform")) {
+        inst.to_world = parse_transform(*t, p + ".transform");
+      }
       if (!(std::fabs(inst.to_world.det3()) > 0))
         r_.fail(p + ".transform", "must be invertible (a zero scale flattens the object)");
       scene_.instances.push_back(inst);
     }
   }
 
-  Mesh parse_shape(const json& j, const std::string& p) {
+  // A shape of the scene's "shapes": a world mesh, or, with "keyframes", a moving shape: an object
+  // holding the shape (its own "transform" applied first) placed by one moving instance.
+  void parse_world_shape(const json& j, const std::string& p) {
+    const json* keys = j.is_object() ? r_.find(j, "keyframes") : nullptr;
+    if (!keys) {
+      scene_.meshes.push_back(parse_shape(j, p));
+      return;
+    }
+    SceneObject obj;
+    obj.meshes.push_back(parse_shape(j, p, /*moving=*/true));
+    obj.name = obj.meshes.front().name;
+    Instance inst;
+    inst.object = uint32_t(scene_.objects.size());
+    inst.motion = parse_motion(*keys, p + ".keyframes");
+    inst.to_world = inst.motion.keys().front().m;
+    scene_.objects.push_back(std::move(obj));
+    scene_.instances.push_back(inst);
+  }
+
+  Mesh parse_shape(const json& j, const std::string& p, bool moving = false) {
     r_.expect_object(j, p);
     std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
     std::vector<std::string> keys = {"type", "name", "material", "transform", "emission"};
+    if (moving) keys.push_back("keyframes");
     if (type == "obj" || type == "ply")
       keys.push_back("file");
     else if (type == "mesh")

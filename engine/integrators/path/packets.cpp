@@ -360,6 +360,8 @@ void PacketPaths::trace(const Ray* camera_rays, RGB* radiance) {
   for (int i = 0; i < K; ++i) S::put(sum_, i, RGB(0.0f));
   for (int i = 0; i < n_; ++i) {
     rays_.set(i, camera_rays[i]);
+    // The lane's time for all its rays: lanes_to_packets writes the rest of the rays in place.
+    shadow_.rh.ray.time[i] = camera_rays[i].time;
     lanes_[i].prev_p = camera_rays[i].o;
   }
   for (int depth = 0; live_ > 0; ++depth) {

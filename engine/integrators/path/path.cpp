@@ -46,7 +46,7 @@ RGB trace_alone(const RenderContext& ctx, CameraPath path, RGB radiance, Ray ray
       RGB l;
       if (light_sample_mis_unshadowed(ctx, hit, bsdf, wo, u_light, u_point, l, r, !ends)) {
         ++counters.rays;
-        if (!ctx.accel.occluded(r.o, r.d, r.tmax)) radiance += path.beta * l;
+        if (!ctx.accel.occluded(r)) radiance += path.beta * l;
       }
     }
     if (ends) break;

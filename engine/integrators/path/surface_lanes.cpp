@@ -46,7 +46,8 @@ RF_SIMD_CLONES void diffuse_lanes_sphere_points(SurfaceLanes& L) {
   RF_IVDEP
   for (int j = 0; j < SurfaceLanes::N; ++j) {  // all N: see SurfaceLanes
     Ray r = Accel::shadow_segment(D::get(L.hit.p, j), D::get(L.hit.p_error, j), D::get(L.hit.ng, j),
-                                  D::get(L.l_p0, j), D::get(L.l_p1, j), D::get(L.l_n, j));
+                                  D::get(L.l_p0, j), D::get(L.l_p1, j), D::get(L.l_n, j),
+                                  0.0f);  // the time: the packet's arrays keep the lane's
     const bool sphere = L.l_sphere[j] != 0;
     D::put(L.shadow_o, j, vselect(sphere, r.o, D::get(L.g_shadow_o, j)));
     D::put(L.shadow_d, j, vselect(sphere, r.d, D::get(L.g_shadow_d, j)));
@@ -99,7 +100,8 @@ template <bool kGivenLight>
     RGB c = f * ls.radiance * (cos_i * w / ls.pdf_solid_angle);
     L.nee_ok[j] = ok;
     if constexpr (!kGivenLight) {
-      Ray shadow = Accel::shadow_segment(p, p_error, ng, ls.p, ls.p_error, ls.n);
+      // The time: the packet's arrays keep the lane's (PacketPaths::trace).
+      Ray shadow = Accel::shadow_segment(p, p_error, ng, ls.p, ls.p_error, ls.n, 0.0f);
       D::put(L.shadow_o, j, shadow.o);
       D::put(L.shadow_d, j, shadow.d);
       L.shadow_tmax[j] = shadow.tmax;
