@@ -1,6 +1,7 @@
 // The local commands: render, merge, compare, bench (DESIGN.md "Local single-node runs").
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -237,8 +238,14 @@ int cmd_render(const RenderArgs& a) {
   for (const FrameFiles& f : frames) {
     if (!scene || f.scene != scene->path) {
       renderer.reset();
+      const auto t0 = std::chrono::steady_clock::now();
       scene = std::make_unique<Scene>(load_scene(f.scene, ov));
+      const auto t1 = std::chrono::steady_clock::now();
       renderer = std::make_unique<Renderer>(*scene);
+      if (frames.size() > 1)  // a shot's set-up, against the frames' own (bench/motion.sh)
+        spdlog::info("{}: parsed in {:.3f} s, renderer set up in {:.3f} s", f.scene,
+                     std::chrono::duration<double>(t1 - t0).count(),
+                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count());
       if (!renderer->has_lights() && integrator_needs_lights(scene->render.integrator.method))
         spdlog::warn(
             "{}: the scene has no lights (no emitter, light or environment): the {} image "

@@ -52,7 +52,7 @@ bool Scheduler::is_done(const FrameState& f, uint64_t number) const {
 void Scheduler::add_job(const std::string& job_id, const std::vector<uint32_t>& frames,
                         uint32_t tiles, uint32_t passes, int priority) {
   JobState& j = jobs_[job_id];
-  j = JobState{job_id, priority, next_order_++, tiles, passes, {}, {}, {}, false, false, {}};
+  j = JobState{job_id, priority, next_order_++, tiles, passes, {}, {}, {}, {}, false, false, {}};
   j.frames.reserve(frames.size());
   for (uint32_t f : frames) {
     j.frame_index[f] = j.frames.size();
@@ -165,10 +165,11 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
     if (wf != j->worker_failures.end() && wf->second >= options_.max_failures) continue;
     // The window: the first window_frames frames (in job order) that still need tasks. Each
     // one's first task this worker may get (a frame's tasks are numbered by pass, then tile),
-    // then the least by (pass, position in the job, tile).
+    // then the least by (pass, not the worker's last frame, position in the job, tile).
     FrameState* best = nullptr;
     uint64_t best_number = 0;
-    std::tuple<uint32_t, size_t, uint32_t> best_key{};
+    std::tuple<uint32_t, bool, size_t, uint32_t> best_key{};
+    auto last = j->worker_frame.find(worker_id);
     size_t open = 0;
     for (size_t i = 0; i < j->frames.size() && open < options_.window_frames; ++i) {
       FrameState& f = j->frames[i];
@@ -176,8 +177,9 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
       ++open;
       std::optional<uint64_t> n = first_for(*j, f, worker_id);
       if (!n) continue;
-      std::tuple<uint32_t, size_t, uint32_t> key{uint32_t(*n / j->tiles), i,
-                                                 uint32_t(*n % j->tiles)};
+      const bool other = last == j->worker_frame.end() || last->second != f.frame;
+      std::tuple<uint32_t, bool, size_t, uint32_t> key{uint32_t(*n / j->tiles), other, i,
+                                                       uint32_t(*n % j->tiles)};
       if (!best || key < best_key) best = &f, best_number = *n, best_key = key;
     }
     if (!best) continue;
@@ -193,6 +195,7 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
       f.fresh = best_number + 1;
     }
     TaskRef ref{j->id, f.frame, uint32_t(best_number / j->tiles), uint32_t(best_number % j->tiles)};
+    j->worker_frame[worker_id] = f.frame;
     std::string id = options_.lease_prefix + std::to_string(++next_lease_);
     leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
     expiry_.insert({now + options_.lease_seconds, id});

@@ -4,7 +4,9 @@
 //
 // Order: jobs by priority (higher first), then submission; within a job, a window of at most
 // `window_frames` unfinished frames is open; within the window, passes in order (all tiles of
-// pass 0 of every open frame before pass 1), then frame, then tile.
+// pass 0 of every open frame before pass 1), then the frame this worker was last leased in the
+// job (frame affinity: its renderer holds that frame's BVH of moving geometry), then frame, then
+// tile.
 // Leases: a task leased to a worker must be renewed within lease_seconds or it is queued again.
 // The first completion of a task wins, from whichever lease (an expired one included): later
 // ones are answered accepted = false, and the task's other leases end. A task that fails on
@@ -149,6 +151,7 @@ class Scheduler {
     std::vector<FrameState> frames;
     std::map<uint32_t, size_t> frame_index;  // frame number -> position in frames
     std::map<std::string, int> worker_failures;
+    std::map<std::string, uint32_t> worker_frame;  // the frame each worker was last leased
     bool failed = false, cancelled = false;
     std::string error;
   };

@@ -202,7 +202,7 @@ uint32_t motion_time_steps(const AnimatedTransform& motion, double open, double 
   return std::min<uint32_t>(kMaxTimeSteps, 1 + kStepsPerSegment * segments);
 }
 
-Accel::Accel(const Scene& scene, uint32_t frame) : scene_(scene) {
+AccelGeometry::AccelGeometry(const Scene& scene_) : scene(scene_) {
   // RAYFARM_EMBREE_CONFIG=isa=NAME: Embree's kernels for another CPU kind (e.g. isa=avx2 on an
   // AVX-512 machine, as Accel.PacketQueriesOnEmbreesAvx2Kernels does; docs/design.md). Only that
   // key: Embree's other settings (its thread count among them) are not ours to hand out.
@@ -216,53 +216,94 @@ Accel::Accel(const Scene& scene, uint32_t frame) : scene_(scene) {
       throw std::runtime_error("RAYFARM_EMBREE_CONFIG=\"" + c +
                                "\": only isa=NAME is accepted (e.g. isa=avx2)");
   }
-  device_ = rtcNewDevice(config && *config ? config : nullptr);
-  if (!device_)
+  device = rtcNewDevice(config && *config ? config : nullptr);
+  if (!device)
     throw std::runtime_error(
         std::string("embree: cannot create device") +
         (config ? " with RAYFARM_EMBREE_CONFIG=\"" + std::string(config) + "\"" : std::string()));
-  rtcSetDeviceErrorFunction(device_, embree_error, nullptr);
-  quiet_packets_ = !rtcGetDeviceProperty(device_, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED);
-  rtc_scene_ = rtcNewScene(device_);
+  rtcSetDeviceErrorFunction(device, embree_error, nullptr);
+  quiet_packets = !rtcGetDeviceProperty(device, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED);
+  for (const Mesh& m : scene.meshes) surfaces.push_back(&m);  // surface id == mesh index
   // Medium (Embree's default, binned SAH without spatial splits): on the million-triangle benchmark
   // scene it builds faster than high quality, and it traces as fast within the noise there and on
   // the Cornell box and veach-mis (docs/performance.md, "Fixed costs of a render: start-up,
   // import, BVH build, output"). Which triangle of a shared edge a ray hits can depend on the
   // tree, so the choice is part of the estimator version (registry.cpp).
-  rtcSetSceneBuildQuality(rtc_scene_, RTC_BUILD_QUALITY_MEDIUM);
-  for (size_t i = 0; i < scene.meshes.size(); ++i) {
-    surfaces_.push_back(&scene.meshes[i]);
-    attach_mesh(device_, rtc_scene_, scene.meshes[i], unsigned(i));  // geometry id == mesh index
-  }
+  world = rtcNewScene(device);
+  rtcSetSceneBuildQuality(world, RTC_BUILD_QUALITY_MEDIUM);
+  for (size_t i = 0; i < scene.meshes.size(); ++i)  // geometry id == mesh index
+    attach_mesh(device, world, scene.meshes[i], unsigned(i));
   // Objects: one Embree scene each, built only if some instance places it.
   std::vector<bool> placed(scene.objects.size(), false);
   for (const Instance& inst : scene.instances) placed.at(inst.object) = true;
   for (size_t o = 0; o < scene.objects.size(); ++o) {
-    object_first_surface_.push_back(uint32_t(surfaces_.size()));
-    for (const Mesh& m : scene.objects[o].meshes) surfaces_.push_back(&m);
+    object_first_surface.push_back(uint32_t(surfaces.size()));
+    for (const Mesh& m : scene.objects[o].meshes) surfaces.push_back(&m);
     RTCScene os = nullptr;
     if (placed[o] && !scene.objects[o].meshes.empty()) {
-      os = rtcNewScene(device_);
+      os = rtcNewScene(device);
       rtcSetSceneBuildQuality(os, RTC_BUILD_QUALITY_MEDIUM);
       for (size_t k = 0; k < scene.objects[o].meshes.size(); ++k)
-        attach_mesh(device_, os, scene.objects[o].meshes[k], unsigned(k));
+        attach_mesh(device, os, scene.objects[o].meshes[k], unsigned(k));
       rtcCommitScene(os);
     }
-    object_scenes_.push_back(os);
+    object_scenes.push_back(os);
   }
-  // Instances: a moving one samples its track at uniform time steps over the frame's shutter
-  // (Embree's time 0 at the shutter's opening, 1 at its closing), quaternion-decomposed so that
-  // Embree slerps the rotation between steps; motion_time_steps says how many.
+  for (size_t i = 0; i < scene.instances.size(); ++i) {  // the instances that stand still
+    const Instance& inst = scene.instances[i];
+    RTCScene os = object_scenes[inst.object];
+    if (!os || inst.moves()) continue;
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(g, os);
+    rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, &inst.to_world.m[0][0]);
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(world, g, unsigned(scene.meshes.size() + i));
+    rtcReleaseGeometry(g);
+  }
+  rtcCommitScene(world);
+  size_t bytes = 0;  // the meshes' indices, vertices, normals and uvs
+  for (const Mesh* m : surfaces)
+    bytes += m->indices.size() * sizeof(uint32_t) + m->positions.size() * sizeof(Vec3) +
+             m->normals.size() * sizeof(Vec3) + m->uvs.size() * sizeof(Vec2);
+  prefetch = bytes > kPrefetchAboveBytes;
+}
+
+AccelGeometry::~AccelGeometry() {
+  if (world) rtcReleaseScene(world);
+  for (RTCScene os : object_scenes)
+    if (os) rtcReleaseScene(os);
+  if (device) rtcReleaseDevice(device);
+}
+
+Accel::Accel(const Scene& scene, uint32_t frame)
+    : Accel(std::make_shared<const AccelGeometry>(scene), frame) {}
+
+Accel::Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame)
+    : geometry_(std::move(geometry)),
+      scene_(geometry_->scene),
+      surfaces_(geometry_->surfaces),
+      object_first_surface_(geometry_->object_first_surface),
+      prefetch_(geometry_->prefetch),
+      world_(geometry_->world) {
+  const Scene& scene = scene_;
+  // The moving instances, in a scene of the frame's own: each samples its track at uniform time
+  // steps over the frame's shutter (Embree's time 0 at the shutter's opening, 1 at its closing),
+  // quaternion-decomposed so that Embree slerps the rotation between steps (motion_time_steps
+  // says how many).
   const double open = scene.time.at(frame, 0.0f), close = scene.time.at(frame, 1.0f);
   instance_geometry_.assign(scene.instances.size(), nullptr);
   instance_to_world_.reserve(scene.instances.size());
   for (size_t i = 0; i < scene.instances.size(); ++i) {
     const Instance& inst = scene.instances[i];
-    const uint32_t steps = inst.moves() ? motion_time_steps(inst.motion, open, close) : 1;
     instance_to_world_.push_back(inst.moves() ? inst.motion.at(open) : inst.to_world);
-    RTCScene os = object_scenes_[inst.object];
-    if (!os) continue;
-    RTCGeometry g = rtcNewGeometry(device_, RTC_GEOMETRY_TYPE_INSTANCE);
+    RTCScene os = geometry_->object_scenes[inst.object];
+    if (!os || !inst.moves()) continue;
+    if (!motion_) {
+      motion_ = rtcNewScene(geometry_->device);
+      rtcSetSceneBuildQuality(motion_, RTC_BUILD_QUALITY_MEDIUM);
+    }
+    const uint32_t steps = motion_time_steps(inst.motion, open, close);
+    RTCGeometry g = rtcNewGeometry(geometry_->device, RTC_GEOMETRY_TYPE_INSTANCE);
     rtcSetGeometryInstancedScene(g, os);
     if (steps == 1) {
       rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, &instance_to_world_[i].m[0][0]);
@@ -278,26 +319,35 @@ Accel::Accel(const Scene& scene, uint32_t frame) : scene_(scene) {
       time_steps_ = std::max(time_steps_, steps);
     }
     rtcCommitGeometry(g);
-    rtcAttachGeometryByID(rtc_scene_, g, unsigned(scene.meshes.size() + i));
+    rtcAttachGeometryByID(motion_, g, unsigned(scene.meshes.size() + i));
     rtcReleaseGeometry(g);
   }
-  size_t bytes = 0;  // the meshes' indices, vertices, normals and uvs
-  for (const Mesh* m : surfaces_)
-    bytes += m->indices.size() * sizeof(uint32_t) + m->positions.size() * sizeof(Vec3) +
-             m->normals.size() * sizeof(Vec3) + m->uvs.size() * sizeof(Vec2);
-  prefetch_ = bytes > kPrefetchAboveBytes;
+  if (motion_) {
+    rtcCommitScene(motion_);
+    // The box the moving instances sweep over the shutter, grown by 1e-4 of its extent (and
+    // 1e-6 of its coordinates' size) so that the rays that skip the motion query miss for sure.
+    RTCLinearBounds lb;
+    rtcGetSceneLinearBounds(motion_, &lb);
+    const float lo[3] = {std::min(lb.bounds0.lower_x, lb.bounds1.lower_x),
+                         std::min(lb.bounds0.lower_y, lb.bounds1.lower_y),
+                         std::min(lb.bounds0.lower_z, lb.bounds1.lower_z)};
+    const float hi[3] = {std::max(lb.bounds0.upper_x, lb.bounds1.upper_x),
+                         std::max(lb.bounds0.upper_y, lb.bounds1.upper_y),
+                         std::max(lb.bounds0.upper_z, lb.bounds1.upper_z)};
+    for (int a = 0; a < 3; ++a) {
+      const float pad =
+          1e-4f * (hi[a] - lo[a]) + 1e-6f * std::max(std::fabs(lo[a]), std::fabs(hi[a]));
+      motion_lo_[a] = lo[a] - pad, motion_hi_[a] = hi[a] + pad;
+    }
+  }
   instance_inverse_.reserve(scene.instances.size());
   for (const Mat4& m : instance_to_world_) instance_inverse_.push_back(m.inverse());
-  rtcCommitScene(rtc_scene_);
 }
 
 Accel::~Accel() {
   for (RTCGeometry g : instance_geometry_)
     if (g) rtcReleaseGeometry(g);
-  if (rtc_scene_) rtcReleaseScene(rtc_scene_);
-  for (RTCScene os : object_scenes_)
-    if (os) rtcReleaseScene(os);
-  if (device_) rtcReleaseDevice(device_);
+  if (motion_) rtcReleaseScene(motion_);
 }
 
 bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
@@ -308,7 +358,9 @@ bool Accel::intersect(const Ray& ray, SurfaceHit& hit) const {
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(rtc_scene_, &ctx, &rh);
+  rtcIntersect1(world_, &ctx, &rh);
+  if (motion_ && may_hit_motion(ray.o, ray.d, rh.ray.tfar))
+    rtcIntersect1(motion_, &ctx, &rh);  // only a nearer hit replaces the world's
   if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
   hit_from_embree(ray, rh.hit.geomID, rh.hit.primID, rh.hit.instID[0], rh.hit.u, rh.hit.v,
                   rh.ray.tfar, hit);
@@ -319,8 +371,9 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  if (quiet_packets_) packet.quiet_inactive();
-  rtcIntersect16(packet.valid, rtc_scene_, &ctx, &packet.rh);
+  if (geometry_->quiet_packets) packet.quiet_inactive();
+  rtcIntersect16(packet.valid, world_, &ctx, &packet.rh);
+  if (motion_) motion_query16(packet, &ctx, /*occlusion=*/false);
   const RTCHit16& h = packet.rh.hit;
   // The lanes' hits are scattered over the meshes: on a scene larger than the caches, fetch every
   // lane's index triple first, then its vertices, so that the lanes' cache misses overlap instead
@@ -390,11 +443,32 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
   }
 }
 
+void Accel::motion_query16(RayPacket& packet, RTCIntersectContext* ctx, bool occlusion) const {
+  // The lanes whose ray may meet the moving instances' box before its end (a lane the world
+  // blocked has tfar -inf and meets nothing).
+  alignas(64) int valid[kPacket];
+  int any = 0;
+  const RTCRay16& r = packet.rh.ray;
+  for (int i = 0; i < kPacket; ++i) {
+    const bool on =
+        packet.valid[i] != 0 && may_hit_motion({r.org_x[i], r.org_y[i], r.org_z[i]},
+                                               {r.dir_x[i], r.dir_y[i], r.dir_z[i]}, r.tfar[i]);
+    valid[i] = on ? -1 : 0;
+    any |= on;
+  }
+  if (!any) return;
+  if (occlusion)
+    rtcOccluded16(valid, motion_, ctx, &packet.rh.ray);
+  else
+    rtcIntersect16(valid, motion_, ctx, &packet.rh);
+}
+
 void Accel::occluded_packet(RayPacket& packet, int n, int* blocked) const {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
-  if (quiet_packets_) packet.quiet_inactive();
-  rtcOccluded16(packet.valid, rtc_scene_, &ctx, &packet.rh.ray);
+  if (geometry_->quiet_packets) packet.quiet_inactive();
+  rtcOccluded16(packet.valid, world_, &ctx, &packet.rh.ray);
+  if (motion_) motion_query16(packet, &ctx, /*occlusion=*/true);
   for (int i = 0; i < n; ++i)  // Embree: -inf on a hit; without a branch (false when inactive)
     blocked[i] = packet.active(i) & (packet.rh.ray.tfar[i] < 0);
 }
@@ -461,7 +535,9 @@ bool Accel::occluded(const Ray& ray) const {
   rtcInitIntersectContext(&ctx);
   RTCRay r;
   init_ray(r, ray.o, ray.d, ray.tmax, ray.time);
-  rtcOccluded1(rtc_scene_, &ctx, &r);
+  rtcOccluded1(world_, &ctx, &r);
+  if (motion_ && r.tfar >= 0 && may_hit_motion(ray.o, ray.d, r.tfar))
+    rtcOccluded1(motion_, &ctx, &r);
   return r.tfar < 0;  // Embree sets tfar to -inf on a hit
 }
 
@@ -485,7 +561,8 @@ void Accel::cast8(const Ray* rays, int n, float* t) const {
     rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
   }
-  rtcIntersect8(valid, rtc_scene_, &ctx, &rh);
+  rtcIntersect8(valid, world_, &ctx, &rh);
+  if (motion_) rtcIntersect8(valid, motion_, &ctx, &rh);
   for (int i = 0; i < n; ++i)
     t[i] = rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID ? kInf : rh.ray.tfar[i];
 }
@@ -497,7 +574,8 @@ float Accel::cast(Vec3 o, Vec3 d) const {
   init_ray(rh.ray, o, d, kInf, 0.0f);
   rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
   rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(rtc_scene_, &ctx, &rh);
+  rtcIntersect1(world_, &ctx, &rh);
+  if (motion_) rtcIntersect1(motion_, &ctx, &rh);
   return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? kInf : rh.ray.tfar;
 }
 

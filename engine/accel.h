@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -96,11 +97,39 @@ inline Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
 inline constexpr uint32_t kMaxTimeSteps = RTC_MAX_TIME_STEP_COUNT, kStepsPerSegment = 8;
 uint32_t motion_time_steps(const AnimatedTransform& motion, double open, double close);
 
+// The part of a scene's BVH that no frame changes: the Embree device, one Embree scene per placed
+// object, the surfaces by id, and the world: the world meshes and the instances that do not move.
+// Built once per scene and shared by the frames' Accels (Renderer), so that a frame of a shot
+// builds only a scene over its moving instances. Which part is which is a function of the scene
+// alone: a frame's BVH is the same whichever frames were built before it.
+struct AccelGeometry {
+  explicit AccelGeometry(const Scene& scene);
+  ~AccelGeometry();
+  AccelGeometry(const AccelGeometry&) = delete;
+  AccelGeometry& operator=(const AccelGeometry&) = delete;
+
+  const Scene& scene;
+  RTCDevice device = nullptr;
+  // Whether the device lacks 16-wide kernels, so that a 16-wide query takes Embree's ray-stream
+  // path, which ignores the valid mask (RayPacket::quiet_inactive).
+  bool quiet_packets = false;
+  // Whether intersect_packet prefetches the hits' triangles: when the meshes' data is larger than
+  // a core's L2 cache (about 1 MiB on the machines measured), not on scenes that fit.
+  static constexpr size_t kPrefetchAboveBytes = size_t(1) << 20;
+  bool prefetch = false;
+  std::vector<const Mesh*> surfaces;           // by surface id
+  std::vector<uint32_t> object_first_surface;  // surface id of each object's first mesh
+  std::vector<RTCScene> object_scenes;         // one per object (nullptr: placed by no instance)
+  RTCScene world = nullptr;                    // the world meshes and the still instances
+};
+
 class Accel {
  public:
   // The scene's BVH for frame `frame`: the placements of moving instances over that frame's
   // shutter (a scene without moving geometry builds the same BVH for every frame).
   explicit Accel(const Scene& scene, uint32_t frame = 0);
+  // The same on geometry built before (its scene's), building only the frame's top level.
+  Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame);
   ~Accel();
   Accel(const Accel&) = delete;
   Accel& operator=(const Accel&) = delete;
@@ -204,7 +233,7 @@ class Accel {
   void occluded_packet(RayPacket& packet, int n, int* blocked) const;
   // Whether the packet queries quiet the inactive lanes (RayPacket::quiet_inactive): the device
   // has no 16-wide kernels.
-  bool quiets_inactive_lanes() const { return quiet_packets_; }
+  bool quiets_inactive_lanes() const { return geometry_->quiet_packets; }
 
   // Spawns a ray from a hit towards w.
   Ray spawn(const SurfaceHit& from, Vec3 w) const {
@@ -249,29 +278,42 @@ class Accel {
     if (inst_id == RTC_INVALID_GEOMETRY_ID) return geom;
     return object_first_surface_[scene_.instances[inst_id - scene_.meshes.size()].object] + geom;
   }
+  // Whether the segment o + t d, t in [0, tfar], may meet the box of the moving instances (a
+  // slab test; a NaN leaves the interval as it was, so it never skips a ray it should not).
+  bool may_hit_motion(Vec3 o, Vec3 d, float tfar) const {
+    float t0 = 0, t1 = tfar;
+    for (int a = 0; a < 3; ++a) {
+      const float inv = 1.0f / d[a];
+      const float ta = (motion_lo_[a] - o[a]) * inv, tb = (motion_hi_[a] - o[a]) * inv;
+      const float near = ta < tb ? ta : tb, far = ta < tb ? tb : ta;
+      t0 = near > t0 ? near : t0;
+      t1 = far < t1 ? far : t1;
+    }
+    return !(t0 > t1 * (1 + 1e-6f) + 1e-30f);
+  }
+  // The moving instances' query of a packet after the world's, for the lanes that may meet them.
+  void motion_query16(RayPacket& packet, RTCIntersectContext* ctx, bool occlusion) const;
   // The surface interaction of an Embree hit of `ray` (geometry, primitive, instance ids,
   // barycentrics u, v and distance t as Embree reports them).
   void hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsigned inst_id, float u,
                        float v, float t, SurfaceHit& hit) const;
 
+  std::shared_ptr<const AccelGeometry> geometry_;
   const Scene& scene_;
-  std::vector<const Mesh*> surfaces_;           // by surface id
-  std::vector<uint32_t> object_first_surface_;  // surface id of each object's first mesh
-  // Whether intersect_packet prefetches the hits' triangles: when the meshes' data is larger than
-  // a core's L2 cache (about 1 MiB on the machines measured), not on scenes that fit.
-  static constexpr size_t kPrefetchAboveBytes = size_t(1) << 20;
-  bool prefetch_ = false;
-  // Whether the device lacks 16-wide kernels, so that a 16-wide query takes Embree's ray-stream
-  // path, which ignores the valid mask (RayPacket::quiet_inactive).
-  bool quiet_packets_ = false;
-  std::vector<RTCScene> object_scenes_;         // one per object (nullptr: placed by no instance)
+  const std::vector<const Mesh*>& surfaces_;           // geometry_'s
+  const std::vector<uint32_t>& object_first_surface_;  // geometry_'s
+  bool prefetch_ = false;                              // geometry_'s
+  // The queries ask the world, then, when instances move, the frame's moving instances with the
+  // world's hit as the ray's end (two queries where one over both would put every world ray
+  // through a motion-blur top level: 30% slower on the million scene, docs/performance.md).
+  RTCScene world_ = nullptr;   // geometry_'s
+  RTCScene motion_ = nullptr;  // the moving instances over the frame's shutter, if any
+  float motion_lo_[3] = {0, 0, 0}, motion_hi_[3] = {0, 0, 0};  // their box over the shutter
   std::vector<Mat4> instance_to_world_;         // per instance: its placement (a moving one's at
                                                 // the shutter's opening)
   std::vector<Mat4> instance_inverse_;          // world to object space, per instance
   std::vector<RTCGeometry> instance_geometry_;  // a moving instance's Embree geometry, else null
   uint32_t time_steps_ = 1;
-  RTCDevice device_ = nullptr;
-  RTCScene rtc_scene_ = nullptr;
 };
 
 }  // namespace rf

@@ -1,7 +1,10 @@
 #include "engine/render.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+
+#include <spdlog/spdlog.h>
 
 #include "engine/check.h"
 
@@ -17,12 +20,22 @@ Renderer::Renderer(const Scene& scene)
   check_renderable(scene);
   float t = std::tan(0.5f * scene.camera.fov_deg * kPi / 180.0f);
   pixel_spread_ = 2 * t / float(std::min(scene.film.width, scene.film.height));
+  geometry_ = std::make_shared<const AccelGeometry>(scene);  // what no frame changes
   if (!per_frame_) still_ = build_frame(0);
 }
 
 std::unique_ptr<Renderer::FrameState> Renderer::build_frame(uint32_t frame) const {
   auto f = std::make_unique<FrameState>();
-  f->accel = std::make_unique<Accel>(scene_, frame);
+  const auto t0 = std::chrono::steady_clock::now();
+  f->accel = std::make_unique<Accel>(geometry_, frame);
+  if (per_frame_) {
+    size_t moving = 0;
+    for (const Instance& i : scene_.instances) moving += i.moves();
+    spdlog::info("frame {}: BVH built in {:.4f} s ({} instances, {} moving; up to {} time steps)",
+                 frame,
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                 scene_.instances.size(), moving, f->accel->time_steps());
+  }
   f->context = std::make_unique<RenderContext>(scene_, *f->accel, *lights_, *textures_, *camera_,
                                                pass_cache_, pixel_spread_, stop_);
   return f;

@@ -4,7 +4,8 @@
 // cache; any thread renders any task (frame, rect, pass) of any frame of the scene, so a worker
 // renders a whole sequence of one scene on one BVH. A scene whose geometry moves has one BVH per
 // frame (Accel: the placements over that frame's shutter), built by the first task of the frame
-// and kept for the kKeepFrames frames used last.
+// and kept for the kKeepFrames frames used last; the geometry no frame changes (AccelGeometry:
+// the meshes' and objects' BVHs) is built once, with the renderer.
 #pragma once
 
 #include <atomic>
@@ -85,6 +86,7 @@ class Renderer {
   float pixel_spread_ = 0;
   mutable std::atomic<bool> stop_{false};
   std::shared_ptr<const FrameState> still_;  // a scene without moving geometry: its one state
+  std::shared_ptr<const AccelGeometry> geometry_;  // the part of the BVH frames share
   struct Entry {
     tbb::collaborative_once_flag once;
     std::shared_ptr<const FrameState> state;

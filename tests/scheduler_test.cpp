@@ -16,10 +16,37 @@ TEST(Scheduler, PassZeroOfEveryOpenFrameFirstThenWindowMoves) {
     got.emplace_back(l->task.frame, l->task.pass, l->task.tile);
     EXPECT_EQ(s.complete(l->lease_id, 0), CompleteOutcome::Accepted);
   }
-  // Window of 2 frames: frames 1 and 2, all of pass 0 before pass 1; frame 3 only once one closes.
+  // Window of 2 frames: frames 1 and 2, all of pass 0 before pass 1 (pass 1 of frame 2 first:
+  // the worker holds it); frame 3 only once one closes.
   std::vector<std::tuple<uint32_t, uint32_t, uint32_t>> want = {
-      {1, 0, 0}, {1, 0, 1}, {2, 0, 0}, {2, 0, 1}, {1, 1, 0}, {1, 1, 1}, {3, 0, 0}, {3, 0, 1}};
+      {1, 0, 0}, {1, 0, 1}, {2, 0, 0}, {2, 0, 1}, {2, 1, 0}, {2, 1, 1}, {3, 0, 0}, {3, 0, 1}};
   EXPECT_EQ(got, want);
+}
+
+// Frame affinity: within a pass, a worker gets the frame it was last leased in the job (its
+// renderer holds that frame's BVH of moving geometry) before the window's order; passes still go
+// in order for everyone.
+TEST(Scheduler, AWorkerKeepsItsFrameWithinAPass) {
+  Scheduler s({30, 3, 2});
+  s.add_job("j", {1, 2}, /*tiles=*/2, /*passes=*/3, 0);
+  auto lease = [&](const char* w) {
+    auto l = s.lease(w, 0);
+    EXPECT_TRUE(l);
+    EXPECT_EQ(s.complete(l->lease_id, 0), CompleteOutcome::Accepted);
+    return std::make_tuple(l->task.frame, l->task.pass, l->task.tile);
+  };
+  using T = std::tuple<uint32_t, uint32_t, uint32_t>;
+  EXPECT_EQ(lease("a"), T(1, 0, 0));
+  EXPECT_EQ(lease("b"), T(1, 0, 1));
+  EXPECT_EQ(lease("b"), T(2, 0, 0));  // frame 1's pass 0 is out: b moves on
+  EXPECT_EQ(lease("a"), T(2, 0, 1));  // pass 0 before a's frame 1 of pass 1
+  EXPECT_EQ(lease("a"), T(2, 1, 0));  // a holds frame 2 now
+  EXPECT_EQ(lease("b"), T(2, 1, 1));  // and so does b
+  EXPECT_EQ(lease("b"), T(1, 1, 0));
+  EXPECT_EQ(lease("a"), T(1, 1, 1));  // pass 1 before a's frame 2 of pass 2
+  EXPECT_EQ(lease("b"), T(1, 2, 0));  // b holds frame 1
+  EXPECT_EQ(lease("a"), T(1, 2, 1));
+  EXPECT_EQ(lease("a"), T(2, 2, 0));
 }
 
 TEST(Scheduler, PriorityThenSubmissionOrder) {

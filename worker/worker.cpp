@@ -321,7 +321,8 @@ Renderer& Worker::prepare(const pb::Task& task) {
   }
   // Not keyed by frame: a frame selects the seed stream and, for a moving camera, where the camera
   // stands (evaluated per ray from the task's frame), so a sequence of one scene file renders on
-  // one BVH.
+  // one BVH; where geometry moves, the renderer adds the frame's BVH over the moving instances
+  // (Renderer::kKeepFrames of them kept) to the rest, built once.
   std::string key =
       sha256_hex(task.scene_path() + "\n" + files + task.overrides().SerializeAsString());
   for (auto it = scenes_.begin(); it != scenes_.end(); ++it)
