@@ -313,7 +313,7 @@ void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi) {
   for (size_t o = 0; o < scene.objects.size(); ++o)
     for (const Mesh& m : scene.objects[o].meshes) mesh_bounds(m, object_box[o].first, object_box[o].second);
   for (const Instance& inst : scene.instances) {
-    auto [a, b] = object_box.at(inst.object);
+    const Vec3 a = object_box.at(inst.object).first, b = object_box.at(inst.object).second;
     if (a.x > b.x) continue;
     auto place = [&](const Mat4& m) {
       for (int c = 0; c < 8; ++c) {

@@ -3,6 +3,7 @@
 // in pbrt_scene.cpp, shapes in pbrt_geometry.cpp, materials and textures in pbrt_materials.cpp.
 #pragma once
 
+#include <cstring>
 #include <map>
 #include <memory>
 #include <optional>
@@ -25,7 +26,10 @@ struct AreaLight {
 };
 
 struct GraphicsState {
-  Mat4 ctm;
+  // pbrt-v4's pair of current transforms: at TransformTimes' start and end. ActiveTransform picks
+  // which of them the transform directives change; a shape or instance whose two differ moves.
+  Mat4 ctm, ctm_end;
+  bool moving() const { return std::memcmp(&ctm, &ctm_end, sizeof(Mat4)) != 0; }
   bool reverse_orientation = false;
   int material = -1;          // index into Builder::materials_, -1: pbrt's default (diffuse 0.5)
   std::string material_name;  // NamedMaterial's name (takes precedence over `material`)
@@ -73,6 +77,10 @@ class Builder {
   void include(Lexer& lex, const Location& at, const std::string& directive);
 
   void camera(const std::string& type, const ParamList& params, const Location& at);
+  // The current transform pair as a motion: start at transform_times_[0], end at [1] (map's
+  // transform applied to each first); throws SceneError naming `at` for a singular key.
+  AnimatedTransform ctm_motion(const Location& at, const std::string& what,
+                               const Mat4& after = Mat4::identity()) const;
   void film(const std::string& type, const ParamList& params, const Location& at);
   void filter(const std::string& type, const ParamList& params, const Location& at);
   void sampler(const std::string& type, const ParamList& params, const Location& at);
@@ -136,9 +144,10 @@ class Builder {
   std::vector<std::unique_ptr<Lexer>> lexers_;  // the include stack, innermost last
   GraphicsState gs_;
   std::vector<GraphicsState> stack_;
-  std::vector<Mat4> transform_stack_;
+  std::vector<std::pair<Mat4, Mat4>> transform_stack_;
   Active active_ = Active::All;
-  std::map<std::string, Mat4> named_coords_;
+  double transform_times_[2] = {0, 1};  // TransformTimes
+  std::map<std::string, std::pair<Mat4, Mat4>> named_coords_;
   std::vector<MaterialDef> materials_;
   std::map<std::string, int> named_materials_;
   int default_material_ = -1;

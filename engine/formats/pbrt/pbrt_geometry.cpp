@@ -180,6 +180,24 @@ void Builder::shape(const std::string& type, const ParamList& params, const Loca
     for (size_t t = 0; t + 2 < data.indices.size(); t += 3)
       std::swap(data.indices[t + 1], data.indices[t + 2]);
   }
+  // A shape whose two transforms differ moves (pbrt-v4's animated shape): an object of its own,
+  // in its own space, placed by one moving instance along the transform pair. (Inside
+  // ObjectBegin the object's instances move, not its shapes: the start transform places them.)
+  const bool moving = gs_.moving() && current_object_ < 0;
+  if (gs_.moving() && current_object_ >= 0)
+    warn(at, d + ": inside ObjectBegin its motion (ActiveTransform) is ignored: the start "
+                 "transform places it; ObjectInstance may move");
+  const Mat4 ctm = gs_.ctm, ctm_end = gs_.ctm_end;
+  std::optional<AnimatedTransform> motion;
+  if (moving) {
+    motion = ctm_motion(at, d);
+    SceneObject obj;
+    obj.name = d + " at " + at.str();
+    scene_.objects.push_back(std::move(obj));
+    object_lights_.emplace_back();  // (indexed as the objects)
+    current_object_ = int(scene_.objects.size() - 1);
+    gs_.ctm = gs_.ctm_end = Mat4::identity();
+  }
   std::vector<Mesh>& target =
       current_object_ >= 0 ? scene_.objects[size_t(current_object_)].meshes : scene_.meshes;
   size_t first = target.size();
@@ -187,6 +205,13 @@ void Builder::shape(const std::string& type, const ParamList& params, const Loca
   if (pending)
     for (size_t i = first; i < target.size(); ++i)
       pending_materials_.push_back({current_object_, i, gs_.material_name, gs_.material_at, at, d});
+  if (moving) {
+    Instance inst(uint32_t(current_object_), motion->keys().front().m);
+    inst.motion = *motion;
+    scene_.instances.push_back(inst);
+    current_object_ = -1;
+    gs_.ctm = ctm, gs_.ctm_end = ctm_end;
+  }
 }
 
 void Builder::add_mesh(MeshData data, const std::vector<uint32_t>& element_of_triangle,

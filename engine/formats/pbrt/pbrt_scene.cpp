@@ -47,7 +47,7 @@ Builder::Builder(const std::string& path, Scene& scene, SceneFiles& files)
   scene_.render.passes = default_passes(16);
   scene_.render.sampler = "sobol";
   scene_.render.integrator.max_depth = 5;
-  named_coords_["world"] = Mat4::identity();
+  named_coords_["world"] = {Mat4::identity(), Mat4::identity()};
 }
 
 void Builder::warn(const Location& at, const std::string& what) {
@@ -141,14 +141,15 @@ std::vector<double> Builder::number_args(Lexer& lex, const std::string& directiv
 
 void Builder::directive(const std::string& name, Lexer& lex, const Location& at) {
   GraphicsState& gs = gs_;
+  // The transform directives change the transforms ActiveTransform names (pbrt-v4).
+  const bool start = active_ != Active::End, end = active_ != Active::Start;
   auto concat = [&](const Mat4& m) {
-    if (active_ == Active::End) {
-      warn(at, name +
-                   ": transform for the shutter's end time only (motion blur is not supported; "
-                   "ignored)");
-      return;
-    }
-    gs.ctm = gs.ctm * m;
+    if (start) gs.ctm = gs.ctm * m;
+    if (end) gs.ctm_end = gs.ctm_end * m;
+  };
+  auto set = [&](const Mat4& m) {
+    if (start) gs.ctm = m;
+    if (end) gs.ctm_end = m;
   };
   if (name == "Translate") {
     auto v = number_args(lex, name, 3);
@@ -167,28 +168,21 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   } else if (name == "Transform" || name == "ConcatTransform") {
     auto v = number_args(lex, name, 16);
     Mat4 m = transpose_of(v);
-    if (name == "Transform") {
-      if (active_ == Active::End) {
-        warn(at, name +
-                     ": transform for the shutter's end time only (motion blur is not supported; "
-                     "ignored)");
-        return;
-      }
-      gs.ctm = m;
-    } else {
+    if (name == "Transform")
+      set(m);
+    else
       concat(m);
-    }
   } else if (name == "Identity") {
-    if (active_ != Active::End) gs.ctm = Mat4::identity();
+    set(Mat4::identity());
   } else if (name == "CoordinateSystem") {
-    named_coords_[string_arg(lex, name)] = gs.ctm;
+    named_coords_[string_arg(lex, name)] = {gs.ctm, gs.ctm_end};
   } else if (name == "CoordSysTransform") {
     std::string n = string_arg(lex, name);
     auto it = named_coords_.find(n);
     if (it == named_coords_.end())
       warn(at, "CoordSysTransform: unknown coordinate system \"" + n + "\" (ignored)");
     else
-      gs.ctm = it->second;
+      gs.ctm = it->second.first, gs.ctm_end = it->second.second;
   } else if (name == "ActiveTransform") {
     Token t = lex.next();
     if (t.kind != Token::Word || (t.text != "StartTime" && t.text != "EndTime" && t.text != "All"))
@@ -197,12 +191,12 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     active_ = t.text == "EndTime"     ? Active::End
               : t.text == "StartTime" ? Active::Start
                                       : Active::All;
-    if (active_ != Active::All)
-      warn(at, "ActiveTransform " + t.text +
-                   ": motion blur is not supported; the start-time transform is used");
   } else if (name == "TransformTimes") {
-    number_args(lex, name, 2);
-    warn(at, "TransformTimes: motion blur is not supported (ignored)");
+    auto v = number_args(lex, name, 2);
+    if (!(std::isfinite(v[0]) && std::isfinite(v[1]) && v[1] > v[0]))
+      fail(at, "TransformTimes: the end time must be after the start time, got " +
+                   format_number(v[0]) + " and " + format_number(v[1]));
+    transform_times_[0] = v[0], transform_times_[1] = v[1];
   } else if (name == "ReverseOrientation") {
     gs.reverse_orientation = !gs.reverse_orientation;
   } else if (name == "AttributeBegin" || name == "TransformBegin") {
@@ -210,7 +204,7 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
       fail(at, name + ": blocks nested more than " + std::to_string(kMaxNesting) +
                    " deep (the import limit on nesting)");
     if (name == "TransformBegin")
-      transform_stack_.push_back(gs.ctm);
+      transform_stack_.push_back({gs.ctm, gs.ctm_end});
     else {
       stack_.push_back(gs);
       stack_.back().begun_at = at;
@@ -218,7 +212,7 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
   } else if (name == "AttributeEnd" || name == "TransformEnd") {
     if (name == "TransformEnd") {
       if (transform_stack_.empty()) fail(at, "TransformEnd without a matching TransformBegin");
-      gs.ctm = transform_stack_.back();
+      gs.ctm = transform_stack_.back().first, gs.ctm_end = transform_stack_.back().second;
       transform_stack_.pop_back();
     } else {
       if (stack_.empty()) fail(at, "AttributeEnd without a matching AttributeBegin");
@@ -240,8 +234,8 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
     if (cs != "srgb")
       warn(at, "ColorSpace \"" + cs + "\": only srgb is supported; RGB values are read as sRGB");
   } else if (name == "WorldBegin") {
-    gs.ctm = Mat4::identity();
-    named_coords_["world"] = Mat4::identity();
+    gs.ctm = gs.ctm_end = Mat4::identity();
+    named_coords_["world"] = {Mat4::identity(), Mat4::identity()};
   } else if (name == "WorldEnd") {
     // pbrt-v3's end of the world block: nothing to do.
   } else if (name == "Include" || name == "Import") {
@@ -328,7 +322,14 @@ void Builder::directive(const std::string& name, Lexer& lex, const Location& at)
       fail(at, "ObjectInstance \"" + n + "\": not allowed inside ObjectBegin");
     auto it = object_ids_.find(n);
     if (it == object_ids_.end()) fail(at, "ObjectInstance: unknown object \"" + n + "\"");
-    scene_.instances.push_back({it->second, gs.ctm});
+    Instance inst(it->second, gs.ctm);
+    if (gs.moving()) {  // pbrt-v4's animated instance
+      inst.motion = ctm_motion(at, "ObjectInstance \"" + n + "\"");
+      inst.to_world = inst.motion.keys().front().m;
+      if (!object_lights_[it->second].empty())
+        warn(at, "ObjectInstance \"" + n + "\": its lights do not move (the start transform)");
+    }
+    scene_.instances.push_back(inst);
     for (Light l : object_lights_[it->second]) {
       l.position = gs.ctm.point(l.position);
       if (length(gs.ctm.vector(l.direction)) > 0)
@@ -369,19 +370,39 @@ void Builder::include(Lexer& lex, const Location& at, const std::string& directi
 // ------------------------------------------------------------------------------------------
 // Camera, film, filter, sampler, integrator.
 
+AnimatedTransform Builder::ctm_motion(const Location& at, const std::string& what,
+                                      const Mat4& after) const {
+  try {
+    return AnimatedTransform(
+        {{transform_times_[0], gs_.ctm * after}, {transform_times_[1], gs_.ctm_end * after}});
+  } catch (const std::invalid_argument& e) {
+    fail(at, what + ": its motion (ActiveTransform): " + e.what());
+  }
+}
+
 void Builder::camera(const std::string& type, const ParamList& params, const Location& at) {
   if (type != "perspective")
     fail(at, "Camera \"" + type + "\": only the perspective camera is supported");
-  Mat4 camera_from_world = gs_.ctm;
-  Mat4 world_from_camera;
+  Mat4 world_from_camera, world_from_camera_end;
   try {
-    world_from_camera = camera_from_world.inverse();
+    world_from_camera = gs_.ctm.inverse();
+    world_from_camera_end = gs_.ctm_end.inverse();
   } catch (const std::domain_error&) {
     fail(at, "Camera: the current transform is singular");
   }
-  named_coords_["camera"] = world_from_camera;
+  named_coords_["camera"] = {world_from_camera, world_from_camera_end};
   // pbrt's camera space looks down +z (left-handed: x right, y up); ours looks down -z.
-  scene_.camera.camera_to_world = world_from_camera * Mat4::scale({1, 1, -1});
+  const Mat4 flip = Mat4::scale({1, 1, -1});
+  scene_.camera.camera_to_world = world_from_camera * flip;
+  if (gs_.moving()) {  // a moving camera: its two transforms at TransformTimes
+    try {
+      scene_.camera.motion =
+          AnimatedTransform({{transform_times_[0], world_from_camera * flip},
+                             {transform_times_[1], world_from_camera_end * flip}});
+    } catch (const std::invalid_argument& e) {
+      fail(at, std::string("Camera: ") + e.what());
+    }
+  }
   double fov = params.number("fov", 90);
   if (!(fov > 0 && fov < 180))
     fail(at, "Camera: \"float fov\" must be between 0 and 180 degrees, got " + format_number(fov));
@@ -390,9 +411,15 @@ void Builder::camera(const std::string& type, const ParamList& params, const Loc
   scene_.camera.focus_distance = float(params.number("focaldistance", 1e6));
   if (scene_.camera.lens_radius < 0) fail(at, "Camera: \"float lensradius\" must be at least 0");
   if (!(scene_.camera.focus_distance > 0)) fail(at, "Camera: \"float focaldistance\" must be > 0");
-  // The shutter: no motion blur, but its length is the sensor's exposure time (see finish()).
-  exposure_time_ = params.number("shutterclose", 1) - params.number("shutteropen", 0);
+  // The shutter, in seconds of one frame at 1 fps (pbrt renders one instant's image: frame 0);
+  // its length is also the sensor's exposure time (see finish()).
+  const double open = params.number("shutteropen", 0), close = params.number("shutterclose", 1);
+  exposure_time_ = close - open;
   if (!(exposure_time_ > 0)) fail(at, "Camera: \"shutterclose\" must be after \"shutteropen\"");
+  if (!(std::fabs(open) <= kMaxShutterFrames && std::fabs(close) <= kMaxShutterFrames))
+    fail(at, "Camera: the shutter must lie within " + format_number(kMaxShutterFrames) +
+                 " seconds of 0");
+  scene_.time = ShotTime{1, open, close};
   warn_unused(params, "Camera \"perspective\"");
 }
 
@@ -516,6 +543,8 @@ RGB Builder::light_spectrum(const ParamList& params, const std::string& name,
 void Builder::light(const std::string& type, const ParamList& params, const Location& at) {
   const std::string d = "LightSource \"" + type + "\"";
   const Mat4& ctm = gs_.ctm;
+  if (gs_.moving())
+    warn(at, d + ": moving lights are not supported: the start transform places it");
   float scale = float(params.number("scale", 1));
   Light l;
   l.name = d + " at " + at.str();
