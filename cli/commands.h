@@ -53,7 +53,7 @@ void add_credential_options(CLI::App& cmd, SharedOptions& shared);
 
 // The scene overrides `render` and `submit` share (--spp, --passes, --integrator, ...).
 struct OverrideArgs {
-  std::string res, integrator, filter, sampler, light_selection;
+  std::string res, integrator, filter, sampler, light_selection, shutter;
   std::optional<uint64_t> spp, seed;
   std::optional<uint32_t> passes;
   std::optional<int> max_depth;

@@ -99,7 +99,7 @@ void print_summary(const SampleBuffer& frame, double seconds, uint64_t rays) {
 }
 
 struct RenderArgs {
-  std::string scene, output, partial, pass_range, frames, shutter;
+  std::string scene, output, partial, pass_range, frames;
   OverrideArgs overrides;
   std::optional<uint32_t> frame;
   double time_budget = 0;
@@ -205,14 +205,6 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
 // and every per-frame scene file found before the first frame renders.
 int cmd_render(const RenderArgs& a) {
   SceneOverrides ov = overrides_of(a.overrides);
-  if (!a.shutter.empty()) {
-    ov.shutter = a.shutter;
-    try {
-      check_overrides(ov);
-    } catch (const SceneError& e) {
-      throw UsageError(e.what());
-    }
-  }
   if (a.output.empty() && a.partial.empty())
     throw UsageError("render: give -o OUT.exr or --partial OUT.rfb");
   if (!a.partial.empty() && a.pass_range.empty())
@@ -360,9 +352,6 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
                      "frame range (1-24, 1-24:2, 1,5,9): one render per frame; -o and --partial "
                      "then need a frame template (shot.####.exr or shot.%04d.exr), and the scene "
                      "may be one file or a per-frame pattern (shot.####.json)");
-  render->add_option("--shutter", ra->shutter,
-                     "shutter OPEN,CLOSE in frames from each frame's start (0,0.5), or one "
-                     "instant (0); overrides the scene's time.shutter (moving scenes only)");
   render->add_option("--threads", shared.threads, "worker threads (default: all cores)")
       ->check(finite_in(0, 4096));
   render

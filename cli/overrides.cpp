@@ -89,6 +89,9 @@ void add_override_options(CLI::App& cmd, OverrideArgs& a) {
                  "light selection for next-event estimation (auto, power, bvh)");
   cmd.add_option("--noise-target", a.noise_target, "stop when relMSE <= this")
       ->check(finite_in(0, 1e6));
+  cmd.add_option("--shutter", a.shutter,
+                 "shutter OPEN,CLOSE in frames from each frame's start (0,0.5), or one instant "
+                 "(0); overrides the scene's time.shutter (scenes where something moves)");
   cmd.add_option("--aov", a.aovs,
                  "auxiliary outputs, comma-separated: albedo, normal, depth (docs/outputs.md)");
 }
@@ -104,6 +107,7 @@ SceneOverrides overrides_of(const OverrideArgs& a) {
   if (!a.filter.empty()) ov.filter = a.filter;
   if (!a.sampler.empty()) ov.sampler = a.sampler;
   if (!a.light_selection.empty()) ov.light_selection = a.light_selection;
+  if (!a.shutter.empty()) ov.shutter = a.shutter;
   if (a.aovs) ov.aovs = *a.aovs;
   if (!a.res.empty()) std::tie(ov.width, ov.height) = parse_resolution(a.res);
   try {

@@ -25,6 +25,7 @@ Json overrides_json(const SceneOverrides& o) {
   if (o.sampler) j["sampler"] = *o.sampler;
   if (o.aovs) j["aovs"] = *o.aovs;
   if (o.light_selection) j["light_selection"] = *o.light_selection;
+  if (o.shutter) j["shutter"] = *o.shutter;
   return j;
 }
 
@@ -47,6 +48,7 @@ SceneOverrides overrides_from(const Json& j) {
   read_optional(j, "sampler", o.sampler);
   read_optional(j, "aovs", o.aovs);
   read_optional(j, "light_selection", o.light_selection);
+  read_optional(j, "shutter", o.shutter);
   return o;
 }
 

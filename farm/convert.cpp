@@ -18,6 +18,7 @@ SceneOverrides to_scene_overrides(const pb::RenderOverrides& o) {
   if (o.has_sampler()) s.sampler = o.sampler();
   if (o.has_aovs()) s.aovs = o.aovs();
   if (o.has_light_selection()) s.light_selection = o.light_selection();
+  if (o.has_shutter()) s.shutter = o.shutter();
   return s;
 }
 
@@ -35,6 +36,7 @@ pb::RenderOverrides to_wire_overrides(const SceneOverrides& s) {
   if (s.sampler) o.set_sampler(*s.sampler);
   if (s.aovs) o.set_aovs(*s.aovs);
   if (s.light_selection) o.set_light_selection(*s.light_selection);
+  if (s.shutter) o.set_shutter(*s.shutter);
   return o;
 }
 

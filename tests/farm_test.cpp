@@ -88,17 +88,19 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
                       farm.dir() + "/range/local." + f + ".exr");
   EXPECT_EQ(farm.client("fetch " + a + " -o " + farm.dir() + "/one.exr").exit_code, 2)
       << "several frames into one name";
-  // A moving camera and a moving ball (keyframes, motion blur over the shutter): each frame the
-  // farm renders is the bits of the local frame-range render, and the frames differ (they moved).
+  // A moving camera and a moving ball (keyframes, motion blur over a shutter given at submit):
+  // each frame the farm renders is the bits of the local frame-range render, and the frames
+  // differ (they moved).
   const std::string moving = "tests/data/motion/moving_camera.json";
-  const std::string m = farm.submit(moving + " --frames 1-3");
+  const std::string m = farm.submit(moving + " --frames 1-3 --shutter=-0.1,0.3");
   farm.worker();  // (the first two left when the queue ran dry)
   farm.worker();
   EXPECT_EQ(farm.client("watch " + m).exit_code, 0);
   r = farm.client("fetch " + m + " -o " + farm.dir() + "/moving/farm.####.exr");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   r = test::run_command("cd " + test::source_dir() + " && " + test::rayfarm_binary() + " render " +
-                        moving + " --frames 1-3 -q -o " + farm.dir() + "/moving/local.####.exr");
+                        moving + " --frames 1-3 --shutter=-0.1,0.3 -q -o " + farm.dir() +
+                        "/moving/local.####.exr");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* f : {"0001", "0002", "0003"})
     expect_same_image(farm.dir() + "/moving/farm." + f + ".exr",

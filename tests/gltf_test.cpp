@@ -403,21 +403,6 @@ TEST(GltfTest, CliRendersAGltfFile) {
 // ---------------------------------------------------------------------------------------------
 // Agreement: the Cornell box written as glTF from scene.json's own data renders the same image.
 
-std::string base64(const std::string& in) {
-  static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-  std::string out;
-  for (size_t i = 0; i < in.size(); i += 3) {
-    uint32_t v = uint32_t(uint8_t(in[i])) << 16;
-    if (i + 1 < in.size()) v |= uint32_t(uint8_t(in[i + 1])) << 8;
-    if (i + 2 < in.size()) v |= uint32_t(uint8_t(in[i + 2]));
-    out += k[v >> 18 & 63];
-    out += k[v >> 12 & 63];
-    out += i + 1 < in.size() ? k[v >> 6 & 63] : '=';
-    out += i + 2 < in.size() ? k[v & 63] : '=';
-  }
-  return out;
-}
-
 // The loaded JSON scene's world-space meshes, diffuse materials, emission and camera as glTF:
 // base colour = reflectance (metallic 0, roughness 1 -> Lambertian), the light's radiance as
 // emissiveFactor x KHR_materials_emissive_strength, the camera as a node matrix with yfov = fov
@@ -475,8 +460,8 @@ std::string cornell_gltf(const Scene& s) {
   j["nodes"].push_back({{"camera", 0}, {"matrix", matrix}});
   scene_nodes.push_back(int(j["nodes"].size() - 1));
   j["scenes"] = {{{"nodes", scene_nodes}}};
-  j["buffers"] = {
-      {{"byteLength", bin.size()}, {"uri", "data:application/octet-stream;base64," + base64(bin)}}};
+  j["buffers"] = {{{"byteLength", bin.size()},
+                   {"uri", "data:application/octet-stream;base64," + test::base64(bin)}}};
   return j.dump();
 }
 

@@ -161,6 +161,28 @@ TEST(MitsubaXml, ThinLensAndSensorMatrix) {
   EXPECT_EQ(s.render.integrator.max_depth, 1024);
 }
 
+// Mitsuba 3's XML has no animated transforms: Mitsuba 0.6's <animation> is warned, naming it and
+// what is dropped, and its first key places the shape; nothing moves.
+TEST(MitsubaXml, AnAnimationIsDroppedWithAWarning) {
+  std::string dir = test::make_temp_dir("mitsuba_animation");
+  test::write_text(dir + "/s.xml", R"(<scene version="3.0.0">
+  <sensor type="perspective"><transform name="to_world"><translate z="5"/></transform></sensor>
+  <shape type="sphere">
+    <animation name="to_world">
+      <transform time="0"><translate x="-1"/></transform>
+      <transform time="1"><translate x="1"/></transform>
+    </animation>
+  </shape>
+  <emitter type="constant"/></scene>)");
+  Scene s = load_scene(dir + "/s.xml");
+  EXPECT_TRUE(has_warning(s, "<animation>: Mitsuba 3 scenes have no animated transforms"));
+  EXPECT_TRUE(has_warning(s, "s.xml:4"));
+  EXPECT_FALSE(scene_moves(s));
+  ASSERT_EQ(s.meshes.size(), 1u);
+  ASSERT_TRUE(s.meshes[0].sphere);
+  expect_vec_near(s.meshes[0].sphere->center, {-1, 0, 0}, 1e-6f);
+}
+
 TEST(MitsubaXml, Integrators) {
   auto load_integrator = [](const std::string& xml) {
     std::string dir = test::make_temp_dir("mitsuba_integrator");

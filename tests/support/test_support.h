@@ -17,6 +17,9 @@
 
 namespace rf::test {
 
+// RFC 4648 base64 of bytes (data: URIs of test glTF files).
+std::string base64(const std::string& in);
+
 #ifdef RAYFARM_TEST_ASAN
 inline constexpr bool kAddressSanitizer = true;
 #else

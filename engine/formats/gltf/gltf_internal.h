@@ -6,6 +6,7 @@
 #include <tiny_gltf.h>
 
 #include <map>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -56,6 +57,37 @@ std::vector<float> read_floats(const Context& c, int accessor, int components,
 // Vertex indices (SCALAR, unsigned byte/short/int), each checked < vertex_count.
 std::vector<uint32_t> read_indices(const Context& c, int accessor, size_t vertex_count,
                                    const std::string& where);
+
+// Node animations (gltf_animation.cpp; docs/formats/gltf.md "Animations"). The matrix
+// T R S of a translation, a unit quaternion (x, y, z, w) and a scale, as a node's TRS makes it.
+Mat4 trs_matrix(const Vec3& t, const double q[4], const Vec3& s);
+// Every channel of /animations that moves a node's translation, rotation or scale, checked (a
+// channel on a missing node, a missing sampler, key times out of order, a wrong number of
+// values, a node with a 'matrix' are errors naming the pointer); all animations play together
+// from time 0 (seconds), and morph-target weight channels are warned and dropped.
+class Animations {
+ public:
+  explicit Animations(Context& c);
+  ~Animations();
+  bool animates(size_t node) const;
+  // The times at which a chain of nodes (root first) is sampled: every key of their channels,
+  // plus for STEP a key just before each next one (kStepHold of the gap before it) holding the
+  // value, and for CUBICSPLINE kSplineSteps steps per segment (the AnimatedTransform
+  // interpolates the rest: exactly for LINEAR keys of one node under similarity parents).
+  std::vector<double> key_times(const std::vector<size_t>& chain) const;
+  // A node's local transform at time t: its own TRS with the animated paths evaluated.
+  Mat4 local_at(const Context& c, size_t node, double t) const;
+  // The world transform over time of the last node of `chain` (root first); a track that does
+  // not move collapses to one key (AnimatedTransform). `where` names it in errors.
+  AnimatedTransform world_motion(const Context& c, const std::vector<size_t>& chain,
+                                 const std::string& where) const;
+  static constexpr double kStepHold = 1e-6;
+  static constexpr int kSplineSteps = 8;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // Materials and textures (gltf_materials.cpp): fills scene.materials (one per glTF material, plus
 // the spec's default material at the end when a primitive has none), scene.textures and the

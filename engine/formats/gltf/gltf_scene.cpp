@@ -196,9 +196,6 @@ void check_asset_and_extensions(Context& c) {
         !contains_name(c.model.extensionsRequired, c.model.extensionsUsed[i]))
       c.warn(ptr("/extensionsUsed", i),
              "extension " + c.model.extensionsUsed[i] + " is not supported (ignored)");
-  if (!c.model.animations.empty())
-    c.warn("/animations", std::to_string(c.model.animations.size()) +
-                              " animation(s) ignored: the scene is rendered in its rest pose");
   if (!c.model.skins.empty())
     c.warn("/skins", std::to_string(c.model.skins.size()) +
                          " skin(s) ignored: skinned meshes are rendered in their bind pose");
@@ -237,14 +234,7 @@ Mat4 node_matrix(const Context& c, size_t n) {
       if (!(len > 0) || !std::isfinite(len)) c.fail(ptr(p, "rotation"), "not a unit quaternion");
       for (int i = 0; i < 4; ++i) q[i] = node.rotation[size_t(i)] / len;
     }
-    const double x = q[0], y = q[1], z = q[2], w = q[3];
-    const double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
-                            {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
-                            {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)}};
-    const float sv[3] = {s.x, s.y, s.z};
-    for (int row = 0; row < 3; ++row)
-      for (int col = 0; col < 3; ++col) m.m[row][col] = float(r[row][col]) * sv[col];  // T R S
-    m.m[0][3] = t.x, m.m[1][3] = t.y, m.m[2][3] = t.z;
+    m = trs_matrix(t, q, s);
   }
   if (!m.is_finite()) c.fail(p, "the transform is not finite");
   return m;
@@ -253,6 +243,8 @@ Mat4 node_matrix(const Context& c, size_t n) {
 struct PlacedNode {
   size_t node;
   Mat4 to_world;
+  int parent = -1;           // the parent's index among the placed nodes, -1 for a root
+  AnimatedTransform motion;  // world over time where an animation moves it or an ancestor
 };
 
 // The nodes of the scene to render in depth-first order with their world transforms. A node
@@ -285,10 +277,11 @@ std::vector<PlacedNode> walk_nodes(Context& c) {
     int node;
     Mat4 parent;
     std::string where;
+    int parent_index;
   };
   std::vector<Item> stack;
   for (size_t i = roots.size(); i-- > 0;)
-    stack.push_back({roots[i], Mat4::identity(), ptr(roots_where, i)});
+    stack.push_back({roots[i], Mat4::identity(), ptr(roots_where, i), -1});
   while (!stack.empty()) {
     Item it = std::move(stack.back());
     stack.pop_back();
@@ -302,12 +295,32 @@ std::vector<PlacedNode> walk_nodes(Context& c) {
     seen[n] = true;
     Mat4 world = it.parent * node_matrix(c, n);
     if (!world.is_finite()) c.fail(ptr("/nodes", n), "the world transform is not finite");
-    out.push_back({n, world});
+    PlacedNode placed;
+    placed.node = n, placed.to_world = world, placed.parent = it.parent_index;
+    out.push_back(std::move(placed));
+    const int index = int(out.size() - 1);
     const auto& ch = m.nodes[n].children;
     for (size_t k = ch.size(); k-- > 0;)
-      stack.push_back({ch[k], world, ptr(ptr(ptr("/nodes", n), "children"), k)});
+      stack.push_back({ch[k], world, ptr(ptr(ptr("/nodes", n), "children"), k), index});
   }
   return out;
+}
+
+// The motion of every placed node that an animation moves, itself or through an ancestor.
+void animate_nodes(Context& c, std::vector<PlacedNode>& nodes) {
+  if (c.model.animations.empty()) return;
+  const Animations anim(c);
+  for (PlacedNode& pn : nodes) {
+    std::vector<size_t> chain;  // root first
+    bool moves = false;
+    for (int i = int(&pn - nodes.data()); i >= 0; i = nodes[size_t(i)].parent) {
+      chain.insert(chain.begin(), nodes[size_t(i)].node);
+      moves |= anim.animates(nodes[size_t(i)].node);
+    }
+    if (!moves) continue;
+    pn.motion = anim.world_motion(c, chain, ptr("/nodes", pn.node));
+    pn.to_world = pn.motion.keys().front().m;  // a track that holds still: where it holds
+  }
 }
 
 // --------------------------------------------------------------------------------------------
@@ -439,22 +452,25 @@ void place_meshes(Context& c, const std::vector<PlacedNode>& nodes, const Materi
   for (const auto& [mesh, placements] : users) {
     std::vector<Primitive> prims = convert_mesh(c, mesh, mats);
     if (prims.empty()) continue;
-    if (placements.size() == 1) {  // placed once: straight into world space
+    if (placements.size() == 1 && !placements[0]->motion.animated()) {  // straight into world
       for (Primitive& pr : prims) {
         place_mesh(std::move(pr.data), placements[0]->to_world, c.file, pr.where, pr.mesh);
         c.scene->meshes.push_back(std::move(pr.mesh));
       }
       continue;
     }
-    SceneObject obj;  // placed by several nodes: an object and its instances
+    SceneObject obj;  // placed by several nodes, or moving: an object and its instances
     obj.name = m.meshes[mesh].name.empty() ? ptr("/meshes", mesh) : m.meshes[mesh].name;
     for (Primitive& pr : prims) {
       place_mesh(std::move(pr.data), Mat4::identity(), c.file, pr.where, pr.mesh);
       obj.meshes.push_back(std::move(pr.mesh));
     }
     c.scene->objects.push_back(std::move(obj));
-    for (const PlacedNode* pn : placements)
-      c.scene->instances.push_back({uint32_t(c.scene->objects.size() - 1), pn->to_world});
+    for (const PlacedNode* pn : placements) {
+      Instance inst(uint32_t(c.scene->objects.size() - 1), pn->to_world);
+      if (pn->motion.animated()) inst.motion = pn->motion, inst.to_world = pn->motion.keys()[0].m;
+      c.scene->instances.push_back(inst);
+    }
   }
 }
 
@@ -509,20 +525,28 @@ void set_camera(Context& c, const std::vector<PlacedNode>& nodes) {
           : 2 * std::atan(std::tan(yfov / 2) * double(s.film.width) / double(s.film.height));
   s.camera.fov_deg = float(fov * 180 / M_PI);
   // The node's rotation and translation (a scale would change nothing in glTF's camera model).
-  const Mat4& w = chosen->to_world;
-  Vec3 x(w.m[0][0], w.m[1][0], w.m[2][0]), y(w.m[0][1], w.m[1][1], w.m[2][1]),
-      z(w.m[0][2], w.m[1][2], w.m[2][2]);
-  if (!(length(z) > 0) || !(length(y) > 0) || w.det3() == 0)
-    c.fail(ptr("/nodes", chosen->node), "the camera node's transform is singular");
-  if (w.det3() < 0)
-    c.fail(ptr("/nodes", chosen->node), "the camera node's transform mirrors (det < 0)");
-  z = normalize(z);
-  y = normalize(y - z * dot(y, z));
-  x = cross(y, z);
-  Mat4 cw;
-  for (int r = 0; r < 3; ++r)
-    cw.m[r][0] = x[r], cw.m[r][1] = y[r], cw.m[r][2] = z[r], cw.m[r][3] = w.m[r][3];
-  s.camera.camera_to_world = cw;
+  auto camera_of = [&](const Mat4& w) {
+    Vec3 x(w.m[0][0], w.m[1][0], w.m[2][0]), y(w.m[0][1], w.m[1][1], w.m[2][1]),
+        z(w.m[0][2], w.m[1][2], w.m[2][2]);
+    if (!(length(z) > 0) || !(length(y) > 0) || w.det3() == 0)
+      c.fail(ptr("/nodes", chosen->node), "the camera node's transform is singular");
+    if (w.det3() < 0)
+      c.fail(ptr("/nodes", chosen->node), "the camera node's transform mirrors (det < 0)");
+    z = normalize(z);
+    y = normalize(y - z * dot(y, z));
+    x = cross(y, z);
+    Mat4 cw;
+    for (int r = 0; r < 3; ++r)
+      cw.m[r][0] = x[r], cw.m[r][1] = y[r], cw.m[r][2] = z[r], cw.m[r][3] = w.m[r][3];
+    return cw;
+  };
+  s.camera.camera_to_world = camera_of(chosen->to_world);
+  if (chosen->motion.animated()) {  // an animated camera: its keys, made camera transforms
+    std::vector<Keyframe> keys;
+    for (const Keyframe& k : chosen->motion.keys()) keys.push_back({k.time, camera_of(k.m)});
+    s.camera.motion = AnimatedTransform(keys);
+    s.camera.camera_to_world = s.camera.motion.keys()[0].m;
+  }
 }
 
 // A documented default when the scene has no camera: 40 degrees, looking down -z at the centre
@@ -564,6 +588,10 @@ void add_lights(Context& c, const std::vector<PlacedNode>& nodes) {
                                    std::to_string(m.lights.size()) + ")");
     const tinygltf::Light& gl = m.lights[size_t(idx)];
     const std::string lp = ptr("/extensions/KHR_lights_punctual/lights", size_t(idx));
+    if (pn.motion.animated())
+      c.warn(np,
+             "moving lights are not supported: the light stays where the node's rest pose "
+             "puts it");
     RGB colour(1.0f);
     if (!gl.color.empty()) {
       if (gl.color.size() != 3) c.fail(ptr(lp, "color"), "expected 3 numbers");
@@ -700,6 +728,7 @@ void import_gltf(const std::string& bytes, SceneFiles& files, Scene& scene) {
   gltf::check_asset_and_extensions(c);
   gltf::MaterialMap mats = gltf::convert_materials(c);
   std::vector<gltf::PlacedNode> nodes = gltf::walk_nodes(c);
+  gltf::animate_nodes(c, nodes);
   gltf::place_meshes(c, nodes, mats);
   gltf::add_lights(c, nodes);
   gltf::set_camera(c, nodes);

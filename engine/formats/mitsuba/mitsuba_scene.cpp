@@ -2,6 +2,8 @@
 // (mitsuba_parser.h).
 #include "engine/formats/mitsuba/mitsuba_parser.h"
 
+#include <optional>
+
 namespace rf::mitsuba {
 
 void MitsubaParser::parse() {
@@ -213,6 +215,18 @@ FloatParam MitsubaParser::float_param(Props& p, const std::string& name, float f
 }
 
 Mat4 MitsubaParser::transform_of(const Node& n) {
+  if (n.tag() == "animation") {
+    // Mitsuba 0.6's animated transform; Mitsuba 3's XML has none. Its first key stands.
+    std::optional<Node> first;
+    for (const Node& k : doc_.children(n))
+      if (!first && k.tag() == "transform") first = k;
+    if (!first) fail(n, "an <animation> without a <transform> key");
+    doc_.warn(n,
+              "<animation>: Mitsuba 3 scenes have no animated transforms and rayfarm reads "
+              "none from this format: the motion is dropped, the first key's transform is "
+              "used (give the keys in rayfarm's JSON, pbrt-v4 or glTF to move it)");
+    return transform_of(*first);
+  }
   if (n.tag() != "transform") fail(n, "expected a <transform>, got <" + n.tag() + ">");
   Mat4 m = Mat4::identity();
   for (const Node& op : doc_.children(n)) m = transform_op(op) * m;

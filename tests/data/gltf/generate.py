@@ -106,6 +106,38 @@ def hierarchy():
     return b.done()
 
 
+def animated():
+    """Node animations (docs/formats/gltf.md "Animations"; a fuzzing seed): a quad sliding
+    (LINEAR translation), one snapping a quarter turn at t = 1 (STEP rotation), one on a cubic
+    (CUBICSPLINE translation), a child riding on the first, and a camera."""
+    b = Builder()
+    b.j["meshes"] = [{"name": "quad", "primitives": [dict(b.quad(), material=0)]}]
+    b.j["materials"] = [{"name": "grey", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1], "metallicFactor": 0}}]
+    s = math.sqrt(0.5)
+    b.j["nodes"] = [
+        {"name": "slide", "mesh": 0, "children": [3]},
+        {"name": "snap", "mesh": 0, "translation": [3, 0, 0]},
+        {"name": "cubic", "mesh": 0, "translation": [-3, 0, 0]},
+        {"name": "rider", "mesh": 0, "translation": [0, 2.5, 0]},
+        {"name": "camera", "translation": [0, 1, 12], "camera": 0},
+    ]
+    b.j["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}]
+    times2, times3 = b.accessor([0, 1], "SCALAR"), b.accessor([0, 1, 2], "SCALAR")
+    samplers = [
+        {"input": times3, "output": b.accessor([(0, 0, 0), (1, 0, 0), (1, 2, 0)], "VEC3")},
+        {"input": times2, "interpolation": "STEP", "output": b.accessor([(0, 0, 0, 1), (0, s, 0, s)], "VEC4")},
+        {"input": times2, "interpolation": "CUBICSPLINE",
+         "output": b.accessor([(0, 0, 0), (-3, 0, 0), (3, 0, 0), (0, 0, 0), (-2, 0, 0), (0, 0, 0)], "VEC3")},
+    ]
+    b.j["animations"] = [{"name": "shot", "samplers": samplers, "channels": [
+        {"sampler": 0, "target": {"node": 0, "path": "translation"}},
+        {"sampler": 1, "target": {"node": 1, "path": "rotation"}},
+        {"sampler": 2, "target": {"node": 2, "path": "translation"}}]}]
+    b.j["scenes"] = [{"nodes": [0, 1, 2, 4]}]
+    b.j["scene"] = 0
+    return b.done()
+
+
 def lights():
     b = Builder()
     b.j["extensionsUsed"] = ["KHR_lights_punctual"]
@@ -308,6 +340,7 @@ if __name__ == "__main__":
     write("textured_external.gltf", textured_external())
     write("primitives.gltf", primitives())
     write("interleaved.gltf", interleaved())
+    write("animated.gltf", animated())
     with open("checker.png", "wb") as f:
         f.write(TEXTURE_PNG)
     malformed()

@@ -1,0 +1,232 @@
+// glTF node animations (docs/formats/gltf.md, "Animations"), on a file the test writes with
+// known keyframes: LINEAR translation and rotation, STEP rotation, CUBICSPLINE translation, a
+// track that does not move, an animated parent; the world transforms at chosen times equal the
+// closed forms, a track that does not move stays static geometry, and bad channels are named.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "engine/render.h"
+#include "engine/scene.h"
+#include "tests/support/test_support.h"
+
+namespace rf {
+namespace {
+
+using nlohmann::json;
+
+// A glTF with one triangle mesh placed by nodes 0-4 and the animation's channels; accessors are
+// added from float arrays.
+struct AnimatedFile {
+  json j;
+  std::string bin;
+  AnimatedFile() {
+    j = {{"asset", {{"version", "2.0"}}},
+         {"bufferViews", json::array()},
+         {"accessors", json::array()},
+         {"meshes", json::array()},
+         {"nodes", json::array()},
+         {"animations", {{{"channels", json::array()}, {"samplers", json::array()}}}}};
+    const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    const size_t pos = add(tri, 9, "VEC3");
+    j["meshes"].push_back({{"primitives", {{{"attributes", {{"POSITION", pos}}}}}}});
+  }
+  size_t add(const float* v, size_t n, const char* type) {
+    const size_t comps = std::string(type) == "SCALAR" ? 1 : std::string(type) == "VEC3" ? 3 : 4;
+    j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", n * 4}});
+    bin.append(reinterpret_cast<const char*>(v), n * 4);
+    j["accessors"].push_back({{"bufferView", j["bufferViews"].size() - 1},
+                              {"componentType", 5126},
+                              {"count", n / comps},
+                              {"type", type}});
+    return j["accessors"].size() - 1;
+  }
+  size_t node(json n) {
+    j["nodes"].push_back(n);
+    return j["nodes"].size() - 1;
+  }
+  void channel(size_t node, const char* path, const char* interp, std::vector<float> times,
+               std::vector<float> values) {
+    const char* type = std::string(path) == "rotation" ? "VEC4" : "VEC3";
+    const size_t in = add(times.data(), times.size(), "SCALAR");
+    const size_t out = add(values.data(), values.size(), type);
+    json& a = j["animations"][0];
+    a["samplers"].push_back({{"input", in}, {"output", out}, {"interpolation", interp}});
+    a["channels"].push_back(
+        {{"sampler", a["samplers"].size() - 1}, {"target", {{"node", node}, {"path", path}}}});
+  }
+  std::string text() {
+    j["buffers"] = {{{"byteLength", bin.size()},
+                     {"uri", "data:application/octet-stream;base64," + test::base64(bin)}}};
+    return j.dump();
+  }
+};
+
+const float kS = float(std::sqrt(0.5));  // sin and cos of 45 degrees
+
+// The file of the tests: node 0 slides (LINEAR), node 1 turns a quarter about +y (LINEAR), node 2
+// snaps a quarter turn at t = 1 (STEP), node 3 follows a cubic (CUBICSPLINE), node 4's track
+// holds one value, node 5 is a child of node 0 (moved by its parent).
+AnimatedFile animated_file() {
+  AnimatedFile f;
+  for (int i = 0; i < 5; ++i) f.node({{"mesh", 0}});
+  f.node({{"mesh", 0}, {"translation", {0, 0, 5}}});
+  f.j["nodes"][0]["children"] = {5};
+  f.j["scenes"] = {{{"nodes", {0, 1, 2, 3, 4}}}};
+  f.channel(0, "translation", "LINEAR", {0, 1, 2}, {0, 0, 0, 1, 0, 0, 1, 2, 0});
+  f.channel(1, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, kS, 0, kS});
+  f.channel(2, "rotation", "STEP", {0, 1}, {0, 0, 0, 1, 0, kS, 0, kS});
+  // x(u) from 0 to 1 over [0, 1], out-tangent 3 at the start, in-tangent 0 at the end:
+  // (in, value, out) per key.
+  f.channel(3, "translation", "CUBICSPLINE", {0, 1},
+            {0, 0, 0, 0, 0, 0, 3, 0, 0,  //
+             0, 0, 0, 1, 0, 0, 0, 0, 0});
+  f.channel(4, "translation", "LINEAR", {0, 1, 2}, {2, 0, 0, 2, 0, 0, 2, 0, 0});
+  return f;
+}
+
+Scene load_text(const std::string& text, const std::string& tag = "gltf-animation") {
+  const std::string dir = test::make_temp_dir(tag);
+  test::write_text(dir + "/scene.gltf", text);
+  return load_scene(dir + "/scene.gltf");
+}
+
+std::string load_error(const std::string& text) {
+  try {
+    load_text(text);
+  } catch (const SceneError& e) {
+    return e.what();
+  }
+  return "(loaded)";
+}
+
+// The instance placing node n's mesh (objects are made in mesh order, instances in node order).
+const Instance& placed_by(const Scene& s, size_t k) { return s.instances.at(k); }
+
+void expect_point(const Mat4& m, Vec3 p, Vec3 want, float tol, const char* what) {
+  const Vec3 got = m.point(p);
+  EXPECT_NEAR(got.x, want.x, tol) << what;
+  EXPECT_NEAR(got.y, want.y, tol) << what;
+  EXPECT_NEAR(got.z, want.z, tol) << what;
+}
+
+TEST(GltfAnimation, KeyframesEvaluateToTheirClosedForms) {
+  const Scene s = load_text(animated_file().text());
+  // One mesh placed by six nodes: an object and six instances, node order 0, 5, 1, 2, 3, 4.
+  ASSERT_EQ(s.objects.size(), 1u);
+  ASSERT_EQ(s.instances.size(), 6u);
+  const Instance &slide = placed_by(s, 0), &child = placed_by(s, 1), &turn = placed_by(s, 2),
+                 &snap = placed_by(s, 3), &cubic = placed_by(s, 4), &still = placed_by(s, 5);
+  constexpr float kTol = 1e-5f;
+  // LINEAR translation: (t, 0, 0) then (1, t - 1, 0)... at t in [1, 2]: (1, 2 (t - 1), 0).
+  ASSERT_TRUE(slide.moves());
+  expect_point(slide.motion.at(0.5), {0, 0, 0}, {0.5f, 0, 0}, kTol, "slide 0.5");
+  expect_point(slide.motion.at(1.5), {0, 0, 0}, {1, 1, 0}, kTol, "slide 1.5");
+  expect_point(slide.motion.at(3.0), {0, 0, 0}, {1, 2, 0}, kTol, "slide after the last key");
+  // The child rides on its parent: (0, 0, 5) + the parent's translation.
+  ASSERT_TRUE(child.moves());
+  expect_point(child.motion.at(1.5), {0, 0, 0}, {1, 1, 5}, kTol, "child 1.5");
+  // LINEAR rotation: a slerp, 45 degrees about +y at t = 0.5 (x axis to (cos, 0, -sin)).
+  ASSERT_TRUE(turn.moves());
+  expect_point(turn.motion.at(0.5), {1, 0, 0}, {kS, 0, -kS}, kTol, "turn 0.5");
+  // STEP: the first key's rotation until t = 1, then the second's.
+  ASSERT_TRUE(snap.moves());
+  expect_point(snap.motion.at(0.5), {1, 0, 0}, {1, 0, 0}, kTol, "snap 0.5");
+  expect_point(snap.motion.at(0.999), {1, 0, 0}, {1, 0, 0}, kTol, "snap 0.999");
+  expect_point(snap.motion.at(1.0), {1, 0, 0}, {0, 0, -1}, kTol, "snap 1");
+  // CUBICSPLINE: x(u) = 3 (u^3 - 2u^2 + u) + (3u^2 - 2u^3); at the sampled u = 0.25 and 0.5 the
+  // closed form (0.578125, 0.875), and between samples within the linear interpolation of the
+  // 8 steps per segment (|x''| <= 6 here: error <= 6 / 8 (1/8)^2... below 0.012).
+  ASSERT_TRUE(cubic.moves());
+  auto x = [](double u) { return 3 * (u * u * u - 2 * u * u + u) + (3 * u * u - 2 * u * u * u); };
+  expect_point(cubic.motion.at(0.25), {0, 0, 0}, {float(x(0.25)), 0, 0}, kTol, "cubic 0.25");
+  expect_point(cubic.motion.at(0.5), {0, 0, 0}, {float(x(0.5)), 0, 0}, kTol, "cubic 0.5");
+  expect_point(cubic.motion.at(0.3), {0, 0, 0}, {float(x(0.3)), 0, 0}, 0.012f, "cubic 0.3");
+  // A track that holds one value collapses to a static placement.
+  EXPECT_FALSE(still.moves());
+  expect_point(still.to_world, {0, 0, 0}, {2, 0, 0}, kTol, "still");
+  EXPECT_TRUE(geometry_moves(s));
+}
+
+// A mesh placed once by a node whose track does not move is static world geometry, as without
+// the animation: the importer collapses the constant track.
+TEST(GltfAnimation, AConstantTrackStaysStaticGeometry) {
+  AnimatedFile f;
+  f.node({{"mesh", 0}});
+  f.j["scenes"] = {{{"nodes", {0}}}};
+  f.channel(0, "translation", "LINEAR", {0, 1}, {2, 0, 0, 2, 0, 0});
+  const Scene s = load_text(f.text());
+  EXPECT_TRUE(s.instances.empty());
+  ASSERT_EQ(s.meshes.size(), 1u);
+  EXPECT_FLOAT_EQ(s.meshes[0].positions[1].x, 3.0f);
+  EXPECT_FALSE(geometry_moves(s));
+}
+
+TEST(GltfAnimation, ItRendersWithMotionBlur) {
+  AnimatedFile f = animated_file();
+  f.j["cameras"] = {{{"type", "perspective"}, {"perspective", {{"yfov", 1.0}, {"znear", 0.1}}}}};
+  f.j["nodes"].push_back({{"camera", 0}, {"translation", {0.5, 0.5, 12}}});
+  f.j["scenes"][0]["nodes"].push_back(f.j["nodes"].size() - 1);
+  SceneOverrides o;
+  o.width = o.height = 16, o.spp = 4, o.passes = 1;
+  const std::string dir = test::make_temp_dir("gltf-animation-render");
+  test::write_text(dir + "/scene.gltf", f.text());
+  const Scene s = load_scene(dir + "/scene.gltf", o);
+  Renderer r(s);
+  const Rect frame{0, 0, 16, 16};
+  EXPECT_NE(r.render(TaskKey{6, frame, 0}, true).sum, r.render(TaskKey{30, frame, 0}, true).sum);
+}
+
+TEST(GltfAnimation, BadChannelsAreNamed) {
+  AnimatedFile f = animated_file();
+  f.j["animations"][0]["channels"][1]["target"]["node"] = 99;
+  EXPECT_NE(load_error(f.text()).find(
+                "/animations/0/channels/1/target/node: the channel's node 99 does not exist"),
+            std::string::npos)
+      << load_error(f.text());
+  f = animated_file();
+  f.j["animations"][0]["channels"][0]["sampler"] = 42;
+  EXPECT_NE(
+      load_error(f.text()).find("/animations/0/channels/0/sampler: sampler 42 does not exist"),
+      std::string::npos)
+      << load_error(f.text());
+  f = animated_file();
+  f.j["animations"][0]["samplers"][1]["interpolation"] = "BEZIER";
+  EXPECT_NE(load_error(f.text()).find("/animations/0/samplers/1/interpolation: unknown"),
+            std::string::npos)
+      << load_error(f.text());
+  f = animated_file();  // key times out of order
+  {
+    const float bad[3] = {0, 2, 1};
+    const size_t in = f.add(bad, 3, "SCALAR");
+    f.j["animations"][0]["samplers"][0]["input"] = in;
+  }
+  EXPECT_NE(load_error(f.text()).find("/animations/0/samplers/0/input: key times must be finite "
+                                      "and increasing: key 2"),
+            std::string::npos)
+      << load_error(f.text());
+  f = animated_file();  // three values for two keys
+  f.j["animations"][0]["samplers"][1]["input"] = f.j["animations"][0]["samplers"][2]["input"];
+  f.j["animations"][0]["samplers"][1]["output"] = f.j["animations"][0]["samplers"][0]["output"];
+  EXPECT_NE(load_error(f.text()).find("/animations/0/samplers/1/output"), std::string::npos)
+      << load_error(f.text());
+  f = animated_file();  // an animated node with a matrix
+  f.j["nodes"][1]["matrix"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+  EXPECT_NE(
+      load_error(f.text()).find("/animations/0/channels/1/target/node: node 1 has a 'matrix'"),
+      std::string::npos)
+      << load_error(f.text());
+  // Morph-target weights are warned and dropped.
+  f = animated_file();
+  f.channel(4, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, 0, 1});
+  f.j["animations"][0]["channels"].back()["target"]["path"] = "weights";
+  const Scene s = load_text(f.text(), "gltf-animation-weights");
+  bool warned = false;
+  for (const std::string& w : s.warnings)
+    warned |= w.find("morph target weights") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
+}  // namespace
+}  // namespace rf
