@@ -86,19 +86,9 @@ AnimatedFile animated_file() {
   return f;
 }
 
-Scene load_text(const std::string& text, const std::string& tag = "gltf-animation") {
-  const std::string dir = test::make_temp_dir(tag);
-  test::write_text(dir + "/scene.gltf", text);
-  return load_scene(dir + "/scene.gltf");
-}
-
+Scene load_text(const std::string& text) { return test::load_scene_text("scene.gltf", text); }
 std::string load_error(const std::string& text) {
-  try {
-    load_text(text);
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "(loaded)";
+  return test::scene_text_error("scene.gltf", text);
 }
 
 // The instance placing node n's mesh (objects are made in mesh order, instances in node order).
@@ -170,9 +160,7 @@ TEST(GltfAnimation, ItRendersWithMotionBlur) {
   f.j["scenes"][0]["nodes"].push_back(f.j["nodes"].size() - 1);
   SceneOverrides o;
   o.width = o.height = 16, o.spp = 4, o.passes = 1;
-  const std::string dir = test::make_temp_dir("gltf-animation-render");
-  test::write_text(dir + "/scene.gltf", f.text());
-  const Scene s = load_scene(dir + "/scene.gltf", o);
+  const Scene s = test::load_scene_text("scene.gltf", f.text(), o);
   Renderer r(s);
   const Rect frame{0, 0, 16, 16};
   EXPECT_NE(r.render(TaskKey{6, frame, 0}, true).sum, r.render(TaskKey{30, frame, 0}, true).sum);
@@ -221,7 +209,7 @@ TEST(GltfAnimation, BadChannelsAreNamed) {
   f = animated_file();
   f.channel(4, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, 0, 1});
   f.j["animations"][0]["channels"].back()["target"]["path"] = "weights";
-  const Scene s = load_text(f.text(), "gltf-animation-weights");
+  const Scene s = load_text(f.text());
   bool warned = false;
   for (const std::string& w : s.warnings)
     warned |= w.find("morph target weights") != std::string::npos;

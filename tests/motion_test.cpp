@@ -60,12 +60,9 @@ TEST(Motion, BoxShutterBlurIsTheMeanOfStillsAcrossTheShutter) {
   ASSERT_TRUE(moving.camera.moves());
   test::ImageStats blurred = test::render_stats(moving, passes, 1);
   constexpr int kSlices = 16;
-  std::vector<Scene> stills;
-  for (int i = 0; i < kSlices; ++i) stills.push_back(still_at(moving, (i + 0.5) / kSlices / 24.0));
-  std::vector<const Scene*> views;
-  for (const Scene& s : stills) views.push_back(&s);
-  const test::ImageStats averaged = test::mean_of_renders(views, passes, 1);
-  const test::Agreement a = test::compare(blurred, averaged);
+  const test::Agreement a =
+      test::compare(blurred, test::mean_of_stills([&](double t) { return still_at(moving, t); }, 0,
+                                                  1.0 / 24, kSlices, passes, 1));
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("blur against the mean of stills: %s\n", a.message.c_str());
   // And the blur is there: the still at the shutter's middle is not the blurred image.
@@ -115,20 +112,8 @@ json keyframed_scene() {
   })");
 }
 
-Scene load_json(const json& j) {
-  std::string dir = test::make_temp_dir("motion-json");
-  test::write_text(dir + "/scene.json", j.dump(2));
-  return load_scene(dir + "/scene.json");
-}
-
-std::string load_error(const json& j) {
-  try {
-    load_json(j);
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "no error";
-}
+Scene load_json(const json& j) { return test::load_scene_text("scene.json", j.dump(2)); }
+std::string load_error(const json& j) { return test::scene_text_error("scene.json", j.dump(2)); }
 
 TEST(Motion, JsonTimeAndCameraKeyframes) {
   const Scene s = load_json(keyframed_scene());

@@ -21,18 +21,10 @@ namespace rf {
 namespace {
 
 Scene load_pbrt(const std::string& text, const SceneOverrides& o = {}) {
-  const std::string dir = test::make_temp_dir("pbrt-motion");
-  test::write_text(dir + "/scene.pbrt", text);
-  return load_scene(dir + "/scene.pbrt", o);
+  return test::load_scene_text("scene.pbrt", text, o);
 }
-
 std::string pbrt_error(const std::string& text) {
-  try {
-    load_pbrt(text);
-  } catch (const SceneError& e) {
-    return e.what();
-  }
-  return "(loaded)";
+  return test::scene_text_error("scene.pbrt", text);
 }
 
 const char* kMoving = R"(TransformTimes 0 2

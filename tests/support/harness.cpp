@@ -263,6 +263,16 @@ ImageStats mean_of_renders(const std::vector<const Scene*>& scenes, uint32_t pas
   return stats;
 }
 
+ImageStats mean_of_stills(const std::function<Scene(double)>& still_at, double open, double close,
+                          int slices, uint32_t passes, int block) {
+  std::vector<Scene> stills;
+  for (int i = 0; i < slices; ++i)
+    stills.push_back(still_at(open + (close - open) * (i + 0.5) / slices));
+  std::vector<const Scene*> views;
+  for (const Scene& s : stills) views.push_back(&s);
+  return mean_of_renders(views, passes, block);
+}
+
 namespace {
 
 struct CellTally {

@@ -21,6 +21,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -103,6 +104,10 @@ inline constexpr uint32_t kMinPasses = 32;
 // pass the mean of the scenes' renders of that pass: the time integral a motion-blurred render
 // estimates, by the midpoint rule when the scenes stand at the midpoints of equal slices.
 ImageStats mean_of_renders(const std::vector<const Scene*>& scenes, uint32_t passes, int block);
+// That for the scenes still_at(t) at the midpoints t of `slices` equal slices of [open, close]
+// (seconds).
+ImageStats mean_of_stills(const std::function<Scene(double)>& still_at, double open, double close,
+                          int slices, uint32_t passes, int block);
 
 // A render's per-channel image mean and the standard error of that mean.
 struct ImageMeans {

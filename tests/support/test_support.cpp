@@ -24,6 +24,22 @@ extern "C" const char* __asan_default_options() { return "new_delete_type_mismat
 
 namespace rf::test {
 
+Scene load_scene_text(const std::string& file_name, const std::string& text,
+                      const SceneOverrides& overrides) {
+  const std::string dir = make_temp_dir("scene-text");
+  write_text(dir + "/" + file_name, text);
+  return load_scene(dir + "/" + file_name, overrides);
+}
+
+std::string scene_text_error(const std::string& file_name, const std::string& text) {
+  try {
+    load_scene_text(file_name, text);
+  } catch (const SceneError& e) {
+    return e.what();
+  }
+  return "(loaded)";
+}
+
 std::string base64(const std::string& in) {
   static const char* k = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
   std::string out;

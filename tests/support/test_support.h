@@ -46,6 +46,12 @@ void write_text(const std::string& path, const std::string& text);
 
 namespace rf::test {
 
+// Writes `text` as `file_name` (its extension picks the format) in a fresh directory and loads it
+// with load_scene; and the SceneError message that loading it gives, or "(loaded)".
+Scene load_scene_text(const std::string& file_name, const std::string& text,
+                      const SceneOverrides& overrides = {});
+std::string scene_text_error(const std::string& file_name, const std::string& text);
+
 // The scene format's closed UV sphere (engine/shapes.h), flat shaded (no vertex normals, no uvs):
 // outward right-hand winding, 2*n_theta*n_phi - 2*n_phi triangles.
 Mesh make_uv_sphere(Vec3 center, float radius, int n_theta, int n_phi, uint32_t material);
