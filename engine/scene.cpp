@@ -249,12 +249,15 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
     if (inst.object >= scene.objects.size())
       throw SceneError(scene.path + ": " + where + ": object " + std::to_string(inst.object) +
                        " does not exist (" + std::to_string(scene.objects.size()) + " objects)");
-    for (const Keyframe& k :
-         inst.moves() ? inst.motion.keys() : std::vector<Keyframe>{{0, inst.to_world}})
-      if (!k.m.is_finite() || !(std::fabs(k.m.det3()) > 0))
-        throw SceneError(scene.path + ": " + where + " of '" + scene.objects[inst.object].name +
-                         "': the transform must be finite and invertible" +
-                         (inst.moves() ? " (the key at " + std::to_string(k.time) + " s)" : ""));
+    auto bad = [](const Mat4& m) { return !m.is_finite() || !(std::fabs(m.det3()) > 0); };
+    auto refuse = [&](const std::string& which) {
+      throw SceneError(scene.path + ": " + where + " of '" + scene.objects[inst.object].name +
+                       "': the transform must be finite and invertible" + which);
+    };
+    if (!inst.moves() && bad(inst.to_world)) refuse("");
+    static const std::vector<Keyframe> kNoKeys;
+    for (const Keyframe& k : inst.moves() ? inst.motion.keys() : kNoKeys)
+      if (bad(k.m)) refuse(" (the key at " + std::to_string(k.time) + " s)");
   }
   for (uint32_t o = 0; o < scene.objects.size(); ++o) {
     SceneObject& obj = scene.objects[o];
@@ -315,29 +318,28 @@ void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi) {
   for (const Instance& inst : scene.instances) {
     const Vec3 a = object_box.at(inst.object).first, b = object_box.at(inst.object).second;
     if (a.x > b.x) continue;
-    auto place = [&](const Mat4& m) {
+    auto place = [&](const Mat4& m, Vec3& box_lo, Vec3& box_hi) {  // grows the box by a placement
       for (int c = 0; c < 8; ++c) {
         Vec3 q = m.point({(c & 1) ? b.x : a.x, (c & 2) ? b.y : a.y, (c & 4) ? b.z : a.z});
-        lo = vmin(lo, q), hi = vmax(hi, q);
+        box_lo = vmin(box_lo, q), box_hi = vmax(box_hi, q);
       }
     };
     if (!inst.moves()) {
-      place(inst.to_world);
+      place(inst.to_world, lo, hi);
       continue;
     }
     // A moving instance: its box at kBoundSteps times per key segment (the box swept between two
     // of them by a rotation leaves their union by at most 1 - cos(pi / kBoundSteps) of its
     // radius for a half turn per segment, 0.05% at 100), then grown by 1% of its extent.
     constexpr int kBoundSteps = 100;
-    Vec3 mlo(kInf), mhi(-kInf);
-    std::swap(lo, mlo), std::swap(hi, mhi);
+    Vec3 mlo(kInf), mhi(-kInf);  // the swept box
     const std::vector<Keyframe>& keys = inst.motion.keys();
     for (size_t k = 0; k + 1 < keys.size(); ++k)
       for (int j = 0; j <= kBoundSteps; ++j)
-        place(inst.motion.at(keys[k].time + (keys[k + 1].time - keys[k].time) * j / kBoundSteps));
-    const Vec3 pad = (hi - lo) * 0.01f;
-    mlo = vmin(mlo, lo - pad), mhi = vmax(mhi, hi + pad);
-    lo = mlo, hi = mhi;
+        place(inst.motion.at(keys[k].time + (keys[k + 1].time - keys[k].time) * j / kBoundSteps),
+              mlo, mhi);
+    const Vec3 pad = (mhi - mlo) * 0.01f;
+    lo = vmin(lo, mlo - pad), hi = vmax(hi, mhi + pad);
   }
 }
 
