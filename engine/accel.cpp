@@ -192,13 +192,36 @@ float sphere_distance(const SphereShape& s, Vec3 o, Vec3 d, float t_embree) {
 
 }  // namespace
 
+namespace {
+
+// The key segments that the shutter [open, close] overlaps, for n keys at times(k) (increasing);
+// 0 when the track holds still during it (no key segment overlapped, or an instant).
+template <class Times>
+uint32_t overlapped_segments(const Times& times, size_t n, double open, double close) {
+  if (n < 2 || !(close > open)) return 0;
+  if (close <= times(0) || open >= times(n - 1)) return 0;  // held still
+  uint32_t segments = 1;
+  for (size_t k = 0; k < n; ++k) segments += times(k) > open && times(k) < close;
+  return segments;
+}
+
+}  // namespace
+
 uint32_t motion_time_steps(const AnimatedTransform& motion, double open, double close) {
-  if (!motion.animated() || !(close > open)) return 1;
   const std::vector<Keyframe>& keys = motion.keys();
-  if (close <= keys.front().time || open >= keys.back().time) return 1;  // held still
-  uint32_t segments = 1;  // the key segments the shutter overlaps
-  for (const Keyframe& k : keys) segments += k.time > open && k.time < close;
+  const uint32_t segments = overlapped_segments([&](size_t k) { return keys[k].time; },
+                                                motion.animated() ? keys.size() : 0, open, close);
+  if (segments == 0) return 1;
   if (segments == 1 && motion.rigid_at((open + close) / 2)) return 2;
+  return std::min<uint32_t>(kMaxTimeSteps, 1 + kStepsPerSegment * segments);
+}
+
+uint32_t deform_time_steps(const Mesh& mesh, double open, double close) {
+  const std::vector<VertexKey>& keys = mesh.deform;
+  const uint32_t segments = overlapped_segments([&](size_t k) { return keys[k].time; },
+                                                mesh.deforms() ? keys.size() : 0, open, close);
+  if (segments == 0) return 1;
+  if (segments == 1) return 2;  // linear within a segment, as Embree interpolates: exact
   return std::min<uint32_t>(kMaxTimeSteps, 1 + kStepsPerSegment * segments);
 }
 
@@ -231,8 +254,9 @@ AccelGeometry::AccelGeometry(const Scene& scene_) : scene(scene_) {
   // tree, so the choice is part of the estimator version (registry.cpp).
   world = rtcNewScene(device);
   rtcSetSceneBuildQuality(world, RTC_BUILD_QUALITY_MEDIUM);
-  for (size_t i = 0; i < scene.meshes.size(); ++i)  // geometry id == mesh index
-    attach_mesh(device, world, scene.meshes[i], unsigned(i));
+  // Geometry id == mesh index; a deforming mesh is each frame's (Accel).
+  for (size_t i = 0; i < scene.meshes.size(); ++i)
+    if (!scene.meshes[i].deforms()) attach_mesh(device, world, scene.meshes[i], unsigned(i));
   // Objects: one Embree scene each, built only if some instance places it.
   std::vector<bool> placed(scene.objects.size(), false);
   for (const Instance& inst : scene.instances) placed.at(inst.object) = true;
@@ -322,9 +346,47 @@ Accel::Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame)
     rtcAttachGeometryByID(motion_, g, unsigned(scene.meshes.size() + i));
     rtcReleaseGeometry(g);
   }
+  // The deforming meshes, in the same scene: each key-interpolated at its own uniform steps over
+  // the shutter (deform_time_steps), one Embree vertex buffer per step, normals kept here.
+  deform_slot_.assign(scene.meshes.size(), -1);
+  for (size_t i = 0; i < scene.meshes.size(); ++i) {
+    const Mesh& m = scene.meshes[i];
+    if (!m.deforms()) continue;
+    if (!motion_) {
+      motion_ = rtcNewScene(geometry_->device);
+      rtcSetSceneBuildQuality(motion_, RTC_BUILD_QUALITY_MEDIUM);
+    }
+    Deformed d;
+    d.steps = deform_time_steps(m, open, close);
+    d.geometry = rtcNewGeometry(geometry_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    rtcSetGeometryTimeStepCount(d.geometry, d.steps);
+    std::vector<Vec3> positions, normals;
+    d.normals.reserve(size_t(d.steps) * m.normals.size());
+    for (uint32_t k = 0; k < d.steps; ++k) {
+      const double t =
+          k + 1 == d.steps && k > 0 ? close : open + (close - open) * k / std::max(1u, d.steps - 1);
+      deformed_vertices(m, t, positions, normals);
+      // Embree-owned, as attach_mesh's: Embree may read 16 bytes at the last vertex.
+      auto* v = static_cast<Vec3*>(rtcSetNewGeometryBuffer(d.geometry, RTC_BUFFER_TYPE_VERTEX, k,
+                                                           RTC_FORMAT_FLOAT3, sizeof(Vec3),
+                                                           positions.size()));
+      std::memcpy(static_cast<void*>(v), positions.data(), positions.size() * sizeof(Vec3));
+      d.positions.push_back(v);
+      d.normals.insert(d.normals.end(), normals.begin(), normals.end());
+    }
+    auto* idx = static_cast<uint32_t*>(
+        rtcSetNewGeometryBuffer(d.geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                3 * sizeof(uint32_t), m.triangle_count()));
+    std::memcpy(idx, m.indices.data(), m.indices.size() * sizeof(uint32_t));
+    rtcCommitGeometry(d.geometry);
+    rtcAttachGeometryByID(motion_, d.geometry, unsigned(i));  // surface id == mesh index
+    time_steps_ = std::max(time_steps_, d.steps);
+    deform_slot_[i] = int32_t(deformed_.size());
+    deformed_.push_back(std::move(d));
+  }
   if (motion_) {
     rtcCommitScene(motion_);
-    // The box the moving instances sweep over the shutter, grown by 1e-4 of its extent (and
+    // The box the moving geometry sweeps over the shutter, grown by 1e-4 of its extent (and
     // 1e-6 of its coordinates' size) so that the rays that skip the motion query miss for sure.
     RTCLinearBounds lb;
     rtcGetSceneLinearBounds(motion_, &lb);
@@ -347,6 +409,7 @@ Accel::Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame)
 Accel::~Accel() {
   for (RTCGeometry g : instance_geometry_)
     if (g) rtcReleaseGeometry(g);
+  for (const Deformed& d : deformed_) rtcReleaseGeometry(d.geometry);
   if (motion_) rtcReleaseScene(motion_);
 }
 
@@ -390,7 +453,8 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
     const Mesh& m = *surfaces_[surface_of(h.geomID[i], h.instID[0][i])];
     if (m.sphere) continue;
     meshes[i] = &m;
-    if (h.instID[0][i] == RTC_INVALID_GEOMETRY_ID) batched[i] = &m;
+    // A deforming mesh's triangle is the frame's (hit_from_embree), not its first key's.
+    if (h.instID[0][i] == RTC_INVALID_GEOMETRY_ID && !m.deforms()) batched[i] = &m;
     if (!prefetch_) continue;
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i])]);
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i]) + 2]);
@@ -444,7 +508,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
 }
 
 void Accel::motion_query16(RayPacket& packet, RTCIntersectContext* ctx, bool occlusion) const {
-  // The lanes whose ray may meet the moving instances' box before its end (a lane the world
+  // The lanes whose ray may meet the moving geometry's box before its end (a lane the world
   // blocked has tfar -inf and meets nothing).
   alignas(64) int valid[kPacket];
   int any = 0;
@@ -519,6 +583,30 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
   hit.t = t;
   uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
   const bool normals = !m.normals.empty();
+  if (!instanced && m.deforms()) {
+    // The triangle at the ray's time, between the frame's two time steps around it as Embree
+    // interpolates them ((1 - f) a + f b), so that the hit is on the triangle the traversal met
+    // (to the last bits of Embree's own arithmetic, which p_error's bound covers).
+    const Deformed& d = deformed_[size_t(deform_slot_[surface])];
+    const uint32_t segments = d.steps - 1;
+    const float ft = ray.time * float(segments);
+    const uint32_t k =
+        segments == 0 ? 0 : std::min(segments - 1, uint32_t(std::max(0.0f, std::floor(ft))));
+    const uint32_t k1 = segments == 0 ? 0 : k + 1;
+    const float f = segments == 0 ? 0.0f : ft - float(k);
+    const size_t n = m.positions.size();
+    auto at = [f](const Vec3* a, const Vec3* b, uint32_t vtx) {
+      return a[vtx] * (1 - f) + b[vtx] * f;
+    };
+    const Vec3 *pa = d.positions[k], *pb = d.positions[k1];
+    const Vec3* na = normals ? &d.normals[k * n] : nullptr;
+    const Vec3* nb = normals ? &d.normals[k1 * n] : nullptr;
+    triangle_hit(at(pa, pb, i0), at(pa, pb, i1), at(pa, pb, i2),
+                 normals ? at(na, nb, i0) : Vec3(0.0f), normals ? at(na, nb, i1) : Vec3(0.0f),
+                 normals ? at(na, nb, i2) : Vec3(0.0f), u, v, hit.p, hit.p_error, hit.ng, hit.ns);
+    hit.uv = triangle_uv(m, i0, i1, i2, u, v);
+    return;
+  }
   triangle_hit(m.positions[i0], m.positions[i1], m.positions[i2],
                normals ? m.normals[i0] : Vec3(0.0f), normals ? m.normals[i1] : Vec3(0.0f),
                normals ? m.normals[i2] : Vec3(0.0f), u, v, hit.p, hit.p_error, hit.ng, hit.ns);

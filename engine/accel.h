@@ -96,12 +96,17 @@ inline Vec3 offset_ray_origin(Vec3 p, Vec3 p_error, Vec3 ng, Vec3 w) {
 // between steps are approximated by their neighbours' interpolation (docs/design.md "Time").
 inline constexpr uint32_t kMaxTimeSteps = RTC_MAX_TIME_STEP_COUNT, kStepsPerSegment = 8;
 uint32_t motion_time_steps(const AnimatedTransform& motion, double open, double close);
+// The same for a deforming mesh's vertex keys (Mesh::deform): 1 when it holds its shape during
+// the shutter, 2 within one key segment (vertices linear between keys, as Embree interpolates
+// steps: exact), else kStepsPerSegment per key segment overlapped, at most kMaxTimeSteps.
+uint32_t deform_time_steps(const Mesh& mesh, double open, double close);
 
 // The part of a scene's BVH that no frame changes: the Embree device, one Embree scene per placed
-// object, the surfaces by id, and the world: the world meshes and the instances that do not move.
-// Built once per scene and shared by the frames' Accels (Renderer), so that a frame of a shot
-// builds only a scene over its moving instances. Which part is which is a function of the scene
-// alone: a frame's BVH is the same whichever frames were built before it.
+// object, the surfaces by id, and the world: the world meshes that keep their shape and the
+// instances that do not move. Built once per scene and shared by the frames' Accels (Renderer),
+// so that a frame of a shot builds only a scene over its moving instances and deforming meshes.
+// Which part is which is a function of the scene alone: a frame's BVH is the same whichever frames
+// were built before it.
 struct AccelGeometry {
   explicit AccelGeometry(const Scene& scene);
   ~AccelGeometry();
@@ -120,13 +125,14 @@ struct AccelGeometry {
   std::vector<const Mesh*> surfaces;           // by surface id
   std::vector<uint32_t> object_first_surface;  // surface id of each object's first mesh
   std::vector<RTCScene> object_scenes;         // one per object (nullptr: placed by no instance)
-  RTCScene world = nullptr;                    // the world meshes and the still instances
+  RTCScene world = nullptr;  // the world meshes that keep their shape and the still instances
 };
 
 class Accel {
  public:
-  // The scene's BVH for frame `frame`: the placements of moving instances over that frame's
-  // shutter (a scene without moving geometry builds the same BVH for every frame).
+  // The scene's BVH for frame `frame`: the placements of moving instances and the vertices of
+  // deforming meshes over that frame's shutter (a scene without moving geometry builds the same
+  // BVH for every frame).
   explicit Accel(const Scene& scene, uint32_t frame = 0);
   // The same on geometry built before (its scene's), building only the frame's top level.
   Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame);
@@ -278,7 +284,7 @@ class Accel {
     if (inst_id == RTC_INVALID_GEOMETRY_ID) return geom;
     return object_first_surface_[scene_.instances[inst_id - scene_.meshes.size()].object] + geom;
   }
-  // Whether the segment o + t d, t in [0, tfar], may meet the box of the moving instances (a
+  // Whether the segment o + t d, t in [0, tfar], may meet the box of the moving geometry (a
   // slab test; a NaN leaves the interval as it was, so it never skips a ray it should not).
   bool may_hit_motion(Vec3 o, Vec3 d, float tfar) const {
     float t0 = 0, t1 = tfar;
@@ -291,7 +297,7 @@ class Accel {
     }
     return !(t0 > t1 * (1 + 1e-6f) + 1e-30f);
   }
-  // The moving instances' query of a packet after the world's, for the lanes that may meet them.
+  // The moving geometry's query of a packet after the world's, for the lanes that may meet it.
   void motion_query16(RayPacket& packet, RTCIntersectContext* ctx, bool occlusion) const;
   // The surface interaction of an Embree hit of `ray` (geometry, primitive, instance ids,
   // barycentrics u, v and distance t as Embree reports them).
@@ -303,16 +309,27 @@ class Accel {
   const std::vector<const Mesh*>& surfaces_;           // geometry_'s
   const std::vector<uint32_t>& object_first_surface_;  // geometry_'s
   bool prefetch_ = false;                              // geometry_'s
-  // The queries ask the world, then, when instances move, the frame's moving instances with the
+  // The queries ask the world, then, when geometry moves, the frame's moving geometry with the
   // world's hit as the ray's end (two queries where one over both would put every world ray
   // through a motion-blur top level: 30% slower on the million scene, docs/performance.md).
   RTCScene world_ = nullptr;   // geometry_'s
-  RTCScene motion_ = nullptr;  // the moving instances over the frame's shutter, if any
+  RTCScene motion_ = nullptr;  // the moving instances and deforming meshes over the frame's
+                               // shutter, if any
   float motion_lo_[3] = {0, 0, 0}, motion_hi_[3] = {0, 0, 0};  // their box over the shutter
   std::vector<Mat4> instance_to_world_;         // per instance: its placement (a moving one's at
                                                 // the shutter's opening)
   std::vector<Mat4> instance_inverse_;          // world to object space, per instance
   std::vector<RTCGeometry> instance_geometry_;  // a moving instance's Embree geometry, else null
+  // A deforming mesh over the frame's shutter: its Embree geometry, whose vertex buffer k holds
+  // the positions at time step k, and the normals at each step (steps x vertices, or empty).
+  struct Deformed {
+    RTCGeometry geometry = nullptr;
+    uint32_t steps = 1;
+    std::vector<const Vec3*> positions;  // per step, Embree's buffer
+    std::vector<Vec3> normals;
+  };
+  std::vector<Deformed> deformed_;
+  std::vector<int32_t> deform_slot_;  // per world mesh: its index in deformed_, or -1
   uint32_t time_steps_ = 1;
 };
 

@@ -29,12 +29,14 @@ std::unique_ptr<Renderer::FrameState> Renderer::build_frame(uint32_t frame) cons
   const auto t0 = std::chrono::steady_clock::now();
   f->accel = std::make_unique<Accel>(geometry_, frame);
   if (per_frame_) {
-    size_t moving = 0;
+    size_t moving = 0, deforming = 0;
     for (const Instance& i : scene_.instances) moving += i.moves();
-    spdlog::info("frame {}: BVH built in {:.4f} s ({} instances, {} moving; up to {} time steps)",
-                 frame,
-                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                 scene_.instances.size(), moving, f->accel->time_steps());
+    for (const Mesh& m : scene_.meshes) deforming += m.deforms();
+    spdlog::info(
+        "frame {}: BVH built in {:.4f} s ({} instances, {} moving; {} deforming shapes; up to {} "
+        "time steps)",
+        frame, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+        scene_.instances.size(), moving, deforming, f->accel->time_steps());
   }
   f->context = std::make_unique<RenderContext>(scene_, *f->accel, *lights_, *textures_, *camera_,
                                                pass_cache_, pixel_spread_, stop_);

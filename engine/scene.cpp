@@ -222,7 +222,34 @@ Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::st
 
 bool geometry_moves(const Scene& scene) {
   return std::any_of(scene.instances.begin(), scene.instances.end(),
-                     [](const Instance& i) { return i.moves(); });
+                     [](const Instance& i) { return i.moves(); }) ||
+         std::any_of(scene.meshes.begin(), scene.meshes.end(),
+                     [](const Mesh& m) { return m.deforms(); });
+}
+
+void deformed_vertices(const Mesh& m, double time, std::vector<Vec3>& positions,
+                       std::vector<Vec3>& normals) {
+  const std::vector<VertexKey>& keys = m.deform;
+  RF_CHECK(!keys.empty(), "deformed_vertices of a mesh without keys");
+  size_t b = 0;  // the first key after `time`
+  while (b < keys.size() && keys[b].time <= time) ++b;
+  if (b == 0 || b == keys.size()) {  // held before the first key and after the last
+    const VertexKey& k = keys[b == 0 ? 0 : b - 1];
+    positions = k.positions, normals = k.normals;
+    return;
+  }
+  const VertexKey &ka = keys[b - 1], &kb = keys[b];
+  const float f = float((time - ka.time) / (kb.time - ka.time));
+  auto lerp = [f](const std::vector<Vec3>& a, const std::vector<Vec3>& c, std::vector<Vec3>& out) {
+    out.resize(a.size());
+    for (size_t i = 0; i < a.size(); ++i) out[i] = a[i] * (1 - f) + c[i] * f;
+  };
+  if (f == 0) {  // exactly at a key: its own vertices
+    positions = ka.positions, normals = ka.normals;
+    return;
+  }
+  lerp(ka.positions, kb.positions, positions);
+  lerp(ka.normals, kb.normals, normals);
 }
 
 bool scene_moves(const Scene& scene) { return scene.camera.moves() || geometry_moves(scene); }
@@ -259,6 +286,45 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
     for (const Keyframe& k : inst.moves() ? inst.motion.keys() : kNoKeys)
       if (bad(k.m)) refuse(" (the key at " + std::to_string(k.time) + " s)");
   }
+  // Deforming meshes: world triangle meshes whose keys match the mesh (first key its own
+  // vertices, every key as many positions and normals, times increasing and finite, positions
+  // finite), and no emitter (area lights are sampled per world-space triangle, which a
+  // deforming emitter would need at the path's time: issue 46's next part).
+  for (size_t i = 0; i < scene.meshes.size(); ++i) {
+    const Mesh& m = scene.meshes[i];
+    if (m.deform.empty()) continue;
+    auto refuse = [&](const std::string& why) {
+      throw SceneError(scene.path + ": shape '" + m.name + "' deforms: " + why);
+    };
+    if (m.sphere) refuse("only triangle meshes deform");
+    if (m.deform.size() < 2) refuse("give at least two keys");
+    if (m.emission && !is_black(m.emission->radiance))
+      refuse("deforming area lights are not supported yet; keep the emitter's shape still");
+    elements += m.deform.size() * m.positions.size();
+    if (elements > max_elements)
+      throw over(std::to_string(elements) + " elements with the deforming shapes' vertex keys");
+    for (size_t k = 0; k < m.deform.size(); ++k) {
+      const VertexKey& key = m.deform[k];
+      const std::string at = " (key " + std::to_string(k) + ")";
+      if (!std::isfinite(key.time)) refuse("a key's time is not finite" + at);
+      if (k > 0 && !(key.time > m.deform[k - 1].time))
+        refuse("keys must be in increasing time" + at);
+      if (key.positions.size() != m.positions.size() || key.normals.size() != m.normals.size())
+        refuse("every key must have the mesh's " + std::to_string(m.positions.size()) +
+               " positions and " + std::to_string(m.normals.size()) + " normals" + at);
+      for (const Vec3& q : key.positions)
+        if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z))
+          refuse("a position is not finite" + at);
+    }
+    if (m.deform.front().positions != m.positions || m.deform.front().normals != m.normals)
+      refuse("the first key must be the mesh's own vertices");
+  }
+  for (const SceneObject& obj : scene.objects)
+    for (const Mesh& m : obj.meshes)
+      if (!m.deform.empty())
+        throw SceneError(scene.path + ": shape '" + m.name + "' of object '" + obj.name +
+                         "' deforms: only shapes placed in the world deform, not an instanced "
+                         "object's");
   for (uint32_t o = 0; o < scene.objects.size(); ++o) {
     SceneObject& obj = scene.objects[o];
     auto emissive = [](const Mesh& m) { return m.emission && !is_black(m.emission->radiance); };
@@ -291,7 +357,9 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
 }
 
 void flatten_instances(Scene& scene) {
-  RF_CHECK(!geometry_moves(scene), "flatten_instances of a scene whose instances move");
+  RF_CHECK(std::none_of(scene.instances.begin(), scene.instances.end(),
+                        [](const Instance& i) { return i.moves(); }),
+           "flatten_instances of a scene whose instances move");
   for (size_t i = 0; i < scene.instances.size(); ++i) {
     const Instance& inst = scene.instances[i];
     const SceneObject& obj = scene.objects.at(inst.object);
@@ -307,6 +375,8 @@ void mesh_bounds(const Mesh& m, Vec3& lo, Vec3& hi) {
     hi = vmax(hi, m.sphere->center + Vec3(m.sphere->radius));
   }
   for (Vec3 q : m.positions) lo = vmin(lo, q), hi = vmax(hi, q);
+  for (const VertexKey& k : m.deform)  // linear between keys: the keys' box holds every time's
+    for (Vec3 q : k.positions) lo = vmin(lo, q), hi = vmax(hi, q);
 }
 
 void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi) {

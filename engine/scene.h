@@ -82,6 +82,13 @@ struct Emission {
   bool two_sided = false;
 };
 
+// A deforming mesh's vertices at one time in seconds (Mesh::deform).
+struct VertexKey {
+  double time = 0;
+  std::vector<Vec3> positions;  // world space, one per vertex of the mesh
+  std::vector<Vec3> normals;    // the same, empty when the mesh has no normals
+};
+
 // A surface: triangles, or one exact sphere (then positions, normals, uvs and indices are empty
 // and its only primitive is prim 0).
 struct Mesh {
@@ -93,6 +100,12 @@ struct Mesh {
   std::vector<uint32_t> indices;   // 3 per triangle
   uint32_t material = 0;           // index into Scene::materials
   std::optional<Emission> emission;
+  // A deforming mesh (JSON "deform", glTF skins and morph targets): its vertices at two or more
+  // keys in increasing time, linear between keys and held before the first and after the last;
+  // positions and normals above are the first key's. Empty for a mesh that keeps its shape. Only
+  // world meshes deform (Scene::meshes), and only triangles.
+  std::vector<VertexKey> deform;
+  bool deforms() const { return deform.size() > 1; }
   size_t triangle_count() const { return indices.size() / 3; }
   // Triangles, or 1 for a sphere.
   size_t primitive_count() const { return sphere ? 1 : triangle_count(); }
@@ -228,8 +241,8 @@ struct Scene {
   std::vector<std::string> warnings;
 };
 
-// Whether some geometry moves (an instance with an animated transform): its BVH is then one per
-// frame (Accel). And whether anything moves: that, or the camera.
+// Whether some geometry moves (an instance with an animated transform, a deforming mesh): its BVH
+// is then one per frame (Accel). And whether anything moves: that, or the camera.
 bool geometry_moves(const Scene& scene);
 bool scene_moves(const Scene& scene);
 
@@ -288,8 +301,14 @@ void flatten_instances(Scene& scene);
 // World-space axis-aligned bounds of the meshes and of every instance's object (the object's
 // box transformed); lo > hi when the scene has no geometry.
 void scene_bounds(const Scene& scene, Vec3& lo, Vec3& hi);
-// Grows [lo, hi] by a mesh's bounds (its triangles' vertices, or its sphere's box).
+// Grows [lo, hi] by a mesh's bounds (its triangles' vertices, every key's for a deforming mesh,
+// or its sphere's box).
 void mesh_bounds(const Mesh& m, Vec3& lo, Vec3& hi);
+// A deforming mesh's vertices at `time` (seconds): each key's exactly at its time, linear between
+// keys ((1 - f) a + f b in float), held past the ends. normals is left empty when the mesh has
+// none; the interpolated normals are not normalised.
+void deformed_vertices(const Mesh& m, double time, std::vector<Vec3>& positions,
+                       std::vector<Vec3>& normals);
 
 // Names and defaults every format maps onto.
 inline constexpr int kMaxResolution = 16384;

@@ -222,6 +222,14 @@ void check_renderable(const Scene& scene) {
                   " integrator shares its per-pass light state between camera samples at "
                   "different times, so it does not render moving geometry; path, direct, ao, "
                   "whitted, light and bdpt do");
+        if (!Module::kMovingGeometry)
+          for (const Mesh& m : scene.meshes)
+            if (m.deforms())
+              throw SceneError(scene.path + ": shape '" + m.name +
+                               "' deforms during the shot: the " + std::string(Module::kName) +
+                               " integrator shares its per-pass light state between camera "
+                               "samples at different times, so it does not render moving "
+                               "geometry; path, direct, ao, whitted, light and bdpt do");
         integrator.check(scene);
       },
       scene.render.integrator.method);

@@ -25,15 +25,19 @@ extern "C" const char* __asan_default_options() { return "new_delete_type_mismat
 namespace rf::test {
 
 Scene load_scene_text(const std::string& file_name, const std::string& text,
-                      const SceneOverrides& overrides) {
+                      const SceneOverrides& overrides,
+                      const std::map<std::string, std::string>& files) {
   const std::string dir = make_temp_dir("scene-text");
   write_text(dir + "/" + file_name, text);
+  for (const auto& [name, contents] : files) write_text(dir + "/" + name, contents);
   return load_scene(dir + "/" + file_name, overrides);
 }
 
-std::string scene_text_error(const std::string& file_name, const std::string& text) {
+std::string scene_text_error(const std::string& file_name, const std::string& text,
+                             const SceneOverrides& overrides,
+                             const std::map<std::string, std::string>& files) {
   try {
-    load_scene_text(file_name, text);
+    load_scene_text(file_name, text, overrides, files);
   } catch (const SceneError& e) {
     return e.what();
   }

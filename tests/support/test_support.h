@@ -2,6 +2,7 @@
 // running the CLI and capturing its output.
 #pragma once
 
+#include <map>
 #include <string>
 
 // Built with AddressSanitizer (gcc defines __SANITIZE_ADDRESS__, clang has the feature): tests
@@ -48,9 +49,13 @@ namespace rf::test {
 
 // Writes `text` as `file_name` (its extension picks the format) in a fresh directory and loads it
 // with load_scene; and the SceneError message that loading it gives, or "(loaded)".
+// `files`: other files written beside it (name -> contents), which the scene may reference.
 Scene load_scene_text(const std::string& file_name, const std::string& text,
-                      const SceneOverrides& overrides = {});
-std::string scene_text_error(const std::string& file_name, const std::string& text);
+                      const SceneOverrides& overrides = {},
+                      const std::map<std::string, std::string>& files = {});
+std::string scene_text_error(const std::string& file_name, const std::string& text,
+                             const SceneOverrides& overrides = {},
+                             const std::map<std::string, std::string>& files = {});
 
 // The scene format's closed UV sphere (engine/shapes.h), flat shaded (no vertex normals, no uvs):
 // outward right-hand winding, 2*n_theta*n_phi - 2*n_phi triangles.

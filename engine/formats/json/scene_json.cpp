@@ -629,8 +629,15 @@ class SceneParser {
   // holding the shape (its own "transform" applied first) placed by one moving instance.
   void parse_world_shape(const json& j, const std::string& p) {
     const json* keys = j.is_object() ? r_.find(j, "keyframes") : nullptr;
+    const json* deform = j.is_object() ? r_.find(j, "deform") : nullptr;
+    if (keys && deform)
+      r_.fail(p + ".deform",
+              "a shape deforms ('deform') or moves by 'keyframes', not both: put its motion "
+              "into the deform keys' vertices");
     if (!keys) {
-      scene_.meshes.push_back(parse_shape(j, p));
+      Mesh mesh = parse_shape(j, p, /*moving=*/false, /*world=*/true);
+      if (deform) parse_deform(*deform, j, p, mesh);
+      scene_.meshes.push_back(std::move(mesh));
       return;
     }
     SceneObject obj;
@@ -644,11 +651,96 @@ class SceneParser {
     scene_.instances.push_back(inst);
   }
 
-  Mesh parse_shape(const json& j, const std::string& p, bool moving = false) {
+  // A deforming shape's "deform" keys (docs/scene-format.md): each at a 'frame' or 'time', with
+  // its vertices inline ('positions', 'normals') or from a mesh 'file', or neither for the shape's
+  // own; as many vertices as the shape, in its order, moved by the shape's 'transform'. The
+  // shape's triangles, uvs and material are every key's.
+  void parse_deform(const json& list, const json& shape, const std::string& p, Mesh& mesh) {
+    const std::string q = p + ".deform";
+    const std::string type = r_.string(r_.require(shape, p, "type"), p + ".type");
+    if (type != "mesh" && type != "obj" && type != "ply")
+      r_.fail(q, "only triangle meshes deform (type mesh, obj or ply), not a " + type);
+    r_.array(list, q);
+    if (list.size() < 2) r_.fail(q, "needs at least two keys");
+    Mat4 to_world = Mat4::identity();
+    if (const json* t = r_.find(shape, "transform"))
+      to_world = parse_transform(*t, p + ".transform");
+    for (size_t i = 0; i < list.size(); ++i) {
+      const std::string kp = json_child(q, i);
+      const json& k = list[i];
+      r_.expect_object(k, kp);
+      r_.check_keys(k, kp, {"frame", "time", "positions", "normals", "file"});
+      const json* frame = r_.find(k, "frame");
+      const json* time = r_.find(k, "time");
+      if (!frame == !time) r_.fail(kp, "give its 'frame' or its 'time' (seconds), one of them");
+      VertexKey key;
+      key.time =
+          frame ? r_.real(*frame, kp + ".frame") / scene_.time.fps : r_.real(*time, kp + ".time");
+      if (!std::isfinite(key.time)) r_.fail(kp, "the key's time is not finite");
+      if (!mesh.deform.empty() && !(key.time > mesh.deform.back().time))
+        r_.fail(kp + (frame ? ".frame" : ".time"),
+                "keys must be in increasing time: this one is not after " + json_child(q, i - 1));
+      const json* positions = r_.find(k, "positions");
+      const json* file = r_.find(k, "file");
+      if (positions && file) r_.fail(kp, "give its 'positions' or its 'file', not both");
+      if (!positions && !file) {
+        if (r_.find(k, "normals")) r_.fail(kp + ".normals", "goes with the key's 'positions'");
+        key.positions = mesh.positions, key.normals = mesh.normals;  // the shape's own
+        mesh.deform.push_back(std::move(key));
+        continue;
+      }
+      MeshData data;
+      std::string where = kp;
+      if (file) {
+        const std::string name = r_.string(*file, kp + ".file");
+        const std::string ext = std::filesystem::path(name).extension().string();
+        if (ext != ".obj" && ext != ".ply")
+          r_.fail(kp + ".file", "'" + name + "' is not an .obj or .ply mesh");
+        where = kp + " (" + name + ")";
+        const MeshData& m = files_.mesh(name, ext.substr(1), kp + ".file");
+        data.positions = m.positions, data.normals = m.normals;
+      } else {
+        std::vector<float> v = flat_numbers(*positions, kp + ".positions", 3);
+        for (size_t a = 0; a < v.size(); a += 3)
+          data.positions.emplace_back(v[a], v[a + 1], v[a + 2]);
+        if (const json* n = r_.find(k, "normals")) {
+          v = flat_numbers(*n, kp + ".normals", 3);
+          for (size_t a = 0; a < v.size(); a += 3)
+            data.normals.emplace_back(v[a], v[a + 1], v[a + 2]);
+        }
+      }
+      if (data.positions.size() != mesh.positions.size())
+        r_.fail(where, "has " + std::to_string(data.positions.size()) +
+                           " vertices; the shape has " + std::to_string(mesh.positions.size()));
+      if (!mesh.normals.empty() && data.normals.size() != mesh.positions.size())
+        r_.fail(where, "needs a normal per vertex, as the shape has (" +
+                           std::to_string(data.normals.size()) + " given)");
+      for (Vec3& v : data.positions) {
+        v = to_world.point(v);
+        if (!is_finite(v)) r_.fail(where, "a vertex is not finite after the shape's transform");
+      }
+      if (!mesh.normals.empty())
+        for (Vec3& n : data.normals) {
+          n = to_world.normal(n);
+          const float len = length(n);
+          if (!(len > 0) || !std::isfinite(len)) r_.fail(where, "a normal is zero or not finite");
+          n = n / len;
+        }
+      key.positions = std::move(data.positions);
+      if (!mesh.normals.empty()) key.normals = std::move(data.normals);
+      mesh.deform.push_back(std::move(key));
+    }
+    // The mesh's own vertices are its first key's (Mesh::deform).
+    mesh.positions = mesh.deform.front().positions;
+    mesh.normals = mesh.deform.front().normals;
+  }
+
+  Mesh parse_shape(const json& j, const std::string& p, bool moving = false, bool world = false) {
     r_.expect_object(j, p);
     std::string type = r_.string(r_.require(j, p, "type"), p + ".type");
     std::vector<std::string> keys = {"type", "name", "material", "transform", "emission"};
     if (moving) keys.push_back("keyframes");
+    if (world) keys.push_back("deform");
     if (type == "obj" || type == "ply")
       keys.push_back("file");
     else if (type == "mesh")
