@@ -454,7 +454,7 @@ void Accel::intersect_packet(RayPacket& packet, int n, PacketHits& out, bool coh
     if (m.sphere) continue;
     meshes[i] = &m;
     // A deforming mesh's triangle is the frame's (hit_from_embree), not its first key's.
-    if (h.instID[0][i] == RTC_INVALID_GEOMETRY_ID && !m.deforms()) batched[i] = &m;
+    if (h.instID[0][i] == RTC_INVALID_GEOMETRY_ID && !(motion_ && m.deforms())) batched[i] = &m;
     if (!prefetch_) continue;
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i])]);
     __builtin_prefetch(&m.indices[3 * size_t(h.primID[i]) + 2]);
@@ -583,7 +583,7 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
   hit.t = t;
   uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1], i2 = m.indices[3 * prim + 2];
   const bool normals = !m.normals.empty();
-  if (!instanced && m.deforms()) {
+  if (!instanced && motion_ && m.deforms()) {  // (a still scene does not read m.deform)
     // The triangle at the ray's time, between the frame's two time steps around it as Embree
     // interpolates them ((1 - f) a + f b), so that the hit is on the triangle the traversal met
     // (to the last bits of Embree's own arithmetic, which p_error's bound covers).

@@ -121,6 +121,27 @@ TEST(Deform, AZeroShutterIsTheStillAtThatInstant) {
   EXPECT_TRUE(test::bits_equal(a.sum, b.sum));
 }
 
+// A frame's BVH is a function of the scene and the frame, deforming meshes included: frame 17
+// rendered by a renderer that built frames 1 to 16 before it (keeping Renderer::kKeepFrames) is
+// the bits of a fresh renderer's frame 17, and frame 16 is another image. The box leans through
+// keys at frames 0, 8 and 24, and the shutter spans the whole frame.
+TEST(Deform, AFramesImageDoesNotDependOnTheFramesBefore) {
+  Scene s = test::cornell_box({"path", 16, 2, 4, 3, 8});
+  deform_mesh(s, "TallBox", {0.0, 8.0 / 24, 1.0}, [](size_t k, Vec3 p) {
+    return Vec3(p.x + 0.1f * float(k) * p.y, p.y * (1 + 0.1f * float(k)), p.z);
+  });
+  s.time = ShotTime{24, 0, 1};
+  const Rect frame{0, 0, 16, 16};
+  Renderer reused(s);
+  for (uint32_t f = 1; f <= 16; ++f) reused.render(TaskKey{f, frame, 0}, true);
+  const SampleBuffer a = reused.render(TaskKey{17, frame, 0}, true);
+  Renderer fresh(s);
+  const SampleBuffer b = fresh.render(TaskKey{17, frame, 0}, true);
+  EXPECT_TRUE(test::bits_equal(a.sum, b.sum));
+  const SampleBuffer c = fresh.render(TaskKey{16, frame, 0}, true);
+  EXPECT_FALSE(test::bits_equal(a.sum, c.sum));
+}
+
 // A square in the plane z = Z(t) facing +z, Z piecewise linear over keys at times 0, 0.3 and 1
 // (seconds; a shutter over [0, 1] at 1 fps) through 0, 1 and 0.5.
 Scene bobbing_square(std::vector<double> times, std::vector<float> heights) {

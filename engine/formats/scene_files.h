@@ -25,6 +25,7 @@ class SceneFiles {
   // The main scene file's bytes (the first read counted); throws SceneError naming the path.
   std::string read_main();
   const std::string& root() const { return root_; }  // the main file's directory
+  const ImportLimits& limits() const { return limits_; }
   // Checks a referenced file name (relative to the root) and returns it normalised
   // ("./a//b.obj" -> "a/b.obj"). Errors are SceneErrors "<scene file>: <where>: <why>".
   std::string name(const std::string& file, const std::string& where) const;

@@ -29,7 +29,7 @@ Mat4 trs_matrix(const Vec3& t, const double q[4], const Vec3& s) {
 
 namespace {
 
-enum class Path { Translation, Rotation, Scale };
+enum class Path { Translation, Rotation, Scale, Weights };
 enum class Interp { Linear, Step, CubicSpline };
 
 struct Channel {
@@ -114,12 +114,20 @@ Animations::Animations(Context& c) : impl_(std::make_unique<Impl>()) {
         c.fail(ptr(cp, "sampler"), "sampler " + std::to_string(ch.sampler) +
                                        " does not exist (the animation has " +
                                        std::to_string(anim.samplers.size()) + ")");
-      if (ch.target_path == "weights") {
-        c.warn(cp, "morph target weights are not animated (the base shape is rendered)");
-        continue;
-      }
       Channel out;
-      if (ch.target_path == "translation")
+      const size_t node = size_t(ch.target_node);
+      if (ch.target_path == "weights") {
+        // As many weights per key as the node's mesh has morph targets.
+        const tinygltf::Node& n = m.nodes[node];
+        const size_t targets = n.mesh >= 0 && size_t(n.mesh) < m.meshes.size() &&
+                                       !m.meshes[size_t(n.mesh)].primitives.empty()
+                                   ? m.meshes[size_t(n.mesh)].primitives[0].targets.size()
+                                   : 0;
+        if (targets == 0)
+          c.fail(ptr(tp, "node"), "the channel animates the morph weights of node " +
+                                      std::to_string(node) + ", whose mesh has no morph targets");
+        out.path = Path::Weights, out.comps = int(targets);
+      } else if (ch.target_path == "translation")
         out.path = Path::Translation, out.comps = 3;
       else if (ch.target_path == "rotation")
         out.path = Path::Rotation, out.comps = 4;
@@ -128,8 +136,7 @@ Animations::Animations(Context& c) : impl_(std::make_unique<Impl>()) {
       else
         c.fail(ptr(tp, "path"), "unknown path '" + ch.target_path +
                                     "' (known: translation, rotation, scale, weights)");
-      const size_t node = size_t(ch.target_node);
-      if (!m.nodes[node].matrix.empty())
+      if (out.path != Path::Weights && !m.nodes[node].matrix.empty())
         c.fail(ptr(tp, "node"), "node " + std::to_string(node) +
                                     " has a 'matrix': an animated node must use translation, "
                                     "rotation and scale (glTF 2.0, 5.25)");
@@ -151,14 +158,18 @@ Animations::Animations(Context& c) : impl_(std::make_unique<Impl>()) {
         if (!std::isfinite(out.times[i]) || (i > 0 && !(out.times[i] > out.times[i - 1])))
           c.fail(ptr(sp, "input"), "key times must be finite and increasing: key " +
                                        std::to_string(i) + " is " + format_number(out.times[i]));
-      out.values = read_floats(c, s.output, out.comps, ptr(sp, "output"));
+      // Weights are SCALAR accessors, targets per key (glTF 2.0, 3.11).
+      out.values =
+          read_floats(c, s.output, out.path == Path::Weights ? 1 : out.comps, ptr(sp, "output"));
       const size_t want =
           out.times.size() * (out.interp == Interp::CubicSpline ? 3 : 1) * size_t(out.comps);
       if (out.values.size() != want)
-        c.fail(ptr(sp, "output"), std::to_string(out.values.size() / size_t(out.comps)) +
-                                      " values for " + std::to_string(out.times.size()) +
-                                      " key times (" + interp + " needs " +
-                                      std::to_string(want / size_t(out.comps)) + ")");
+        c.fail(ptr(sp, "output"),
+               std::to_string(out.values.size() / size_t(out.comps)) +
+                   (out.path == Path::Weights ? " sets of " + std::to_string(out.comps) + " weights"
+                                              : std::string()) +
+                   " values for " + std::to_string(out.times.size()) + " key times (" + interp +
+                   " needs " + std::to_string(want / size_t(out.comps)) + ")");
       for (float v : out.values)
         if (!std::isfinite(v)) c.fail(ptr(sp, "output"), "a value is not finite");
       out.where = cp;
@@ -173,14 +184,26 @@ Animations::Animations(Context& c) : impl_(std::make_unique<Impl>()) {
 
 Animations::~Animations() = default;
 
-bool Animations::animates(size_t node) const { return impl_->nodes.count(node) != 0; }
+bool Animations::animates(size_t node) const {
+  auto it = impl_->nodes.find(node);
+  if (it == impl_->nodes.end()) return false;
+  for (const auto& entry : it->second)
+    if (entry.first != Path::Weights) return true;
+  return false;
+}
 
-std::vector<double> Animations::key_times(const std::vector<size_t>& chain) const {
+bool Animations::animates_weights(size_t node) const {
+  auto it = impl_->nodes.find(node);
+  return it != impl_->nodes.end() && it->second.count(Path::Weights) != 0;
+}
+
+std::vector<double> Animations::key_times(const std::vector<size_t>& chain, bool weights) const {
   std::set<double> times;
   for (size_t node : chain) {
     auto it = impl_->nodes.find(node);
     if (it == impl_->nodes.end()) continue;
     for (const auto& [path, ch] : it->second) {
+      if ((path == Path::Weights) != weights) continue;
       const size_t n = ch.times.size();
       for (size_t k = 0; k < n; ++k) {
         times.insert(ch.times[k]);
@@ -196,8 +219,37 @@ std::vector<double> Animations::key_times(const std::vector<size_t>& chain) cons
   return {times.begin(), times.end()};
 }
 
+std::vector<double> Animations::weights_at(const Context& c, size_t node, size_t targets,
+                                           double t) const {
+  auto it = impl_->nodes.find(node);
+  if (it != impl_->nodes.end()) {
+    auto w = it->second.find(Path::Weights);
+    if (w != it->second.end()) return evaluate(w->second, t);
+  }
+  // The node's weights, else its mesh's, else zeros (glTF 2.0, 3.7.2.2).
+  const tinygltf::Node& n = c.model.nodes[node];
+  std::vector<double> out(targets, 0.0);
+  const std::vector<double>* given = &n.weights;
+  if (given->empty() && n.mesh >= 0 && size_t(n.mesh) < c.model.meshes.size())
+    given = &c.model.meshes[size_t(n.mesh)].weights;
+  if (!given->empty() && given->size() != targets)
+    c.fail(ptr("/nodes", node), std::to_string(given->size()) + " morph weights for " +
+                                    std::to_string(targets) + " morph targets");
+  for (size_t i = 0; i < given->size(); ++i) {
+    if (!std::isfinite((*given)[i])) c.fail(ptr("/nodes", node), "a morph weight is not finite");
+    out[i] = (*given)[i];
+  }
+  return out;
+}
+
 Mat4 Animations::local_at(const Context& c, size_t node, double t) const {
   const tinygltf::Node& n = c.model.nodes[node];
+  if (n.matrix.size() == 16) {  // a still node given by its matrix (an animated one has TRS)
+    Mat4 m;
+    for (int col = 0; col < 4; ++col)
+      for (int row = 0; row < 4; ++row) m.m[row][col] = float(n.matrix[size_t(col * 4 + row)]);
+    return m;
+  }
   Vec3 tr(0.0f), sc(1.0f);
   double q[4] = {0, 0, 0, 1};
   if (n.translation.size() == 3)
@@ -212,6 +264,7 @@ Mat4 Animations::local_at(const Context& c, size_t node, double t) const {
   auto it = impl_->nodes.find(node);
   if (it != impl_->nodes.end())
     for (const auto& [path, ch] : it->second) {
+      if (path == Path::Weights) continue;
       const std::vector<double> v = evaluate(ch, t);
       if (path == Path::Translation) tr = Vec3(float(v[0]), float(v[1]), float(v[2]));
       if (path == Path::Scale) sc = Vec3(float(v[0]), float(v[1]), float(v[2]));

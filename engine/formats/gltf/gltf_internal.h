@@ -5,6 +5,7 @@
 
 #include <tiny_gltf.h>
 
+#include <array>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -63,19 +64,27 @@ std::vector<uint32_t> read_indices(const Context& c, int accessor, size_t vertex
 Mat4 trs_matrix(const Vec3& t, const double q[4], const Vec3& s);
 // Every channel of /animations that moves a node's translation, rotation or scale, checked (a
 // channel on a missing node, a missing sampler, key times out of order, a wrong number of
-// values, a node with a 'matrix' are errors naming the pointer); all animations play together
-// from time 0 (seconds), and morph-target weight channels are warned and dropped.
+// values, a node with a 'matrix' are errors naming the pointer), and the channels of morph
+// target weights (a node whose mesh has no morph targets is an error); all animations play
+// together from time 0 (seconds).
 class Animations {
  public:
   explicit Animations(Context& c);
   ~Animations();
+  // Whether a channel moves the node (translation, rotation, scale) / sets its morph weights.
   bool animates(size_t node) const;
-  // The times at which a chain of nodes (root first) is sampled: every key of their channels,
-  // plus for STEP a key just before each next one (kStepHold of the gap before it) holding the
-  // value, and for CUBICSPLINE kSplineSteps steps per segment (the AnimatedTransform
-  // interpolates the rest: exactly for LINEAR keys of one node under similarity parents).
-  std::vector<double> key_times(const std::vector<size_t>& chain) const;
-  // A node's local transform at time t: its own TRS with the animated paths evaluated.
+  bool animates_weights(size_t node) const;
+  // The times at which a chain of nodes (root first) is sampled: every key of their transform
+  // channels (with `weights`: of their weight channels instead), plus for STEP a key just before
+  // each next one (kStepHold of the gap before it) holding the value, and for CUBICSPLINE
+  // kSplineSteps steps per segment (the AnimatedTransform interpolates the rest: exactly for
+  // LINEAR keys of one node under similarity parents).
+  std::vector<double> key_times(const std::vector<size_t>& chain, bool weights = false) const;
+  // Node `node`'s morph weights at time t (`targets` of them): its channel's, else the node's
+  // own, else its mesh's, else zeros.
+  std::vector<double> weights_at(const Context& c, size_t node, size_t targets, double t) const;
+  // A node's local transform at time t: its own TRS with the animated paths evaluated (a still
+  // node's matrix if it has one).
   Mat4 local_at(const Context& c, size_t node, double t) const;
   // The world transform over time of the last node of `chain` (root first); a track that does
   // not move collapses to one key (AnimatedTransform). `where` names it in errors.
@@ -88,6 +97,39 @@ class Animations {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+// A node of the rendered scene (gltf_scene.cpp's walk_nodes, depth first).
+struct PlacedNode {
+  size_t node;
+  Mat4 to_world;
+  int parent = -1;           // the parent's index among the placed nodes, -1 for a root
+  AnimatedTransform motion;  // world over time where an animation moves it or an ancestor
+};
+
+// A primitive's geometry in its mesh's space and the engine Mesh it becomes once placed, with
+// what deforms it: morph targets (deltas per vertex) and a skin's joints and weights.
+struct MorphTarget {
+  std::vector<Vec3> positions, normals;  // per vertex, each empty when the target lacks it
+};
+struct Primitive {
+  MeshData data;
+  Mesh mesh;  // name, material, emission
+  std::string where;
+  std::vector<MorphTarget> targets;
+  std::vector<std::array<uint32_t, 4>> joints;  // JOINTS_0: indices into the skin's joints
+  std::vector<std::array<float, 4>> weights;    // WEIGHTS_0
+};
+
+// Skins and morph targets (gltf_deform.cpp; docs/formats/gltf.md "Skins and morph targets").
+// Reads a primitive's morph targets and JOINTS_0 / WEIGHTS_0 (n vertices; `where` its pointer).
+void read_deformation(Context& c, const tinygltf::Primitive& pr, size_t n, const std::string& where,
+                      Primitive& out);
+// Places node pn's skinned or morphed mesh as world meshes of its own: its vertices evaluated
+// (morph weights, then the skin's joints, or else the node's world transform) at every key time
+// of its weights and of the joints (or the node) that move it, deforming between them (a mesh
+// whose vertices never change is still).
+void place_deforming(Context& c, const Animations& anim, const std::vector<PlacedNode>& nodes,
+                     const PlacedNode& pn, const std::vector<Primitive>& prims);
 
 // Materials and textures (gltf_materials.cpp): fills scene.materials (one per glTF material, plus
 // the spec's default material at the end when a primitive has none), scene.textures and the

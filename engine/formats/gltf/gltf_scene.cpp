@@ -6,6 +6,7 @@
 // gltf_materials.cpp, accessors in gltf_accessors.cpp, embedded images in gltf_images.cpp.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <set>
@@ -196,9 +197,6 @@ void check_asset_and_extensions(Context& c) {
         !contains_name(c.model.extensionsRequired, c.model.extensionsUsed[i]))
       c.warn(ptr("/extensionsUsed", i),
              "extension " + c.model.extensionsUsed[i] + " is not supported (ignored)");
-  if (!c.model.skins.empty())
-    c.warn("/skins", std::to_string(c.model.skins.size()) +
-                         " skin(s) ignored: skinned meshes are rendered in their bind pose");
 }
 
 // --------------------------------------------------------------------------------------------
@@ -239,13 +237,6 @@ Mat4 node_matrix(const Context& c, size_t n) {
   if (!m.is_finite()) c.fail(p, "the transform is not finite");
   return m;
 }
-
-struct PlacedNode {
-  size_t node;
-  Mat4 to_world;
-  int parent = -1;           // the parent's index among the placed nodes, -1 for a root
-  AnimatedTransform motion;  // world over time where an animation moves it or an ancestor
-};
 
 // The nodes of the scene to render in depth-first order with their world transforms. A node
 // reached twice (a cycle, or two parents) is an error; the walk uses its own stack, so a deep
@@ -307,9 +298,8 @@ std::vector<PlacedNode> walk_nodes(Context& c) {
 }
 
 // The motion of every placed node that an animation moves, itself or through an ancestor.
-void animate_nodes(Context& c, std::vector<PlacedNode>& nodes) {
+void animate_nodes(Context& c, const Animations& anim, std::vector<PlacedNode>& nodes) {
   if (c.model.animations.empty()) return;
-  const Animations anim(c);
   for (PlacedNode& pn : nodes) {
     std::vector<size_t> chain;  // root first
     bool moves = false;
@@ -357,26 +347,20 @@ std::vector<uint32_t> triangles(Context& c, int mode, std::vector<uint32_t> idx,
   }
 }
 
-// A primitive's geometry in its mesh's space and the engine Mesh it becomes once placed.
-struct Primitive {
-  MeshData data;
-  Mesh mesh;  // name, material, emission
-  std::string where;
-};
-
 // The primitives of glTF mesh `index` (points and lines left out).
 std::vector<Primitive> convert_mesh(Context& c, size_t index, const MaterialMap& mats) {
   const tinygltf::Mesh& gm = c.model.meshes[index];
   const std::string mp = ptr("/meshes", index);
   std::vector<Primitive> out;
-  if (!gm.weights.empty())
-    c.warn(ptr(mp, "weights"), "morph targets are not supported (base shape rendered)");
   for (size_t k = 0; k < gm.primitives.size(); ++k) {
     const tinygltf::Primitive& pr = gm.primitives[k];
     const std::string p = ptr(ptr(mp, "primitives"), k);
     const std::string ap = ptr(p, "attributes");
-    if (!pr.targets.empty() && gm.weights.empty())
-      c.warn(ptr(p, "targets"), "morph targets are not supported (base shape rendered)");
+    if (pr.targets.size() != gm.primitives[0].targets.size())
+      c.fail(ptr(p, "targets"), std::to_string(pr.targets.size()) +
+                                    " morph targets where primitive 0 has " +
+                                    std::to_string(gm.primitives[0].targets.size()) +
+                                    " (a mesh's primitives have the same targets)");
     if (pr.extensions.count("KHR_draco_mesh_compression"))
       c.warn(ptr(ptr(p, "extensions"), "KHR_draco_mesh_compression"),
              "Draco compression is not supported: the uncompressed accessors are read");
@@ -402,6 +386,8 @@ std::vector<Primitive> convert_mesh(Context& c, size_t index, const MaterialMap&
     for (size_t i = 0; i < uv.size(); i += 2) d.uvs.push_back({uv[i], 1.0f - uv[i + 1]});  // v up
     if (pr.attributes.count("COLOR_0"))
       c.warn(ptr(ap, "COLOR_0"), "vertex colours are not supported (ignored)");
+    Primitive prim;
+    read_deformation(c, pr, n, p, prim);
     std::vector<uint32_t> idx;
     if (pr.indices != -1) {  // read_indices refuses other negative values
       idx = read_indices(c, pr.indices, n, ptr(p, "indices"));
@@ -428,12 +414,14 @@ std::vector<Primitive> convert_mesh(Context& c, size_t index, const MaterialMap&
     if (d.uvs.empty() && mats.uses_texcoord &&
         (mat.reflectance.texture >= 0 || mat.specular.texture >= 0 || mat.roughness.texture >= 0))
       c.warn(ap, "the material is textured but the primitive has no TEXCOORD_0 (uv 0 everywhere)");
-    out.push_back({std::move(d), std::move(mesh), p});
+    prim.data = std::move(d), prim.mesh = std::move(mesh), prim.where = p;
+    out.push_back(std::move(prim));
   }
   return out;
 }
 
-void place_meshes(Context& c, const std::vector<PlacedNode>& nodes, const MaterialMap& mats) {
+void place_meshes(Context& c, const Animations& anim, const std::vector<PlacedNode>& nodes,
+                  const MaterialMap& mats) {
   const auto& m = c.model;
   std::map<size_t, std::vector<const PlacedNode*>> users;  // mesh -> the nodes placing it
   for (const PlacedNode& pn : nodes) {
@@ -452,6 +440,15 @@ void place_meshes(Context& c, const std::vector<PlacedNode>& nodes, const Materi
   for (const auto& [mesh, placements] : users) {
     std::vector<Primitive> prims = convert_mesh(c, mesh, mats);
     if (prims.empty()) continue;
+    // A skinned or morphed mesh: world meshes of each placement's own, deforming where its
+    // weights or joints move (gltf_deform.cpp).
+    const bool skinned =
+        std::any_of(placements.begin(), placements.end(),
+                    [&](const PlacedNode* pn) { return m.nodes[pn->node].skin != -1; });
+    if (skinned || !prims[0].targets.empty()) {
+      for (const PlacedNode* pn : placements) place_deforming(c, anim, nodes, *pn, prims);
+      continue;
+    }
     if (placements.size() == 1 && !placements[0]->motion.animated()) {  // straight into world
       for (Primitive& pr : prims) {
         place_mesh(std::move(pr.data), placements[0]->to_world, c.file, pr.where, pr.mesh);
@@ -728,8 +725,9 @@ void import_gltf(const std::string& bytes, SceneFiles& files, Scene& scene) {
   gltf::check_asset_and_extensions(c);
   gltf::MaterialMap mats = gltf::convert_materials(c);
   std::vector<gltf::PlacedNode> nodes = gltf::walk_nodes(c);
-  gltf::animate_nodes(c, nodes);
-  gltf::place_meshes(c, nodes, mats);
+  const gltf::Animations anim(c);
+  gltf::animate_nodes(c, anim, nodes);
+  gltf::place_meshes(c, anim, nodes, mats);
   gltf::add_lights(c, nodes);
   gltf::set_camera(c, nodes);
   bool has_camera = false;

@@ -51,7 +51,7 @@ class Builder:
         return len(self.j["bufferViews"]) - 1
 
     def accessor(self, values, kind, ctype=5126, **extra):
-        n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[kind]
+        n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[kind]
         fmt = {5126: "f", 5125: "I", 5123: "H", 5121: "B"}[ctype]
         flat = [x for v in values for x in (v if isinstance(v, (list, tuple)) else [v])]
         view = self.view(struct.pack("<%d%s" % (len(flat), fmt), *flat))
@@ -134,6 +134,48 @@ def animated():
         {"sampler": 1, "target": {"node": 1, "path": "rotation"}},
         {"sampler": 2, "target": {"node": 2, "path": "translation"}}]}]
     b.j["scenes"] = [{"nodes": [0, 1, 2, 4]}]
+    b.j["scene"] = 0
+    return b.done()
+
+
+def deforming():
+    """Skins and morph targets (docs/formats/gltf.md "Skins and morph targets"; a fuzzing seed):
+    a quad with two morph targets whose weights animate (LINEAR), and a quad skinned to two
+    joints, the second turning a quarter about +z (LINEAR rotation)."""
+    b = Builder()
+    quad = b.quad()
+    lift = b.accessor([(0, 0, 1)] * 4, "VEC3")
+    stretch = b.accessor([(0, 0, 0), (1, 0, 0), (1, 0, 0), (0, 0, 0)], "VEC3")
+    joints = b.accessor([(0, 0, 0, 0), (1, 0, 0, 0), (1, 0, 0, 0), (0, 1, 0, 0)], "VEC4", 5121)
+    weights = b.accessor([(1, 0, 0, 0), (1, 0, 0, 0), (1, 0, 0, 0), (0.5, 0.5, 0, 0)], "VEC4")
+    skinned = dict(quad, attributes=dict(quad["attributes"], JOINTS_0=joints, WEIGHTS_0=weights))
+    b.j["meshes"] = [
+        {"name": "morph", "primitives": [dict(quad, material=0, targets=[{"POSITION": lift}, {"POSITION": stretch}])],
+         "weights": [0, 0]},
+        {"name": "skinned", "primitives": [dict(skinned, material=0)]},
+    ]
+    b.j["materials"] = [{"name": "grey", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1], "metallicFactor": 0}}]
+    s = math.sqrt(0.5)
+    b.j["nodes"] = [
+        {"name": "morphed", "mesh": 0, "translation": [-3, 0, 0]},
+        {"name": "root joint", "children": [2]},
+        {"name": "turning joint", "translation": [1, 0, 0]},
+        {"name": "skinned", "mesh": 1, "skin": 0},
+        {"name": "camera", "translation": [0, 1, 12], "camera": 0},
+    ]
+    ibm = b.accessor([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1,
+                      1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 1], "MAT4")
+    b.j["skins"] = [{"joints": [1, 2], "inverseBindMatrices": ibm}]
+    b.j["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}]
+    times2 = b.accessor([0, 1], "SCALAR")
+    samplers = [
+        {"input": times2, "output": b.accessor([0, 0, 1, 0.5], "SCALAR")},
+        {"input": times2, "output": b.accessor([(0, 0, 0, 1), (0, 0, s, s)], "VEC4")},
+    ]
+    b.j["animations"] = [{"name": "shot", "samplers": samplers, "channels": [
+        {"sampler": 0, "target": {"node": 0, "path": "weights"}},
+        {"sampler": 1, "target": {"node": 2, "path": "rotation"}}]}]
+    b.j["scenes"] = [{"nodes": [0, 1, 3, 4]}]
     b.j["scene"] = 0
     return b.done()
 
@@ -341,6 +383,7 @@ if __name__ == "__main__":
     write("primitives.gltf", primitives())
     write("interleaved.gltf", interleaved())
     write("animated.gltf", animated())
+    write("deforming.gltf", deforming())
     with open("checker.png", "wb") as f:
         f.write(TEXTURE_PNG)
     malformed()
