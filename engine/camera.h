@@ -100,6 +100,17 @@ class PerspectiveCamera {
     return true;
   }
 
+  // The same camera placed by `camera_to_world` instead (a moving camera at a light path's
+  // time): its rays are the bits generate_ray(x, y, u_lens, camera_to_world) gives.
+  PerspectiveCamera placed(const Mat4& camera_to_world) const {
+    PerspectiveCamera c = *this;
+    c.to_world_ = camera_to_world;
+    c.to_camera_ = camera_to_world.inverse();
+    c.origin_ = camera_to_world.point(Vec3(0.0f));
+    c.forward_ = normalize(camera_to_world.vector({0, 0, -1}));
+    return c;
+  }
+
   Vec3 forward() const { return forward_; }
   float lens_radius() const { return lens_radius_; }
 

@@ -33,6 +33,7 @@ struct Tracer {
   const RenderContext& ctx;
   Sampler& sampler;
   TraceCounters& counters;
+  const PerspectiveCamera& camera;  // at the camera sample's time (camera_at)
 
   // Unit direction from v to `to`.
   static Vec3 direction(const Vertex& v, const Vertex& to) {
@@ -81,7 +82,7 @@ struct Tracer {
     float p;
     if (v.kind == VertexKind::Camera) {
       float pdf_pos;
-      ctx.camera.pdf_ray(wn, pdf_pos, p);
+      camera.pdf_ray(wn, pdf_pos, p);
     } else {
       p = v.bsdf.pdf(direction(v, *prev), wn, mode);
     }
@@ -260,7 +261,7 @@ struct Tracer {
       const Vertex& qs = light[s - 1];
       Vec2 u_lens = sampler.get_2d();
       CameraConnection cc;
-      if (!connectible(qs) || !ctx.camera.connect(qs.hit.p, u_lens, cc)) return RGB(0.0f);
+      if (!connectible(qs) || !camera.connect(qs.hit.p, u_lens, cc)) return RGB(0.0f);
       sampled.kind = VertexKind::Camera;
       sampled.hit.p = cc.p_lens;
       sampled.beta = RGB(cc.importance / cc.pdf_solid_angle);
@@ -317,9 +318,12 @@ thread_local std::vector<Vertex> t_camera_path, t_light_path;
 }  // namespace
 
 RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, SplatTarget& splats,
-                       TraceCounters& counters, BdptStrategyRecorder* rec) {
+                       TraceCounters& counters, uint32_t frame, BdptStrategyRecorder* rec) {
+  // The camera at the sample's time: its camera ray's, its light subpath's and every t = 1
+  // connection's.
+  const PerspectiveCamera camera = camera_at(ctx, frame, ray.time);
   const int64_t max_depth = ctx.scene.render.integrator.max_depth;
-  Tracer tr{ctx, sampler, counters};
+  Tracer tr{ctx, sampler, counters, camera};
   std::vector<Vertex>& cam = t_camera_path;
   std::vector<Vertex>& light = t_light_path;
   if (cam.empty()) cam.emplace_back();
@@ -332,7 +336,7 @@ RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, Spla
   cam[0].hit.time = ray.time;  // the light subpath and every connection are made at this time
   cam[0].beta = RGB(1.0f);
   float pdf_pos, pdf_dir;
-  ctx.camera.pdf_ray(ray.d, pdf_pos, pdf_dir);
+  camera.pdf_ray(ray.d, pdf_pos, pdf_dir);
   cam[0].pdf_fwd = pdf_pos;
   size_t n_cam = tr.walk<TransportMode::Radiance>(cam, ray, RGB(1.0f), pdf_dir, max_depth + 2);
 
@@ -386,7 +390,7 @@ SampleBuffer BdptIntegrator::render(const RenderContext& ctx, const TaskKey& tas
   return render_camera_paths<true>(
       ctx, task, parallel,
       [&](Ray ray, Sampler& sampler, SplatTarget& splats, TraceCounters& counters) {
-        return bdpt_camera_sample(ctx, ray, sampler, splats, counters);
+        return bdpt_camera_sample(ctx, ray, sampler, splats, counters, task.frame);
       });
 }
 

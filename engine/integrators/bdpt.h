@@ -69,7 +69,6 @@ struct BdptIntegrator : IntegratorDefaults {
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
   static constexpr const char* kPbrtTypes = "bdpt";
   static constexpr const char* kMitsubaTypes = "bdpt";
-  static constexpr bool kMovingCamera = false;  // see IntegratorDefaults
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const BdptIntegrator&) const = default;
@@ -93,8 +92,10 @@ class BdptStrategyRecorder {
 
 // One BDPT camera sample through `ray` (the sampler started for it, filter and lens dimensions
 // drawn): returns what lands in the sample's own pixel (strategies t >= 2) and splats the t = 1
-// strategies into `splats`. A recorder, when given, sees every strategy's contribution.
+// strategies into `splats`, with a moving camera placed at the ray's time in frame `frame`. A
+// recorder, when given, sees every strategy's contribution.
 RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, SplatTarget& splats,
-                       TraceCounters& counters, BdptStrategyRecorder* recorder = nullptr);
+                       TraceCounters& counters, uint32_t frame,
+                       BdptStrategyRecorder* recorder = nullptr);
 
 }  // namespace rf

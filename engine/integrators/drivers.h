@@ -56,6 +56,14 @@ inline Ray camera_ray(const RenderContext& ctx, Sampler& sampler, uint32_t frame
   return ray;
 }
 
+// The camera at shutter position u of frame `frame` (a light path's time): the context's own
+// when the camera does not move, else placed where camera_ray places it at that time, so that a
+// light path's camera connections and the camera rays of that time see one camera.
+inline PerspectiveCamera camera_at(const RenderContext& ctx, uint32_t frame, float u) {
+  if (!ctx.scene.camera.moves()) return ctx.camera;
+  return ctx.camera.placed(ctx.scene.camera.motion.at(ctx.scene.time.at(frame, u)));
+}
+
 // Camera sample `index` of pixel (x, y): starts the sampler for it, draws the filter offset
 // (filter importance sampling: the sample stays in its pixel) and the lens point, and returns
 // the camera ray; `filter_weight` is the sample's weight.

@@ -11,6 +11,7 @@ namespace {
 // Connects every vertex of a light path to the camera and splats what arrives.
 struct CameraConnector {
   const RenderContext& ctx;
+  const PerspectiveCamera& camera;  // at the light path's time (camera_at)
   Sampler& sampler;
   SplatTarget& target;
   TraceCounters& counters;
@@ -21,7 +22,7 @@ struct CameraConnector {
   void vertex(const PathVertex& v) {
     Vec2 u_cam = sampler.get_2d();
     CameraConnection c;
-    if (v.bsdf.is_delta() || !ctx.camera.connect(v.hit.p, u_cam, c)) return;
+    if (v.bsdf.is_delta() || !camera.connect(v.hit.p, u_cam, c)) return;
     RGB f = v.bsdf.eval(v.wo, c.wi, TransportMode::Importance);
     if (is_black(f)) return;
     ++counters.rays;
@@ -38,7 +39,7 @@ struct CameraConnector {
   void emitter(const EmissionSample& es) {
     Vec2 u_lens = sampler.get_2d();
     CameraConnection c;
-    if (!es.is_area || !ctx.camera.connect(es.p, u_lens, c)) return;
+    if (!es.is_area || !camera.connect(es.p, u_lens, c)) return;
     RGB le = emitted_radiance(ctx.accel.mesh(es.mesh), es.n, c.wi);
     if (is_black(le)) return;
     ++counters.rays;
@@ -63,7 +64,8 @@ SampleBuffer LightIntegrator::render(const RenderContext& ctx, const TaskKey& ta
         const float time = light_path_time(ctx, sampler);
         EmissionSample es;
         if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
-        CameraConnector connector{ctx, sampler, target, c, time};
+        const PerspectiveCamera camera = camera_at(ctx, task.frame, time);
+        CameraConnector connector{ctx, camera, sampler, target, c, time};
         connector.emitter(es);
         trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es, time),
                                                  es.beta, max_depth, connector, c);

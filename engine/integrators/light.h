@@ -34,7 +34,6 @@ struct LightIntegrator : IntegratorDefaults {
   static constexpr const char* kKeys[] = {"type", "max_depth", "rr_min_depth"};
   static constexpr const char* kPbrtTypes = "lightpath";
   static constexpr const char* kMitsubaTypes = "ptracer";
-  static constexpr bool kMovingCamera = false;  // see IntegratorDefaults
 
   SampleBuffer render(const RenderContext& ctx, const TaskKey& task, bool parallel) const;
   bool operator==(const LightIntegrator&) const = default;

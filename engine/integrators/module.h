@@ -12,7 +12,7 @@
 //     void parse(const JsonReader&, const Json&, const std::string& path);  // its own keys
 //     std::string settings_text() const;                 // appended to the buffer header's
 //     void check(const Scene&) const;                    // throws SceneError if it cannot render
-//     // optional: kNeedsLights, kPbrtTypes, kMitsubaTypes, kMovingCamera, from_pbrt,
+//     // optional: kNeedsLights, kPbrtTypes, kMitsubaTypes, kMovingGeometry, from_pbrt,
 //     // from_mitsuba (below)
 //     SampleBuffer render(const RenderContext&, const TaskKey&, bool parallel) const;
 //     bool operator==(const FooIntegrator&) const = default;
@@ -61,9 +61,6 @@ struct IntegratorDefaults {
   // pbrt-v4 `Integrator` names and Mitsuba 3 <integrator type> names.
   static constexpr const char* kPbrtTypes = "";
   static constexpr const char* kMitsubaTypes = "";
-  // Whether it renders a moving camera (Camera::motion): estimators that connect light paths to
-  // the camera (light, bdpt) need the camera at a light path's time, which they do not take yet.
-  static constexpr bool kMovingCamera = true;
   // Whether it renders moving geometry (geometry_moves): estimators that build per-pass state
   // shared by camera samples at every time of the shutter (ir's virtual point lights, ppm's
   // photons) would gather light from where the geometry was at another time.

@@ -207,11 +207,6 @@ void check_renderable(const Scene& scene) {
   std::visit(
       [&](const auto& integrator) {
         using Module = std::decay_t<decltype(integrator)>;
-        if (scene.camera.moves() && !Module::kMovingCamera)
-          throw SceneError(scene.path + ": camera.keyframes: the " + std::string(Module::kName) +
-                           " integrator does not render a moving camera yet (its camera "
-                           "connections would need the light path's time); path, direct, ao, "
-                           "whitted, ir and ppm do");
         if (!Module::kMovingGeometry)
           for (size_t i = 0; i < scene.instances.size(); ++i)
             if (scene.instances[i].moves())

@@ -89,7 +89,7 @@ StrategyImages render_bdpt_strategies(const Scene& scene, uint32_t pass, int max
         float filter_weight;
         Ray ray = start_camera_sample(ctx, sampler, task, x, y, k, filter_weight);
         rec.pending.clear();
-        RGB l = bdpt_camera_sample(ctx, ray, sampler, target, counters, &rec);
+        RGB l = bdpt_camera_sample(ctx, ray, sampler, target, counters, task.frame, &rec);
         ignored.clear();
         if (!is_finite(l * filter_weight)) continue;  // SampleBuffer drops the whole sample
         size_t p = 3 * (size_t(y) * size_t(w) + size_t(x));
