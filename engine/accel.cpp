@@ -588,12 +588,9 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
     // interpolates them ((1 - f) a + f b), so that the hit is on the triangle the traversal met
     // (to the last bits of Embree's own arithmetic, which p_error's bound covers).
     const Deformed& d = deformed_[size_t(deform_slot_[surface])];
-    const uint32_t segments = d.steps - 1;
-    const float ft = ray.time * float(segments);
-    const uint32_t k =
-        segments == 0 ? 0 : std::min(segments - 1, uint32_t(std::max(0.0f, std::floor(ft))));
-    const uint32_t k1 = segments == 0 ? 0 : k + 1;
-    const float f = segments == 0 ? 0.0f : ft - float(k);
+    uint32_t k, k1;
+    float f;
+    step_weights(d, ray.time, k, k1, f);
     const size_t n = m.positions.size();
     auto at = [f](const Vec3* a, const Vec3* b, uint32_t vtx) {
       return a[vtx] * (1 - f) + b[vtx] * f;
@@ -616,6 +613,25 @@ void Accel::hit_from_embree(const Ray& ray, unsigned geom, unsigned prim, unsign
     hit.ns = normalize(to_world.normal(hit.ns));
   }
   hit.uv = triangle_uv(m, i0, i1, i2, u, v);
+}
+
+void Accel::triangle_at(uint32_t mesh, uint32_t prim, float time, Vec3& p0, Vec3& p1,
+                        Vec3& p2) const {
+  const Mesh& m = scene_.meshes[mesh];
+  const uint32_t i0 = m.indices[3 * prim], i1 = m.indices[3 * prim + 1],
+                 i2 = m.indices[3 * prim + 2];
+  if (!(motion_ && m.deforms())) {
+    p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
+    return;
+  }
+  const Deformed& d = deformed_[size_t(deform_slot_[mesh])];
+  uint32_t k, k1;
+  float f;
+  step_weights(d, time, k, k1, f);
+  const Vec3 *a = d.positions[k], *b = d.positions[k1];
+  p0 = a[i0] * (1 - f) + b[i0] * f;
+  p1 = a[i1] * (1 - f) + b[i1] * f;
+  p2 = a[i2] * (1 - f) + b[i2] * f;
 }
 
 bool Accel::occluded(const Ray& ray) const {

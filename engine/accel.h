@@ -12,6 +12,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -275,6 +276,10 @@ class Accel {
   // Instance i's object-to-world transform at shutter position `time` (Ray::time): Embree's
   // interpolation for a moving instance, the placement otherwise.
   Mat4 instance_transform_at(size_t i, float time) const;
+  // The vertices of triangle `prim` of world mesh `mesh` at shutter position `time` (Ray::time):
+  // a deforming mesh's as a hit rebuilds them from the frame's time steps, so that a light
+  // sample on a moving emitter lies on the triangle rays meet at that time; any other mesh's own.
+  void triangle_at(uint32_t mesh, uint32_t prim, float time, Vec3& p0, Vec3& p1, Vec3& p2) const;
   // The mesh of a surface id (see above): its material, emission and object-space geometry.
   const Mesh& mesh(uint32_t surface) const { return *surfaces_[surface]; }
 
@@ -329,6 +334,15 @@ class Accel {
     std::vector<Vec3> normals;
   };
   std::vector<Deformed> deformed_;
+  // The two time steps around shutter position `time` and the weight of the second, as Embree
+  // interpolates a deforming mesh's steps.
+  static void step_weights(const Deformed& d, float time, uint32_t& k, uint32_t& k1, float& f) {
+    const uint32_t segments = d.steps - 1;
+    const float ft = time * float(segments);
+    k = segments == 0 ? 0 : std::min(segments - 1, uint32_t(std::max(0.0f, std::floor(ft))));
+    k1 = segments == 0 ? 0 : k + 1;
+    f = segments == 0 ? 0.0f : ft - float(k);
+  }
   std::vector<int32_t> deform_slot_;  // per world mesh: its index in deformed_, or -1
   uint32_t time_steps_ = 1;
 };

@@ -218,6 +218,52 @@ Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::st
   return w;
 }
 
+// A moving instance's world copy of mesh m (an emitter: lights are sampled per world triangle)
+// as a deforming mesh: its vertices placed by the instance's track at every key and, within a key
+// segment that turns or scales, at kStepsPerKeySegment steps (vertices move linearly between
+// keys; a translation is exact, a quarter turn per segment stays within 1 - cos(pi / 32) = 0.5%
+// of its radius); a sphere is tessellated first.
+constexpr int kStepsPerKeySegment = 8;
+Mesh moving_copy(const Mesh& m, const Instance& inst, size_t i, const std::string& object) {
+  Mesh w = m;
+  w.name = m.name + " (instance " + std::to_string(i) + " of " + object + ")";
+  if (m.sphere) {
+    MeshData d = tessellate_sphere(*m.sphere, kSphereThetaSteps, kSpherePhiSteps);
+    w.sphere.reset();
+    w.positions = std::move(d.positions);
+    w.normals = std::move(d.normals);
+    w.uvs = std::move(d.uvs);
+    w.indices = std::move(d.indices);
+  }
+  const std::vector<Vec3> positions = w.positions, normals = w.normals;
+  const std::vector<Keyframe>& keys = inst.motion.keys();
+  std::vector<double> times;
+  for (size_t k = 0; k < keys.size(); ++k) {
+    times.push_back(keys[k].time);
+    if (k + 1 == keys.size()) break;
+    bool translates = true;  // the linear parts agree: the segment only translates
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) translates &= keys[k].m.m[r][c] == keys[k + 1].m.m[r][c];
+    if (translates) continue;
+    for (int j = 1; j < kStepsPerKeySegment; ++j)
+      times.push_back(keys[k].time + (keys[k + 1].time - keys[k].time) * j / kStepsPerKeySegment);
+  }
+  for (double t : times) {
+    const Mat4 xf = inst.motion.at(t);
+    VertexKey key;
+    key.time = t;
+    for (const Vec3& p : positions) key.positions.push_back(xf.point(p));
+    for (const Vec3& n : normals) key.normals.push_back(normalize(xf.normal(n)));
+    w.deform.push_back(std::move(key));
+  }
+  w.positions = w.deform.front().positions;
+  w.normals = w.deform.front().normals;
+  if (keys.front().m.det3() < 0)
+    for (size_t t = 0; t + 2 < w.indices.size(); t += 3)
+      std::swap(w.indices[t + 1], w.indices[t + 2]);
+  return w;
+}
+
 }  // namespace
 
 bool geometry_moves(const Scene& scene) {
@@ -286,10 +332,35 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
     for (const Keyframe& k : inst.moves() ? inst.motion.keys() : kNoKeys)
       if (bad(k.m)) refuse(" (the key at " + std::to_string(k.time) + " s)");
   }
-  // Deforming meshes: world triangle meshes whose keys match the mesh (first key its own
-  // vertices, every key as many positions and normals, times increasing and finite, positions
-  // finite), and no emitter (area lights are sampled per world-space triangle, which a
-  // deforming emitter would need at the path's time: issue 46's next part).
+  for (uint32_t o = 0; o < scene.objects.size(); ++o) {
+    SceneObject& obj = scene.objects[o];
+    auto emissive = [](const Mesh& m) { return m.emission && !is_black(m.emission->radiance); };
+    if (std::none_of(obj.meshes.begin(), obj.meshes.end(), emissive)) continue;
+    uint64_t triangles = 0, placements = 0;
+    for (const Mesh& m : obj.meshes)
+      if (emissive(m)) triangles += m.primitive_count();
+    for (size_t i = 0; i < scene.instances.size(); ++i) {
+      const Instance& inst = scene.instances[i];
+      placements += inst.object == o;
+    }
+    if (placements && triangles > (max_elements - elements) / placements)
+      throw over("object '" + obj.name + "' holds " + std::to_string(triangles) +
+                 " emissive triangles, placed " + std::to_string(placements) +
+                 " times: that many world-space copies (area lights are sampled per triangle)");
+    elements += triangles * placements;
+    for (size_t i = 0; i < scene.instances.size(); ++i)
+      if (scene.instances[i].object == o)
+        for (const Mesh& m : obj.meshes)
+          if (emissive(m))
+            scene.meshes.push_back(scene.instances[i].moves()
+                                       ? moving_copy(m, scene.instances[i], i, obj.name)
+                                       : instanced_copy(m, scene.instances[i], i, obj.name));
+    obj.meshes.erase(std::remove_if(obj.meshes.begin(), obj.meshes.end(), emissive),
+                     obj.meshes.end());
+  }
+  // Deforming meshes (moving instances' emitters among them): world triangle meshes whose keys
+  // match the mesh (first key its own vertices, every key as many positions and normals, times
+  // increasing and finite, positions finite).
   for (size_t i = 0; i < scene.meshes.size(); ++i) {
     const Mesh& m = scene.meshes[i];
     if (m.deform.empty()) continue;
@@ -298,8 +369,6 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
     };
     if (m.sphere) refuse("only triangle meshes deform");
     if (m.deform.size() < 2) refuse("give at least two keys");
-    if (m.emission && !is_black(m.emission->radiance))
-      refuse("deforming area lights are not supported yet; keep the emitter's shape still");
     elements += m.deform.size() * m.positions.size();
     if (elements > max_elements)
       throw over(std::to_string(elements) + " elements with the deforming shapes' vertex keys");
@@ -325,35 +394,6 @@ void prepare_instances(Scene& scene, uint64_t max_elements) {
         throw SceneError(scene.path + ": shape '" + m.name + "' of object '" + obj.name +
                          "' deforms: only shapes placed in the world deform, not an instanced "
                          "object's");
-  for (uint32_t o = 0; o < scene.objects.size(); ++o) {
-    SceneObject& obj = scene.objects[o];
-    auto emissive = [](const Mesh& m) { return m.emission && !is_black(m.emission->radiance); };
-    if (std::none_of(obj.meshes.begin(), obj.meshes.end(), emissive)) continue;
-    uint64_t triangles = 0, placements = 0;
-    for (const Mesh& m : obj.meshes)
-      if (emissive(m)) triangles += m.primitive_count();
-    for (size_t i = 0; i < scene.instances.size(); ++i) {
-      const Instance& inst = scene.instances[i];
-      placements += inst.object == o;
-      // Area lights are sampled per world-space triangle: a moving emitter would need its
-      // triangles at the path's time (issue 46's next part).
-      if (inst.object == o && inst.moves())
-        throw SceneError(scene.path + ": instance " + std::to_string(i) + " of '" + obj.name +
-                         "' moves, and '" + obj.name +
-                         "' holds an emitter: moving area lights are not supported yet; keep "
-                         "the emitter still (its own shape without keyframes)");
-    }
-    if (placements && triangles > (max_elements - elements) / placements)
-      throw over("object '" + obj.name + "' holds " + std::to_string(triangles) +
-                 " emissive triangles, placed " + std::to_string(placements) +
-                 " times: that many world-space copies (area lights are sampled per triangle)");
-    elements += triangles * placements;
-    for (size_t i = 0; i < scene.instances.size(); ++i)
-      if (scene.instances[i].object == o)
-        for (const Mesh& m : obj.meshes)
-          if (emissive(m)) scene.meshes.push_back(instanced_copy(m, scene.instances[i], i, obj.name));
-    obj.meshes.erase(std::remove_if(obj.meshes.begin(), obj.meshes.end(), emissive), obj.meshes.end());
-  }
 }
 
 void flatten_instances(Scene& scene) {

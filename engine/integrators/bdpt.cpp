@@ -58,7 +58,7 @@ struct Tracer {
     if (!(d2 > 0)) return 0.0f;
     w = w / std::sqrt(d2);
     float pdf_pos, pdf_dir;
-    ctx.lights.pdf_emission(v.light, v.hit.ng, w, pdf_pos, pdf_dir);
+    ctx.lights.pdf_emission(v.light, v.hit.ng, w, pdf_pos, pdf_dir, ctx.at(v.hit.time));
     float pdf = pdf_dir / d2;
     if (next.on_surface) pdf *= std::fabs(dot(next.hit.ng, w));
     return pdf;
@@ -70,7 +70,7 @@ struct Tracer {
   float pdf_light_origin(const Vertex& v) const {
     if (v.infinite) return v.delta_light ? 0.0f : ctx.lights.pdf_environment(v.dir);
     float pdf_pos, pdf_dir;
-    ctx.lights.pdf_emission(v.light, v.hit.ng, v.hit.ng, pdf_pos, pdf_dir);
+    ctx.lights.pdf_emission(v.light, v.hit.ng, v.hit.ng, pdf_pos, pdf_dir, ctx.at(v.hit.time));
     return pdf_pos;
   }
 
@@ -275,7 +275,9 @@ struct Tracer {
       sampler.skip_1d();  // the light is picked by u_point.x (LightSelection::select)
       Vec2 u_point = sampler.get_2d();
       LightSample ls;
-      if (!connectible(pt) || !ctx.lights.sample_by_power(pt.hit.p, u_point, ls)) return RGB(0.0f);
+      if (!connectible(pt) ||
+          !ctx.lights.sample_by_power(pt.hit.p, u_point, ls, ctx.at(pt.hit.time)))
+        return RGB(0.0f);
       sampled.kind = VertexKind::Light;
       sampled.light = ls.light;
       sampled.infinite = ls.is_infinite;
@@ -285,6 +287,7 @@ struct Tracer {
       sampled.hit.p = ls.p;
       sampled.hit.p_error = ls.p_error;
       sampled.hit.ng = sampled.hit.ns = ls.n;
+      sampled.hit.time = pt.hit.time;
       sampled.beta = ls.radiance / ls.pdf_solid_angle;
       sampled.pdf_fwd = pdf_light_origin(sampled);
       c = pt.beta * f(pt, ls.wi, TransportMode::Radiance) * sampled.beta *
@@ -343,7 +346,7 @@ RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, Spla
   // Light subpath: a point on a light, then up to max_depth surface vertices.
   size_t n_light = 0;
   EmissionSample es;
-  if (sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/false)) {
+  if (sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/false, ray.time)) {
     Vertex& y0 = light[0];
     y0 = Vertex{};
     y0.kind = VertexKind::Light;

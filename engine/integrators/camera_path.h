@@ -36,13 +36,14 @@ struct CameraPath {
   // delta scattering, else weighted by the power heuristic against the light-sampling density of
   // the point from the previous vertex. False when the point sends nothing towards wo.
   bool emission(const RenderContext& ctx, const Mesh& m, uint32_t mesh, uint32_t prim, Vec3 p,
-                Vec3 ng, Vec3 wo, RGB& term) const {
+                Vec3 ng, Vec3 wo, float time, RGB& term) const {
     const RGB le = emitted_radiance(m, ng, wo);
     if (is_black(le)) return false;
     if (prev_delta) {
       term = beta * le;
     } else {
-      const float light_pdf = ctx.lights.pdf_solid_angle(prev_p, prev_n, mesh, prim, p, ng);
+      const float light_pdf =
+          ctx.lights.pdf_solid_angle(prev_p, prev_n, mesh, prim, p, ng, ctx.at(time));
       term = beta * le * power_heuristic(prev_bsdf_pdf, light_pdf);
     }
     return true;
@@ -51,7 +52,8 @@ struct CameraPath {
   void arrive(const RenderContext& ctx, const SurfaceHit& hit, Vec3 wo, RGB& radiance) {
     widen_cone(ctx, hit.t);
     RGB term;
-    if (emission(ctx, ctx.accel.mesh(hit.mesh), hit.mesh, hit.prim, hit.p, hit.ng, wo, term))
+    if (emission(ctx, ctx.accel.mesh(hit.mesh), hit.mesh, hit.prim, hit.p, hit.ng, wo, hit.time,
+                 term))
       radiance += term;
   }
   // The path goes on by the BSDF sample bs taken at hit (outgoing direction wo): the throughput

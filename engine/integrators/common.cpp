@@ -63,7 +63,8 @@ bool light_sample_mis_unshadowed(const RenderContext& ctx, const SurfaceHit& hit
                                  Ray& shadow, bool mis) {
   contribution = RGB(0.0f);
   LightSample ls;
-  if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls)) return false;
+  if (!ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls, ctx.at(hit.time)))
+    return false;
   float bsdf_pdf;
   RGB f = bsdf.eval_pdf(wo, ls.wi, bsdf_pdf);
   if (is_black(f)) return false;

@@ -101,6 +101,8 @@ struct RenderContext {
   const std::atomic<bool>& stop;
   // scene_moves(scene): camera samples and light paths draw a time (Ray::time).
   bool moves = false;
+  // When a path at shutter position `time` samples a light (moving emitters read it).
+  LightTime at(float time) const { return {&accel, time}; }
   void throw_if_stopped() const {
     if (stop.load(std::memory_order_relaxed)) throw RenderStopped("the render was stopped");
   }

@@ -43,7 +43,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
     // tracer's first vertex (Sampler::get_2d_joint).
     Vec2 up = k == 0 ? sampler.get_2d_joint(0) : sampler.get_2d();
     LightSample ls;
-    if (!ctx.lights.sample(hit.p, n_receiver, u, up, ls)) continue;
+    if (!ctx.lights.sample(hit.p, n_receiver, u, up, ls, ctx.at(hit.time))) continue;
     if (n_light == 0 && !ls.is_delta) continue;  // "bsdf" strategy: only delta lights here
     RGB f = bsdf.eval(wo, ls.wi);
     if (is_black(f)) continue;
@@ -74,7 +74,7 @@ RGB direct_radiance(const DirectIntegrator& s, const RenderContext& ctx, Ray ray
       le = emitted_radiance(ctx.accel.mesh(light_hit.mesh), light_hit.ng, -bs.wi);
       if (is_black(le)) continue;
       light_pdf = ctx.lights.pdf_solid_angle(hit.p, n_receiver, light_hit.mesh, light_hit.prim,
-                                             light_hit.p, light_hit.ng);
+                                             light_hit.p, light_hit.ng, ctx.at(hit.time));
     } else {
       le = ctx.lights.environment_radiance(bs.wi);
       if (is_black(le)) continue;

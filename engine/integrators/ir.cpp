@@ -124,7 +124,7 @@ std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderCont
   const int max_vpl_depth = ctx.scene.render.integrator.max_depth - 1;
   auto trace_one = [&](Sampler& sampler, std::vector<Vpl>& out, TraceCounters& c) {
     EmissionSample es;
-    if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
+    if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true, /*time=*/0.0f)) return;
     VplDeposit deposit{ctx, out, inv_paths};
     trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es, 0.0f),
                                              es.beta,  // still geometry: kMovingGeometry

@@ -63,7 +63,7 @@ SampleBuffer LightIntegrator::render(const RenderContext& ctx, const TaskKey& ta
       ctx, task, parallel, paths, [&](Sampler& sampler, SplatTarget& target, TraceCounters& c) {
         const float time = light_path_time(ctx, sampler);
         EmissionSample es;
-        if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
+        if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true, time)) return;
         const PerspectiveCamera camera = camera_at(ctx, task.frame, time);
         CameraConnector connector{ctx, camera, sampler, target, c, time};
         connector.emitter(es);

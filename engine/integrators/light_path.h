@@ -90,12 +90,13 @@ void trace_subpath(const RenderContext& ctx, Sampler& sampler, Ray ray, RGB beta
 // The emission that starts a light path: a light chosen by power, a point on it and a direction
 // (three numbers from the sampler). False when no light can emit. With `infinite_lights`,
 // directional and environment lights start paths from a disk outside the scene
-// (LightSet::sample_emission); without (BDPT), a pick of one is false.
+// (LightSet::sample_emission); without (BDPT), a pick of one is false. `time`: the light path's
+// (a moving emitter's point is taken where it is then).
 inline bool sample_light_path_start(const RenderContext& ctx, Sampler& sampler, EmissionSample& es,
-                                    bool infinite_lights) {
+                                    bool infinite_lights, float time) {
   sampler.skip_1d();  // the light is picked by u_pos.x (LightSelection::select)
   Vec2 u_pos = sampler.get_2d(), u_dir = sampler.get_2d();
-  return ctx.lights.sample_emission(u_pos, u_dir, es, infinite_lights);
+  return ctx.lights.sample_emission(u_pos, u_dir, es, infinite_lights, ctx.at(time));
 }
 
 // A light path's time (Ray::time): in a scene where something moves, a number from the path's

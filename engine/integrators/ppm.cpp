@@ -56,7 +56,7 @@ std::shared_ptr<const PhotonMap> build_photon_map(const PpmIntegrator& s, const 
   const int max_depth = ctx.scene.render.integrator.max_depth;
   auto trace_one = [&](Sampler& sampler, std::vector<Photon>& out, TraceCounters& c) {
     EmissionSample es;
-    if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true)) return;
+    if (!sample_light_path_start(ctx, sampler, es, /*infinite_lights=*/true, /*time=*/0.0f)) return;
     PhotonDeposit deposit{out, inv_paths};
     trace_subpath<TransportMode::Importance>(ctx, sampler, light_path_ray(ctx, es, 0.0f),
                                              es.beta,  // still geometry: kMovingGeometry

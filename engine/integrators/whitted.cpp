@@ -47,8 +47,10 @@ RGB whitted_radiance(const RenderContext& ctx, Ray ray, Sampler& sampler, TraceC
       if (ctx.lights.sample_delta_light(k, hit.p, ls)) add(ls);
     }
     LightSample ls;
-    if (ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls) &&
-        !ls.is_delta) add(ls);
+    if (ctx.lights.sample(hit.p, receiver_normal(bsdf, wo), u_light, u_point, ls,
+                          ctx.at(hit.time)) &&
+        !ls.is_delta)
+      add(ls);
     break;
   }
   return radiance;

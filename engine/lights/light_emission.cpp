@@ -16,15 +16,15 @@ Vec3 sample_uniform_cone(Vec2 u, float cos_max) {
 }
 }  // namespace
 
-bool LightSet::sample_emission(Vec2 u_pos, Vec2 u_dir, EmissionSample& es,
-                               bool infinite_lights) const {
+bool LightSet::sample_emission(Vec2 u_pos, Vec2 u_dir, EmissionSample& es, bool infinite_lights,
+                               const LightTime& at) const {
   size_t i = selection_.select(u_pos.x);
   if (i == LightSelection::kNone) return false;
   es = EmissionSample{};
   es.light = uint32_t(i);
   float pmf = selection_.pmf(i);
   if (i < area_.size()) {
-    const AreaLight& tri = area_[i];
+    const AreaLight tri = area_at(i, at);
     const Mesh& m = scene_.meshes[tri.mesh];
     if (!(tri.area > 0)) return false;
     sample_area_surface(tri, u_pos, es.p, es.p_error, es.n);
@@ -105,12 +105,12 @@ void LightSet::start_on_disk(Vec3 dir, Vec2 u, float pmf, EmissionSample& es) co
   es.is_infinite = true;
 }
 
-void LightSet::pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos,
-                            float& pdf_dir) const {
+void LightSet::pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos, float& pdf_dir,
+                            const LightTime& at) const {
   pdf_pos = pdf_dir = 0;
   if (light >= size()) return;
   if (light < area_.size()) {
-    const AreaLight& tri = area_[light];
+    const AreaLight tri = area_at(light, at);
     if (!(tri.area > 0)) return;
     pdf_pos = selection_pmf(light) / tri.area;
     float cos_t = dot(n, dir);

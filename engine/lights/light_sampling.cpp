@@ -62,25 +62,28 @@ bool sample_punctual(const PunctualLight& l, float scene_radius, Vec3 p, LightSa
   return falloff > 0;
 }
 
-bool LightSet::sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls) const {
+bool LightSet::sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls,
+                      const LightTime& at) const {
   size_t i;
   float pmf;
-  return pick(p, n, u_select, u_point, i, pmf) && sample_selected(i, pmf, p, u_point, ls);
+  return pick(p, n, u_select, u_point, i, pmf) && sample_selected(i, pmf, p, u_point, ls, at);
 }
 
-bool LightSet::sample_by_power(Vec3 p, Vec2 u_point, LightSample& ls) const {
+bool LightSet::sample_by_power(Vec3 p, Vec2 u_point, LightSample& ls, const LightTime& at) const {
   size_t i = selection_.select(u_point.x);
   if (i == LightSelection::kNone) return false;
-  return sample_selected(i, selection_.pmf(i), p, u_point, ls);
+  return sample_selected(i, selection_.pmf(i), p, u_point, ls, at);
 }
 
-bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const {
+bool LightSet::sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls,
+                               const LightTime& at) const {
   ls = LightSample{};
   ls.light = uint32_t(i);
   bool ok = false;
   ls.pdf_solid_angle = 1.0f;  // delta lights: the selection probability alone
   if (i < area_.size()) {
-    ok = sample_area(area_[i], area_emission(i), p, u_point, ls);
+    ok = area_[i].moves ? sample_area(area_at(i, at), area_emission(i), p, u_point, ls)
+                        : sample_area(area_[i], area_emission(i), p, u_point, ls);
   } else if (i < area_.size() + punctual_.size()) {
     ok = sample_punctual(punctual_[i - area_.size()], radius_, p, ls);
   } else {

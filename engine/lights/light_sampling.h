@@ -62,6 +62,7 @@ struct AreaLight {
   float area;
   const SphereShape* sphere;  // nullptr for a triangle
   Vec3 p0, p1, p2, n;         // a triangle's vertices and unit normal (copied: no index lookup)
+  bool moves = false;         // on a deforming mesh: the above is its first key (LightSet::at)
 };
 
 // Point, spot and directional lights.

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "engine/accel.h"
 #include "engine/check.h"
 
 namespace rf {
@@ -47,6 +48,8 @@ LightSet::LightSet(const Scene& scene) : scene_(scene) {
         tri.p0 = m.positions[m.indices[3 * t]], tri.p1 = m.positions[m.indices[3 * t + 1]];
         tri.p2 = m.positions[m.indices[3 * t + 2]];
         tri.n = normalize(cross(tri.p1 - tri.p0, tri.p2 - tri.p0));
+        tri.moves = m.deforms();
+        moving_ |= tri.moves;
       }
       area_.push_back(tri);
       kinds_.push_back(LightKind::Area);
@@ -101,6 +104,15 @@ std::vector<LightBounds> LightSet::bounds(std::vector<bool>& positioned) const {
         b.lo = t.sphere->center - Vec3(t.sphere->radius);
         b.hi = t.sphere->center + Vec3(t.sphere->radius);
         b.cos_theta_o = -1.0f;  // normals in every direction
+      } else if (t.moves) {     // wherever its keys put it, facing anywhere
+        const Mesh& m = scene_.meshes[t.mesh];
+        b.lo = Vec3(kInf), b.hi = Vec3(-kInf);
+        for (const VertexKey& k : m.deform)
+          for (int c = 0; c < 3; ++c) {
+            const Vec3 q = k.positions[m.indices[3 * size_t(t.prim) + size_t(c)]];
+            b.lo = vmin(b.lo, q), b.hi = vmax(b.hi, q);
+          }
+        b.cos_theta_o = -1.0f;
       } else {
         b.lo = vmin(t.p0, vmin(t.p1, t.p2));
         b.hi = vmax(t.p0, vmax(t.p1, t.p2));
@@ -133,12 +145,25 @@ std::vector<LightBounds> LightSet::bounds(std::vector<bool>& positioned) const {
   return bounds;
 }
 
+AreaLight LightSet::area_at(size_t i, const LightTime& at) const {
+  AreaLight tri = area_[i];
+  if (!tri.moves) return tri;
+  RF_CHECK(at.accel != nullptr,
+           "moving area light " + std::to_string(i) + " sampled without its time (LightTime)");
+  at.accel->triangle_at(tri.mesh, tri.prim, at.time, tri.p0, tri.p1, tri.p2);
+  const Vec3 c = cross(tri.p1 - tri.p0, tri.p2 - tri.p0);
+  const float len = length(c);
+  tri.area = 0.5f * len;
+  tri.n = len > 0 ? c / len : area_[i].n;
+  return tri;
+}
+
 float LightSet::pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Vec3 on_light,
-                                Vec3 n_light) const {
+                                Vec3 n_light, const LightTime& at) const {
   // Surface ids past the world meshes are instanced meshes, never lights (prepare_instances).
   uint32_t first = mesh < mesh_first_light_.size() ? mesh_first_light_[mesh] : kNoLight;
   if (first == kNoLight) return 0.0f;
-  const AreaLight& tri = area_[first + prim];
+  const AreaLight tri = area_at(first + prim, at);
   if (!(tri.area > 0)) return 0.0f;
   float pmf = selection_pmf_at(first + prim, p, n);
   if (!(pmf > 0)) return 0.0f;

@@ -34,6 +34,18 @@
 
 namespace rf {
 
+class Accel;
+
+// When a light is sampled: the frame's BVH and the shutter position (Ray::time) of the path
+// asking. Only moving emitters (area lights on deforming meshes, which moving instances' emitters
+// become: prepare_instances) read it: their triangle at that time is the frame's (Accel::
+// triangle_at), so a light sample lies on the surface the path's rays meet. A scene whose
+// emitters stand still may pass none.
+struct LightTime {
+  const Accel* accel = nullptr;
+  float time = 0;
+};
+
 // A light path's first vertex (light tracing): a point on a light and a direction leaving it.
 struct EmissionSample {
   Vec3 p, p_error, n;    // point, its error bound, unit normal (area lights; the axis otherwise)
@@ -58,6 +70,8 @@ class LightSet {
   size_t area_light_count() const { return area_.size(); }
   // Whether some area light is an exact sphere (the others are triangles).
   bool has_area_spheres() const { return area_spheres_; }
+  // Whether some area light moves (lies on a deforming mesh): its samples need a LightTime.
+  bool has_moving_area_lights() const { return moving_; }
   LightKind kind(size_t light) const { return kinds_[light]; }
   // Light index of Scene::lights[k], and of the environment (only when has_environment()).
   size_t scene_light_index(size_t k) const { return area_.size() + k; }
@@ -65,7 +79,7 @@ class LightSet {
   // Area light i < area_light_count(): its primitive and its mesh's emission.
   const AreaLight& area_light(size_t i) const { return area_[i]; }
   const Emission& area_emission(size_t i) const { return *scene_.meshes[area_[i].mesh].emission; }
-  // Area light i as the lane kernels take a triangle (not a sphere).
+  // Area light i as the lane kernels take a triangle (not a sphere, not a moving one).
   TriangleLight triangle_light(size_t i) const {
     const AreaLight& t = area_[i];
     return {t.p0, t.p1, t.p2, t.n, t.area, selection_.pmf(i), area_emission(i)};
@@ -94,11 +108,14 @@ class LightSet {
   // spot's cone, a one-sided emitter seen from behind). n: the unit normal of the hemisphere
   // light can arrive from at p (a surface that only reflects, turned to the side of the outgoing
   // direction), or zero; only the BVH selection uses it. pick() followed by sample_selected().
-  bool sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls) const;
+  // `at`: when (LightTime), for moving emitters.
+  bool sample(Vec3 p, Vec3 n, float u_select, Vec2 u_point, LightSample& ls,
+              const LightTime& at = {}) const;
   // Point sampling of light i once it is selected with probability pmf.
-  bool sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls) const;
+  bool sample_selected(size_t i, float pmf, Vec3 p, Vec2 u_point, LightSample& ls,
+                       const LightTime& at = {}) const;
   // The same with selection by power alone, whatever the mode (BDPT's s = 1 connections).
-  bool sample_by_power(Vec3 p, Vec2 u_point, LightSample& ls) const;
+  bool sample_by_power(Vec3 p, Vec2 u_point, LightSample& ls, const LightTime& at = {}) const;
   // Whether light i is a sphere that p sees from outside, with its cone.
   bool sphere_cone_of(size_t i, Vec3 p, SphereCone& c) const {
     return i < area_.size() && rf::sphere_cone_of(area_[i], area_emission(i), p, c);
@@ -109,8 +126,8 @@ class LightSet {
   size_t delta_light_count() const { return punctual_.size(); }
   // Solid-angle pdf of sampling light point `on_light` (triangle mesh/prim) from (p, n), as
   // sample() would, including selection; 0 when that triangle is not a light.
-  float pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Vec3 on_light,
-                        Vec3 n_light) const;
+  float pdf_solid_angle(Vec3 p, Vec3 n, uint32_t mesh, uint32_t prim, Vec3 on_light, Vec3 n_light,
+                        const LightTime& at = {}) const;
   // Light index of triangle prim of mesh, or ~0u when that triangle is not a light.
   uint32_t area_light_index(uint32_t mesh, uint32_t prim) const;
 
@@ -127,15 +144,16 @@ class LightSet {
   // the light's whole flux into it. Without it (BDPT, whose MIS weights give such lights only
   // the camera-side strategies) a pick of one is false.
   // The light is picked by u_pos.x (LightSelection::select), which is then rescaled for the point.
-  bool sample_emission(Vec2 u_pos, Vec2 u_dir, EmissionSample& es,
-                       bool infinite_lights = false) const;
+  bool sample_emission(Vec2 u_pos, Vec2 u_dir, EmissionSample& es, bool infinite_lights = false,
+                       const LightTime& at = {}) const;
   // The densities with which sample_emission() starts a light path at a point of `light` (normal
   // n for area lights) leaving in unit direction dir (BDPT's MIS weights): pdf_pos the area
   // density of the point including selection (point and spot lights: the selection
   // probability), pdf_dir the solid-angle density of dir (0 outside a spot's cone or behind a
   // one-sided emitter). Both 0 for directional and environment lights, on which BDPT (the only
   // caller) never starts paths.
-  void pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos, float& pdf_dir) const;
+  void pdf_emission(uint32_t light, Vec3 n, Vec3 dir, float& pdf_pos, float& pdf_dir,
+                    const LightTime& at = {}) const;
 
   bool has_environment() const { return env_ != nullptr; }
   // Radiance arriving from world direction dir (unit) at infinity; black without environment.
@@ -149,7 +167,11 @@ class LightSet {
   float scene_radius() const { return radius_; }
 
  private:
-  // The bounds of each light with a position (light_bvh.h), positioned[i] false for the others.
+  // Area light i at `at`: a moving one's triangle, normal and area then (Accel::triangle_at);
+  // RF_CHECKs that a moving one is given its time.
+  AreaLight area_at(size_t i, const LightTime& at) const;
+  // The bounds of each light with a position (light_bvh.h), positioned[i] false for the others; a
+  // moving area light's over all its keys, its normals in every direction.
   std::vector<LightBounds> bounds(std::vector<bool>& positioned) const;
   // A light path of an infinite light travelling along unit `dir`: its start on the disk
   // (sample_emission), with pdf_pos including the selection probability pmf.
@@ -164,6 +186,7 @@ class LightSet {
   std::vector<LightKind> kinds_;
   std::vector<uint32_t> mesh_first_light_;  // per mesh: index of its first light triangle or ~0
   bool area_spheres_ = false;
+  bool moving_ = false;
   LightSelection selection_;
 };
 

@@ -46,12 +46,16 @@ void pick_in_group_lanes(const double* __restrict cdf, int count, float* __restr
 LaneLights::LaneLights(const LightSet& lights) : selection_(lights.selection()) {
   const std::vector<LightSelection::Group>& groups = selection_.groups();
   // (O(1) in the lights: built once per task.)
-  triangles_by_power_ = lights.area_light_count() > 0 &&
+  // Moving emitters are sampled one by one at each lane's time (LightSet::sample_selected), so a
+  // scene with one takes none of the lane tables.
+  const bool still = !lights.has_moving_area_lights();
+  triangles_by_power_ = still && lights.area_light_count() > 0 &&
                         lights.area_light_count() == lights.size() && !lights.uses_bvh() &&
                         !lights.has_area_spheres();
   const auto positive = [&](uint32_t i) { return selection_.pmf(i) > 0; };
   // One emissive mesh of 2 to kLanes triangles, none of zero probability.
-  bool one_mesh = groups.size() == 1 && groups[0].count >= 2 && groups[0].count <= uint32_t(kLanes);
+  bool one_mesh =
+      still && groups.size() == 1 && groups[0].count >= 2 && groups[0].count <= uint32_t(kLanes);
   for (uint32_t k = 0; one_mesh && k < groups[0].count; ++k)
     one_mesh &= positive(groups[0].first + k);
   if (one_mesh) {
@@ -66,7 +70,7 @@ LaneLights::LaneLights(const LightSet& lights) : selection_(lights.selection()) 
     }
   }
   const bool spheres =
-      !lights.uses_bvh() && !groups.empty() && groups.size() <= size_t(kLanes) &&
+      still && !lights.uses_bvh() && !groups.empty() && groups.size() <= size_t(kLanes) &&
       std::all_of(groups.begin(), groups.end(), [&](const LightSelection::Group& g) {
         return g.count == 1 && g.first < lights.area_light_count() &&
                lights.area_light(g.first).sphere && positive(g.first);

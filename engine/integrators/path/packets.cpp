@@ -98,7 +98,7 @@ RF_PHASE void PacketPaths::arrive(int depth) {
     a.widen_cone(ctx_, hits.t[i]);
     RGB term;
     if (a.emission(ctx_, mesh, hits.mesh[i], hits.prim[i], D::get(hits.p, i), D::get(hits.ng, i),
-                   wo, term))
+                   wo, hits.time[i], term))
       S::put(sum_, i, S::get(sum_, i) + term);
     if (depth == settings_.max_depth) {
       rays_.clear(i), --live_;
@@ -171,7 +171,8 @@ RF_PHASE void PacketPaths::sample_lights_one_by_one() {
       continue;
     }
     LightSample ls;
-    const bool ok = picked && ctx_.lights.sample_selected(light, pmf, p, u_point, ls);
+    const bool ok =
+        picked && ctx_.lights.sample_selected(light, pmf, p, u_point, ls, ctx_.at(hits.time[i]));
     give_light_sample(i, ok, ls);
   }
 }
@@ -186,8 +187,9 @@ RF_PHASE void PacketPaths::sample_spheres_inside(const uint32_t* entry) {
     if (dl_.l_sphere[i]) continue;
     const Vec2 u_point{dl_.u[kUPoint][0][i], dl_.u[kUPoint][1][i]};
     LightSample ls;
-    const bool ok = ctx_.lights.sample_selected(st.light[entry[i]], st.pmf[entry[i]],
-                                                D::get(hits.p, i), u_point, ls);
+    const bool ok =
+        ctx_.lights.sample_selected(st.light[entry[i]], st.pmf[entry[i]], D::get(hits.p, i),
+                                    u_point, ls, ctx_.at(hits.time[i]));
     give_light_sample(i, ok, ls);
   }
 }
