@@ -216,4 +216,34 @@ bool AnimatedTransform::rigid_at(double time) const {
   return diff <= 1e-6 * largest;
 }
 
+std::vector<double> linear_sample_times(const AnimatedTransform& motion, double tolerance) {
+  const std::vector<Keyframe>& keys = motion.keys();
+  std::vector<double> times;
+  // The chord error at the midpoint of [t0, t1], relative to the midpoint matrix's size.
+  auto chord_error = [&](double t0, double t1) {
+    const Mat4 a = motion.at(t0), b = motion.at(t1), m = motion.at(0.5 * (t0 + t1));
+    double size = 0, err = 0;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) {
+        size = std::max(size, std::fabs(double(m.m[r][c])));
+        err = std::max(err, std::fabs(0.5 * (double(a.m[r][c]) + double(b.m[r][c])) - m.m[r][c]));
+      }
+    return size > 0 ? err / size : err;
+  };
+  for (size_t k = 0; k < keys.size(); ++k) {
+    times.push_back(keys[k].time);
+    if (k + 1 == keys.size()) break;
+    const double t0 = keys[k].time, t1 = keys[k + 1].time;
+    int n = 1;
+    for (; n < kMaxLinearSteps; n *= 2) {
+      double worst = 0;
+      for (int j = 0; j < n; ++j)
+        worst = std::max(worst, chord_error(t0 + (t1 - t0) * j / n, t0 + (t1 - t0) * (j + 1) / n));
+      if (worst <= tolerance) break;
+    }
+    for (int j = 1; j < n; ++j) times.push_back(t0 + (t1 - t0) * j / n);
+  }
+  return times;
+}
+
 }  // namespace rf

@@ -75,4 +75,14 @@ class AnimatedTransform {
   std::vector<DecomposedTransform> parts_{DecomposedTransform{}};
 };
 
+// The times at which to sample `motion` so that interpolating the sampled matrices linearly (what
+// vertex keys of a moving emitter or a skinned mesh do) stays within `tolerance` of the track,
+// relative to the matrices' size (their largest linear and translation entries): every key, and
+// in a key segment that turns or scales, 2^k equal steps with k the smallest that keeps every
+// step's midpoint within it, at most kMaxLinearSteps. A translation needs no steps; a quarter
+// turn needs 128 for 1e-4 (the chord of a turn of angle a falls short of its arc by 1 - cos(a/2),
+// so the area a turning emitter sweeps shrinks by about twice that).
+inline constexpr int kMaxLinearSteps = 128;
+std::vector<double> linear_sample_times(const AnimatedTransform& motion, double tolerance = 1e-4);
+
 }  // namespace rf

@@ -219,11 +219,10 @@ Mesh instanced_copy(const Mesh& m, const Instance& inst, size_t i, const std::st
 }
 
 // A moving instance's world copy of mesh m (an emitter: lights are sampled per world triangle)
-// as a deforming mesh: its vertices placed by the instance's track at every key and, within a key
-// segment that turns or scales, at kStepsPerKeySegment steps (vertices move linearly between
-// keys; a translation is exact, a quarter turn per segment stays within 1 - cos(pi / 32) = 0.5%
-// of its radius); a sphere is tessellated first.
-constexpr int kStepsPerKeySegment = 8;
+// as a deforming mesh: its vertices placed by the instance's track at linear_sample_times (every
+// key, and steps within a segment that turns or scales, so that vertices moving linearly between
+// keys stay within 1e-4 of the track's size: a translation is exact); a sphere is tessellated
+// first.
 Mesh moving_copy(const Mesh& m, const Instance& inst, size_t i, const std::string& object) {
   Mesh w = m;
   w.name = m.name + " (instance " + std::to_string(i) + " of " + object + ")";
@@ -237,18 +236,7 @@ Mesh moving_copy(const Mesh& m, const Instance& inst, size_t i, const std::strin
   }
   const std::vector<Vec3> positions = w.positions, normals = w.normals;
   const std::vector<Keyframe>& keys = inst.motion.keys();
-  std::vector<double> times;
-  for (size_t k = 0; k < keys.size(); ++k) {
-    times.push_back(keys[k].time);
-    if (k + 1 == keys.size()) break;
-    bool translates = true;  // the linear parts agree: the segment only translates
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) translates &= keys[k].m.m[r][c] == keys[k + 1].m.m[r][c];
-    if (translates) continue;
-    for (int j = 1; j < kStepsPerKeySegment; ++j)
-      times.push_back(keys[k].time + (keys[k + 1].time - keys[k].time) * j / kStepsPerKeySegment);
-  }
-  for (double t : times) {
+  for (double t : linear_sample_times(inst.motion)) {
     const Mat4 xf = inst.motion.at(t);
     VertexKey key;
     key.time = t;

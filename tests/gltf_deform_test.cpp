@@ -168,8 +168,12 @@ TEST(GltfDeform, SkinnedVerticesFollowTheirJoints) {
   ASSERT_EQ(s.meshes.size(), 1u);
   const Mesh& m = s.meshes[0];
   ASSERT_TRUE(m.deforms());
-  // The joint's one segment is cut into kSplineSteps keys (its rotation baked into vertices).
-  ASSERT_EQ(m.deform.size(), 9u);
+  // The joint's quarter turn is cut into 2^k steps (its rotation baked into vertices, the chord
+  // within 1e-4 of the track's size: linear_sample_times).
+  const size_t steps = m.deform.size() - 1;
+  EXPECT_GE(steps, 32u);
+  EXPECT_LE(steps, size_t(kMaxLinearSteps));
+  EXPECT_EQ(steps & (steps - 1), 0u);
   constexpr float kTol = 1e-5f;
   const float c = float(std::sqrt(0.5));
   // At rest the mesh is where it was modelled (the node's own translation ignored).
@@ -181,10 +185,10 @@ TEST(GltfDeform, SkinnedVerticesFollowTheirJoints) {
   // Vertex 2 is half on each joint: (0, 2, 0) on the still one, (-sin, 1 + cos, 0) on the
   // turning one at its angle.
   expect_near(vertex_at(m, 0.5, 2), {-0.5f * c, 0.5f * (2 + 1 + c), 0}, kTol, "vertex 2 at 0.5 s");
-  // Between keys the vertex moves on the chord: within 1 - cos(pi/32) of the arc's radius.
-  const Vec3 mid = vertex_at(m, 1.0 / 16, 0) - Vec3(0, 1, 0);
-  EXPECT_GT(length(mid), 1 - (1 - std::cos(kPi / 32)) - 1e-6f);
-  EXPECT_LE(length(mid), 1 + 1e-6f);
+  // Between keys the vertex moves on the chord: halfway between the first two keys it is
+  // cos(a / 2) from the pivot, a = (pi / 2) / steps the turn between keys.
+  const Vec3 mid = vertex_at(m, 0.5 / double(steps), 0) - Vec3(0, 1, 0);
+  EXPECT_NEAR(length(mid), std::cos(0.25 * kPi / double(steps)), 2e-6);
 }
 
 TEST(GltfDeform, BadSkinsAndWeightsAreNamed) {

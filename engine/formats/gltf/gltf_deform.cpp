@@ -161,28 +161,21 @@ void place_deforming(Context& c, const Animations& anim, const std::vector<Place
     c.fail(np, "the node has a skin but its mesh has no JOINTS_0 / WEIGHTS_0");
 
   // The key times: the weights' keys, and the moving nodes' (the joints', or the node's own);
-  // rotations are baked into the vertices, which move linearly between keys, so the segments of
-  // a moving node are cut into kSplineSteps (a quarter turn per segment is then off its arc by
-  // at most 1 - cos(pi / 32) = 0.5% of the radius).
+  // rotations are baked into the vertices, which move linearly between keys, so a moving node's
+  // world track is sampled at linear_sample_times (its keys, and within a turning segment steps
+  // that keep the chord within 1e-4 of the track's size).
   std::set<double> times;
   const std::vector<double> weight_times = anim.key_times({pn.node}, /*weights=*/true);
   times.insert(weight_times.begin(), weight_times.end());
-  std::set<double> moving;
   auto add_moving = [&](const std::vector<size_t>& chain) {
-    const std::vector<double> t = anim.key_times(chain);
-    moving.insert(t.begin(), t.end());
+    if (anim.key_times(chain).empty()) return;  // nothing on the chain moves
+    const std::vector<double> t = linear_sample_times(anim.world_motion(c, chain, np));
+    times.insert(t.begin(), t.end());
   };
   if (skinned)
     for (const Joint& j : joints) add_moving(j.chain);
   else
     add_moving(own);
-  for (auto it = moving.begin(); it != moving.end(); ++it) {
-    times.insert(*it);
-    auto next = std::next(it);
-    if (next == moving.end()) break;
-    for (int k = 1; k < Animations::kSplineSteps; ++k)
-      times.insert(*it + (*next - *it) * k / Animations::kSplineSteps);
-  }
   if (times.empty()) times.insert(0.0);
   uint64_t vertices = 0;
   for (const Primitive& pr : prims) vertices += pr.data.positions.size();
