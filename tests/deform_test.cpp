@@ -57,17 +57,6 @@ Scene leaning_box(const test::CornellBox& settings) {
   return s;
 }
 
-// The scene with every deforming mesh frozen at `time` (seconds).
-Scene still_at(const Scene& deforming, double time) {
-  Scene s = deforming;
-  for (Mesh& m : s.meshes)
-    if (m.deforms()) {
-      deformed_vertices(m, time, m.positions, m.normals);
-      m.deform.clear();
-    }
-  return s;
-}
-
 // The tall box's vertices in the fixture span y in [0, 1.2]: check the fixture is the one the
 // shear above assumes, so that the test deforms what it says.
 TEST(Deform, TheFixturesTallBoxStandsOnTheFloor) {
@@ -96,13 +85,13 @@ TEST(Deform, BoxShutterBlurOfADeformingBoxIsTheMeanOfStills) {
   ASSERT_TRUE(geometry_moves(deforming));
   const test::ImageStats blurred = test::render_stats(deforming, passes, 1);
   constexpr int kSlices = 16;
-  const test::Agreement a =
-      test::compare(blurred, test::mean_of_stills([&](double t) { return still_at(deforming, t); },
-                                                  0, 1.0 / 24, kSlices, passes, 1));
+  const test::Agreement a = test::compare(
+      blurred, test::mean_of_stills([&](double t) { return test::geometry_still_at(deforming, t); },
+                                    0, 1.0 / 24, kSlices, passes, 1));
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("deforming box against the mean of stills: %s\n", a.message.c_str());
-  const test::Agreement sharp =
-      test::compare(blurred, test::render_stats(still_at(deforming, 0.0), passes, 1));
+  const test::Agreement sharp = test::compare(
+      blurred, test::render_stats(test::geometry_still_at(deforming, 0.0), passes, 1));
   EXPECT_FALSE(sharp.passed) << sharp.message;
 }
 
@@ -113,7 +102,7 @@ TEST(Deform, AZeroShutterIsTheStillAtThatInstant) {
   SceneOverrides o;
   o.shutter = "0.25";
   apply_overrides(deforming, o);
-  const Scene still = still_at(deforming, 0.25 / 24);
+  const Scene still = test::geometry_still_at(deforming, 0.25 / 24);
   Renderer rd(deforming), rs(still);
   const Rect frame{0, 0, 24, 24};
   const SampleBuffer a = rd.render(TaskKey{0, frame, 1}, true);

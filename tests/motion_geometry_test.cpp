@@ -56,14 +56,6 @@ Scene moving_box(const test::CornellBox& settings) {
   return s;
 }
 
-// The scene with every instance standing where it is at `time` (seconds).
-Scene still_at(const Scene& moving, double time) {
-  Scene s = moving;
-  for (Instance& i : s.instances)
-    if (i.moves()) i.to_world = i.motion.at(time), i.motion = AnimatedTransform();
-  return s;
-}
-
 // Blur against stills, as Motion.BoxShutterBlurIsTheMeanOfStillsAcrossTheShutter does for a
 // moving camera: the moving box's image and, per pass, the mean of 16 stills at the midpoints of
 // 16 equal slices of the shutter agree under the harness (Welch's t per pixel and channel, level
@@ -82,13 +74,13 @@ TEST(MotionGeometry, BoxShutterBlurOfAMovingBoxIsTheMeanOfStills) {
   ASSERT_TRUE(geometry_moves(moving));
   const test::ImageStats blurred = test::render_stats(moving, passes, 1);
   constexpr int kSlices = 16;
-  const test::Agreement a =
-      test::compare(blurred, test::mean_of_stills([&](double t) { return still_at(moving, t); }, 0,
-                                                  1.0 / 24, kSlices, passes, 1));
+  const test::Agreement a = test::compare(
+      blurred, test::mean_of_stills([&](double t) { return test::geometry_still_at(moving, t); }, 0,
+                                    1.0 / 24, kSlices, passes, 1));
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("moving box against the mean of stills: %s\n", a.message.c_str());
-  const test::Agreement sharp =
-      test::compare(blurred, test::render_stats(still_at(moving, 0.5 / 24), passes, 1));
+  const test::Agreement sharp = test::compare(
+      blurred, test::render_stats(test::geometry_still_at(moving, 0.5 / 24), passes, 1));
   EXPECT_FALSE(sharp.passed) << sharp.message;
 }
 
@@ -100,7 +92,7 @@ TEST(MotionGeometry, AZeroShutterIsTheStillAtThatInstant) {
   SceneOverrides o;
   o.shutter = "0.25";
   apply_overrides(moving, o);
-  const Scene still = still_at(moving, 0.25 / 24);
+  const Scene still = test::geometry_still_at(moving, 0.25 / 24);
   Renderer rm(moving), rs(still);
   const Rect frame{0, 0, 24, 24};
   const SampleBuffer a = rm.render(TaskKey{0, frame, 1}, true);

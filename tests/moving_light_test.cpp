@@ -49,20 +49,9 @@ Scene moving_light(const test::CornellBox& settings) {
   return s;
 }
 
-// The scene with every deforming mesh frozen at `time` (seconds).
-Scene still_at(const Scene& moving, double time) {
-  Scene s = moving;
-  for (Mesh& m : s.meshes)
-    if (m.deforms()) {
-      deformed_vertices(m, time, m.positions, m.normals);
-      m.deform.clear();
-    }
-  return s;
-}
-
-// Blur against stills (as MotionGeometry.BoxShutterBlurOfAMovingBoxIsTheMeanOfStills, with the
-// same statistics: Welch's t per pixel and channel at level 0.001, 32 passes of 4 spp at 24x24,
-// 16 stills at the midpoints of 16 slices of the shutter): light samples, emission seen by
+// Blur against stills (as MotionGeometry.BoxShutterBlurOfAMovingBoxIsTheMeanOfStills: Welch's t
+// per pixel and channel at level 0.001, 32 passes at 24x24, 16 stills at the midpoints of 16
+// slices of the shutter): light samples, emission seen by
 // camera and BSDF rays, and their MIS weights all take the light where it is at the path's time.
 // The light's footprint on the ceiling moves about 2 pixels over the shutter, and the room's
 // lighting changes smoothly with it, so the midpoint rule's error is far below a pixel's standard
@@ -74,9 +63,9 @@ TEST(MovingLight, BoxShutterBlurOfAMovingLightIsTheMeanOfStills) {
   const Scene moving = moving_light({"path", 24, 64, passes, 3, 3});
   ASSERT_TRUE(geometry_moves(moving));
   const test::ImageStats blurred = test::render_stats(moving, passes, 1);
-  const test::Agreement a =
-      test::compare(blurred, test::mean_of_stills([&](double t) { return still_at(moving, t); }, 0,
-                                                  1.0 / 24, 16, passes, 1));
+  const test::Agreement a = test::compare(
+      blurred, test::mean_of_stills([&](double t) { return test::geometry_still_at(moving, t); }, 0,
+                                    1.0 / 24, 16, passes, 1));
   EXPECT_TRUE(a.passed) << a.message;
   std::printf("moving light against the mean of stills: %s\n", a.message.c_str());
 }

@@ -263,6 +263,18 @@ ImageStats mean_of_renders(const std::vector<const Scene*>& scenes, uint32_t pas
   return stats;
 }
 
+Scene geometry_still_at(const Scene& moving, double time) {
+  Scene s = moving;
+  for (Instance& i : s.instances)
+    if (i.moves()) i.to_world = i.motion.at(time), i.motion = AnimatedTransform();
+  for (Mesh& m : s.meshes)
+    if (m.deforms()) {
+      deformed_vertices(m, time, m.positions, m.normals);
+      m.deform.clear();
+    }
+  return s;
+}
+
 ImageStats mean_of_stills(const std::function<Scene(double)>& still_at, double open, double close,
                           int slices, uint32_t passes, int block) {
   std::vector<Scene> stills;

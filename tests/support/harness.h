@@ -104,6 +104,9 @@ inline constexpr uint32_t kMinPasses = 32;
 // pass the mean of the scenes' renders of that pass: the time integral a motion-blurred render
 // estimates, by the midpoint rule when the scenes stand at the midpoints of equal slices.
 ImageStats mean_of_renders(const std::vector<const Scene*>& scenes, uint32_t passes, int block);
+// The scene with its geometry frozen at `time` (seconds): every moving instance placed where it
+// is then, every deforming mesh given its vertices then (the stills mean_of_stills averages).
+Scene geometry_still_at(const Scene& moving, double time);
 // That for the scenes still_at(t) at the midpoints t of `slices` equal slices of [open, close]
 // (seconds).
 ImageStats mean_of_stills(const std::function<Scene(double)>& still_at, double open, double close,
