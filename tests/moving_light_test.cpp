@@ -51,8 +51,9 @@ Scene moving_light(const test::CornellBox& settings) {
 
 // Blur against stills (as MotionGeometry.BoxShutterBlurOfAMovingBoxIsTheMeanOfStills: Welch's t
 // per pixel and channel at level 0.001, 32 passes at 24x24, 16 stills at the midpoints of 16
-// slices of the shutter): light samples, emission seen by
-// camera and BSDF rays, and their MIS weights all take the light where it is at the path's time.
+// slices of the shutter): light samples, emission seen by camera and BSDF rays, and their MIS
+// weights all take the light where it is at the path's time. The smallest bias it sees: about
+// 3.5 per-pixel standard errors in more than 7 of the 1,728 cells, or 1% of an image mean.
 // The light's footprint on the ceiling moves about 2 pixels over the shutter, and the room's
 // lighting changes smoothly with it, so the midpoint rule's error is far below a pixel's standard
 // error (64 spp per pass at max depth 3, so that the image means are known to 0.4%). With light
