@@ -13,8 +13,8 @@ int main() {
   for (uint32_t frames : {10u, 100u}) {
     const uint32_t tiles = 100, passes = 10;
     rf::Scheduler s(rf::SchedulerOptions{30, 3, 4, "L"});
-    std::vector<uint32_t> numbers;
-    for (uint32_t i = 0; i < frames; ++i) numbers.push_back(i);
+    std::vector<rf::FrameNumber> numbers;
+    for (uint32_t i = 0; i < frames; ++i) numbers.push_back(rf::FrameNumber(i));
     s.add_job("j1", numbers, tiles, passes, 0);
     auto t0 = std::chrono::steady_clock::now();
     size_t n = 0;

@@ -21,7 +21,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     std::string job, fetch_dir, fetch_frames, health_addr;
     bool json = false, services = false;
     StatusPage page;
-    std::optional<uint32_t> fetch_frame;
+    std::optional<FrameNumber> fetch_frame;
     float fetch_exposure = 0;
     double timeout = 300;
   };
@@ -78,7 +78,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                    "(shot.####.exr, shot.%04d.exr)")
       ->required();
   auto* fetch_frame = fetch->add_option("--frame", a->fetch_frame, "only this frame")
-                          ->check(finite_in(0, 4294967295.0));
+                          ->check(finite_in(-2147483648.0, 2147483647.0));
   fetch->add_option("--frames", a->fetch_frames, "only these frames (1-24, 1-24:2, 1,5,9)")
       ->excludes(fetch_frame);
   fetch->add_option("--exposure", a->fetch_exposure, "PNG exposure in stops")

@@ -101,7 +101,7 @@ void print_summary(const SampleBuffer& frame, double seconds, uint64_t rays) {
 struct RenderArgs {
   std::string scene, output, partial, pass_range, frames;
   OverrideArgs overrides;
-  std::optional<uint32_t> frame;
+  std::optional<FrameNumber> frame;
   double time_budget = 0;
   int tile = 32;
   float exposure = 0;
@@ -110,7 +110,7 @@ struct RenderArgs {
 
 // One frame of a render: its number and its files (the scene, -o and --partial expanded).
 struct FrameFiles {
-  uint32_t frame;
+  FrameNumber frame;
   std::string scene, output, partial;
 };
 
@@ -118,7 +118,7 @@ struct FrameFiles {
 // a frame template in every output; the scene may be one file or a per-frame pattern.
 std::vector<FrameFiles> frame_files(const RenderArgs& a) {
   if (a.frame && !a.frames.empty()) throw UsageError("render: give --frame or --frames, not both");
-  std::vector<uint32_t> frames;
+  std::vector<FrameNumber> frames;
   if (a.frames.empty()) {
     frames = {a.frame.value_or(0)};
   } else {
@@ -135,7 +135,7 @@ std::vector<FrameFiles> frame_files(const RenderArgs& a) {
                          " frames need a frame template in the name (shot.####.exr or "
                          "shot.%04d.exr)");
   std::vector<FrameFiles> files;
-  for (uint32_t f : frames)
+  for (FrameNumber f : frames)
     files.push_back({f, expand_frame_pattern(a.scene, f), expand_frame_pattern(a.output, f, true),
                      expand_frame_pattern(a.partial, f, true)});
   return files;
@@ -158,7 +158,7 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
   opt.time_budget_s = a.time_budget;
   ProgressPrinter printer(a.quiet);
   opt.progress = [&](const LocalProgress& p) { printer(p); };
-  if (name_frame && !a.quiet) std::fprintf(stderr, "frame %u\n", f.frame);
+  if (name_frame && !a.quiet) std::fprintf(stderr, "frame %d\n", f.frame);
   LocalRenderResult res;
   try {
     res = render_local(renderer, opt);
@@ -347,7 +347,7 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   render->add_option("-o,--output", ra->output, "output EXR (a PNG preview is written beside it)");
   add_override_options(*render, ra->overrides);
   render->add_option("--frame", ra->frame, "frame number (selects the seed stream)")
-      ->check(finite_in(0, 4294967295.0));
+      ->check(finite_in(-2147483648.0, 2147483647.0));
   render->add_option("--frames", ra->frames,
                      "frame range (1-24, 1-24:2, 1,5,9): one render per frame; -o and --partial "
                      "then need a frame template (shot.####.exr or shot.%04d.exr), and the scene "

@@ -177,7 +177,7 @@ JobSpec job_spec(const SubmitArgs& a) {
   fs::path scene(a.scene);
   fs::path dir = scene.parent_path();
   std::string pattern = scene.filename().string();
-  std::vector<uint32_t> frames;
+  std::vector<FrameNumber> frames;
   if (!a.frames.empty()) {
     try {
       frames = parse_frame_range(a.frames);
@@ -189,7 +189,7 @@ JobSpec job_spec(const SubmitArgs& a) {
   if (pattern.find('#') == std::string::npos || frames.empty())
     scene_files.insert(pattern);
   else
-    for (uint32_t f : frames) scene_files.insert(expand_frame_pattern(pattern, f));
+    for (FrameNumber f : frames) scene_files.insert(expand_frame_pattern(pattern, f));
   std::map<std::string, std::string> files;  // path -> digest, in path order
   for (const std::string& name : scene_files) {
     if (!fs::exists(dir / name)) throw FarmError((dir / name).string() + ": no such scene file", 2);
@@ -362,7 +362,7 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
   const std::string& addr = ep.address;
   std::shared_ptr<grpc::Channel> channel = coordinator_channel(ep.address, ep.creds);
   auto stub = pb::JobService::NewStub(channel);
-  std::map<uint32_t, std::string> last;
+  std::map<FrameNumber, std::string> last;
   std::mt19937 rng(std::random_device{}());
   Clock::time_point lost = Clock::now();  // since when no update came (the start counts)
   auto left = [&] {
@@ -392,7 +392,7 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
       error = s.error();
       for (const pb::FrameStatus& f : s.frames()) {
         char buf[256];
-        std::snprintf(buf, sizeof buf, "frame %u: passes %u/%u, %.0f spp, relMSE %.4g, %s",
+        std::snprintf(buf, sizeof buf, "frame %d: passes %u/%u, %.0f spp, relMSE %.4g, %s",
                       f.frame(), f.passes_merged(), f.passes_total(), f.spp(), f.rel_mse(),
                       f.done() ? (f.stopped_on_target() ? "done (noise target)" : "done")
                                : ("ETA " + duration_text(f.eta_seconds())).c_str());
@@ -436,10 +436,10 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
 int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out,
               const std::string& frames, float exposure) {
   const std::string& addr = ep.address;
-  std::set<uint32_t> wanted;
+  std::set<FrameNumber> wanted;
   if (!frames.empty()) {
     try {
-      for (uint32_t f : parse_frame_range(frames)) wanted.insert(f);
+      for (FrameNumber f : parse_frame_range(frames)) wanted.insert(f);
     } catch (const FrameRangeError& e) {
       throw FarmError(std::string("fetch --frames: ") + e.what(), 2);
     }
@@ -464,7 +464,7 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
   for (const pb::FrameStatus& f : status.frames()) {
     if (!wanted.empty() && !wanted.count(f.frame())) continue;
     if (f.passes_merged() == 0) {
-      std::fprintf(stderr, "frame %u: no complete pass yet; skipped\n", f.frame());
+      std::fprintf(stderr, "frame %d: no complete pass yet; skipped\n", f.frame());
       continue;
     }
     pb::FetchRequest req;
@@ -488,7 +488,7 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
       throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
     SampleBuffer frame = decode_buffer(chunks.take(), "frame " + std::to_string(f.frame()));
     char name[64];
-    std::snprintf(name, sizeof name, "%s.%04u", job.c_str(), f.frame());
+    std::snprintf(name, sizeof name, "%s.%04d", job.c_str(), f.frame());
     const std::string exr = to_template ? expand_frame_pattern(out, f.frame(), true)
                                         : (fs::path(out) / (std::string(name) + ".exr")).string();
     const std::string png = fs::path(exr).replace_extension(".png").string();
@@ -496,7 +496,7 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
       fs::create_directories(parent);
     write_exr(exr, frame, {{"job", job}});
     write_png(png, frame, exposure);
-    std::fprintf(stderr, "frame %u: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
+    std::fprintf(stderr, "frame %d: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
                  frame.header.passes.count(), samples_per_pixel(frame), frame.rel_mse(),
                  exr.c_str());
     ++written;

@@ -183,7 +183,7 @@ std::optional<JobStatus> Coordinator::next_status(const std::string& id, uint64_
   return status_of(*job);
 }
 
-FrameImage Coordinator::fetch(const std::string& job_id, uint32_t frame,
+FrameImage Coordinator::fetch(const std::string& job_id, FrameNumber frame,
                               const Caller& caller) const {
   FrameImage image;
   std::shared_ptr<JobRecord> job;

@@ -30,6 +30,7 @@
 #include "coordinator/scene_check.h"
 #include "coordinator/scheduler.h"
 #include "coordinator/state_dir.h"
+#include "engine/frame.h"
 #include "engine/progress.h"
 #include "engine/sample_buffer.h"
 #include "farm/blob_store.h"
@@ -53,7 +54,7 @@ struct Caller {
 };
 
 struct FrameStatus {
-  uint32_t frame = 0;
+  FrameNumber frame = 0;
   FrameProgress progress;  // engine/progress.h: passes, spp, relMSE, ETA
 };
 
@@ -239,7 +240,7 @@ class Coordinator {
   std::optional<JobStatus> next_status(const std::string& job_id, uint64_t& seen,
                                        double timeout_seconds, const Caller& caller = {}) const;
   void cancel(const std::string& job_id, const Caller& caller = {});
-  FrameImage fetch(const std::string& job_id, uint32_t frame, const Caller& caller = {}) const;
+  FrameImage fetch(const std::string& job_id, FrameNumber frame, const Caller& caller = {}) const;
 
   // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal
   // (stored, so it outlives a restart); every later call naming it must come from the same

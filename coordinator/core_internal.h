@@ -12,6 +12,7 @@
 
 #include "coordinator/checkpoint.h"
 #include "coordinator/core.h"
+#include "engine/frame.h"
 #include "engine/frame_accumulator.h"
 
 namespace rf {
@@ -36,7 +37,7 @@ inline double unix_now() {
 
 // One frame of a job: its merge state, durable checkpoint and progress figures.
 struct FrameRecord {
-  uint32_t number = 0;
+  FrameNumber number = 0;
   std::string scene_path;                 // in the bundle
   BufferHeader base;                      // what every task buffer of this frame must match
   std::mutex m;                           // serializes merges and checkpoints of this frame
@@ -66,11 +67,11 @@ struct JobRecord {
   uint64_t spp_per_pass = 0;
   double noise_target = 0;
   std::vector<std::unique_ptr<FrameRecord>> frames;
-  std::map<uint32_t, FrameRecord*> by_number;
+  std::map<FrameNumber, FrameRecord*> by_number;
 
   ProgressiveOptions merge_options() const { return {0, passes, noise_target}; }
-  std::vector<uint32_t> frame_numbers() const {
-    std::vector<uint32_t> out;
+  std::vector<FrameNumber> frame_numbers() const {
+    std::vector<FrameNumber> out;
     for (const auto& f : frames) out.push_back(f->number);
     return out;
   }

@@ -37,7 +37,7 @@ struct FramePlan {
   uint64_t spp_per_pass = 0;
 };
 
-FramePlan plan_frame(const SceneSummary& scene, uint32_t frame, int tile_size) {
+FramePlan plan_frame(const SceneSummary& scene, FrameNumber frame, int tile_size) {
   return {frame_header(scene, frame, PassSet{}),
           work_units(scene, tile_size),
           scene.splats,
@@ -209,7 +209,7 @@ std::map<std::string, SceneSummary> Coordinator::scene_summaries(const JobRecord
 // Splits every frame of the job; all must agree on resolution and passes.
 void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir, bool restoring) {
   const JobSpec& spec = job.spec;
-  std::vector<uint32_t> frames;
+  std::vector<FrameNumber> frames;
   if (!spec.frames.empty()) {
     try {
       frames = parse_frame_range(spec.frames);
@@ -228,7 +228,7 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir, bool
            "tile_size: " + std::to_string(tile_size) + " is outside 8..4096");
   if (frames.empty()) frames.push_back(0);  // a job without a frame range renders frame 0
   std::map<std::string, SceneSummary> scene_of = scene_summaries(job, bundle_dir, restoring);
-  for (uint32_t number : frames) {
+  for (FrameNumber number : frames) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
     f->scene_path = expand_frame_pattern(spec.scene_path, number);

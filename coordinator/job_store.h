@@ -22,6 +22,7 @@
 #include <variant>
 #include <vector>
 
+#include "engine/frame.h"
 #include "farm/job.h"
 
 namespace rf {
@@ -51,7 +52,8 @@ struct StoredJob {
 // A lease as handed out, kept so that its holder's late result is accepted after a restart.
 struct StoredLease {
   std::string lease_id, job_id;
-  uint32_t frame = 0, pass = 0, tile = 0;
+  FrameNumber frame = 0;
+  uint32_t pass = 0, tile = 0;
   std::string worker_id;
 };
 
@@ -62,7 +64,8 @@ struct StoredWorker {
 };
 
 struct TaskFailure {
-  uint32_t frame, pass, tile;
+  FrameNumber frame;
+  uint32_t pass, tile;
   std::string worker_id, message;
 };
 
@@ -87,7 +90,8 @@ struct SetBuild {
 };
 struct TaskEvent {
   std::string job_id;
-  uint32_t frame = 0, pass = 0, tile = 0;
+  FrameNumber frame = 0;
+  uint32_t pass = 0, tile = 0;
   std::string worker_id;
   TaskEventKind kind = TaskEventKind::Done;
   std::string message;
@@ -109,7 +113,7 @@ struct InsertLease {
 };
 struct DeleteLeases {
   std::string job_id;
-  std::optional<uint32_t> frame;  // all of the job's when absent
+  std::optional<FrameNumber> frame;  // all of the job's when absent
 };
 }  // namespace store
 

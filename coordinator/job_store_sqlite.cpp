@@ -333,7 +333,7 @@ void SqliteJobStore::for_each_lease(const std::string& job_id,
          path_);
   s.bind(job_id);
   while (s.step())
-    f({s.text(0), job_id, uint32_t(s.integer(1)), uint32_t(s.integer(2)), uint32_t(s.integer(3)),
+    f({s.text(0), job_id, FrameNumber(s.integer(1)), uint32_t(s.integer(2)), uint32_t(s.integer(3)),
        s.text(4)});
 }
 
@@ -355,7 +355,7 @@ std::vector<TaskFailure> SqliteJobStore::failures(const std::string& id) const {
   s.bind(id);
   std::vector<TaskFailure> out;
   while (s.step())
-    out.push_back({uint32_t(s.integer(0)), uint32_t(s.integer(1)), uint32_t(s.integer(2)),
+    out.push_back({FrameNumber(s.integer(0)), uint32_t(s.integer(1)), uint32_t(s.integer(2)),
                    s.text(3), s.text(4)});
   return out;
 }

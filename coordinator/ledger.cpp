@@ -72,7 +72,7 @@ void Ledger::drop_job(const std::string& job_id) { scheduler_.cancel_job(job_id)
 
 void Ledger::restore_done(const TaskRef& task) { scheduler_.mark_done(task); }
 
-void Ledger::restore_passes(const std::string& job_id, uint32_t frame, uint32_t passes) {
+void Ledger::restore_passes(const std::string& job_id, FrameNumber frame, uint32_t passes) {
   scheduler_.mark_passes_done(job_id, frame, passes);
 }
 

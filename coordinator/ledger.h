@@ -20,6 +20,7 @@
 #include "coordinator/core_internal.h"
 #include "coordinator/journal.h"
 #include "coordinator/scheduler.h"
+#include "engine/frame.h"
 
 namespace rf {
 
@@ -55,7 +56,7 @@ class Ledger {
   void drop_job(const std::string& job_id);
   // Tasks whose results a frame's checkpoint holds, and passes [0, passes) merged.
   void restore_done(const TaskRef& task);
-  void restore_passes(const std::string& job_id, uint32_t frame, uint32_t passes);
+  void restore_passes(const std::string& job_id, FrameNumber frame, uint32_t passes);
 
   // ---- Tasks
   // The next task for the worker, and its lease row (the caller moves a queued job to Running).

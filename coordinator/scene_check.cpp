@@ -323,11 +323,11 @@ std::vector<SceneSummary> check_in_child(const std::string& binary, const SceneC
 }  // namespace
 
 std::vector<std::string> job_scene_paths(const JobSpec& spec) {
-  std::vector<uint32_t> frames =
-      spec.frames.empty() ? std::vector<uint32_t>{0} : parse_frame_range(spec.frames);
+  std::vector<FrameNumber> frames =
+      spec.frames.empty() ? std::vector<FrameNumber>{0} : parse_frame_range(spec.frames);
   std::vector<std::string> paths;
   std::set<std::string> seen;
-  for (uint32_t f : frames) {
+  for (FrameNumber f : frames) {
     std::string p = expand_frame_pattern(spec.scene_path, f);
     if (seen.insert(p).second) paths.push_back(p);
   }

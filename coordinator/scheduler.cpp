@@ -15,12 +15,12 @@ const Scheduler::JobState* Scheduler::job(const std::string& id) const {
   return it == jobs_.end() ? nullptr : &it->second;
 }
 
-Scheduler::FrameState* Scheduler::frame_of(JobState& j, uint32_t frame) {
+Scheduler::FrameState* Scheduler::frame_of(JobState& j, FrameNumber frame) {
   auto it = j.frame_index.find(frame);
   return it == j.frame_index.end() ? nullptr : &j.frames[it->second];
 }
 
-const Scheduler::FrameState* Scheduler::frame_of(const JobState& j, uint32_t frame) const {
+const Scheduler::FrameState* Scheduler::frame_of(const JobState& j, FrameNumber frame) const {
   auto it = j.frame_index.find(frame);
   return it == j.frame_index.end() ? nullptr : &j.frames[it->second];
 }
@@ -49,12 +49,12 @@ bool Scheduler::is_done(const FrameState& f, uint64_t number) const {
   return !f.done.empty() && f.done[number];
 }
 
-void Scheduler::add_job(const std::string& job_id, const std::vector<uint32_t>& frames,
+void Scheduler::add_job(const std::string& job_id, const std::vector<FrameNumber>& frames,
                         uint32_t tiles, uint32_t passes, int priority) {
   JobState& j = jobs_[job_id];
   j = JobState{job_id, priority, next_order_++, tiles, passes, {}, {}, {}, {}, false, false, {}};
   j.frames.reserve(frames.size());
-  for (uint32_t f : frames) {
+  for (FrameNumber f : frames) {
     j.frame_index[f] = j.frames.size();
     j.frames.push_back({f, passes, uint64_t(tiles) * passes, 0, 0, {}, {}});
   }
@@ -108,7 +108,7 @@ void Scheduler::forget_task(const TaskRef& ref) {
   tasks_.erase(t);
 }
 
-void Scheduler::forget_tasks_from(const JobState& j, uint32_t frame, uint32_t first_pass) {
+void Scheduler::forget_tasks_from(const JobState& j, FrameNumber frame, uint32_t first_pass) {
   std::vector<TaskRef> refs;
   for (auto it = tasks_.lower_bound(TaskRef{j.id, frame, first_pass, 0});
        it != tasks_.end() && it->first.job_id == j.id && it->first.frame == frame; ++it)
@@ -271,7 +271,7 @@ void Scheduler::mark_done(const TaskRef& ref) {
   if (locate(ref).first) complete_task(ref);
 }
 
-void Scheduler::mark_passes_done(const std::string& job_id, uint32_t frame, uint32_t passes) {
+void Scheduler::mark_passes_done(const std::string& job_id, FrameNumber frame, uint32_t passes) {
   JobState* j = job(job_id);
   if (!j) return;
   for (uint32_t p = 0; p < std::min(passes, j->passes); ++p)
@@ -368,7 +368,7 @@ void Scheduler::restore_failure(const TaskRef& ref, const std::string& worker_id
   count_failure(ref, worker_id, message);
 }
 
-void Scheduler::stop_frame(const std::string& job_id, uint32_t frame, uint32_t first_unneeded) {
+void Scheduler::stop_frame(const std::string& job_id, FrameNumber frame, uint32_t first_unneeded) {
   JobState* j = job(job_id);
   FrameState* f = j ? frame_of(*j, frame) : nullptr;
   if (!f || first_unneeded >= f->passes_needed) return;

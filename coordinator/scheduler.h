@@ -29,6 +29,7 @@
 #include <tuple>
 #include <vector>
 
+#include "engine/frame.h"
 #include "farm/job.h"  // TaskRef
 
 namespace rf {
@@ -59,7 +60,7 @@ class Scheduler {
   explicit Scheduler(SchedulerOptions options = {}) : options_(options) {}
 
   // A job of `frames` (in order), each split into `tiles` x `passes` tasks.
-  void add_job(const std::string& job_id, const std::vector<uint32_t>& frames, uint32_t tiles,
+  void add_job(const std::string& job_id, const std::vector<FrameNumber>& frames, uint32_t tiles,
                uint32_t passes, int priority);
   void cancel_job(const std::string& job_id);  // drops its queued tasks and ends its leases
 
@@ -76,7 +77,7 @@ class Scheduler {
   // Restoring from checkpoints: the task's result is already merged or stored.
   void mark_done(const TaskRef& task);
   // Restoring from checkpoints: passes [0, passes) of the frame are merged.
-  void mark_passes_done(const std::string& job_id, uint32_t frame, uint32_t passes);
+  void mark_passes_done(const std::string& job_id, FrameNumber frame, uint32_t passes);
   // The task is done or not needed (or its job ended): a result for it would not be merged.
   bool settled(const TaskRef& task) const;
   // A lease id handed out by this scheduler whose record is gone: it ended, and its task is
@@ -106,7 +107,7 @@ class Scheduler {
   // The frame needs no more passes from `first_unneeded_pass` on (noise target met, or done):
   // those tasks leave the queue, their leases end, and the frame's window slot frees when no
   // needed task remains.
-  void stop_frame(const std::string& job_id, uint32_t frame, uint32_t first_unneeded_pass);
+  void stop_frame(const std::string& job_id, FrameNumber frame, uint32_t first_unneeded_pass);
 
   bool job_failed(const std::string& job_id) const;
   std::string job_error(const std::string& job_id) const;  // the failing workers' messages
@@ -134,7 +135,7 @@ class Scheduler {
     std::set<std::string> excluded;  // workers that sent a result held for verification
   };
   struct FrameState {
-    uint32_t frame;
+    FrameNumber frame;
     uint32_t passes_needed;  // tasks of passes >= this are not needed
     uint64_t open_tasks;     // needed tasks not done
     // Tasks numbered >= fresh (number = pass * tiles + tile) were never handed out: they wait
@@ -149,9 +150,9 @@ class Scheduler {
     uint64_t order;
     uint32_t tiles, passes;
     std::vector<FrameState> frames;
-    std::map<uint32_t, size_t> frame_index;  // frame number -> position in frames
+    std::map<FrameNumber, size_t> frame_index;  // frame number -> position in frames
     std::map<std::string, int> worker_failures;
-    std::map<std::string, uint32_t> worker_frame;  // the frame each worker was last leased
+    std::map<std::string, FrameNumber> worker_frame;  // the frame each worker was last leased
     bool failed = false, cancelled = false;
     std::string error;
   };
@@ -173,7 +174,7 @@ class Scheduler {
   // Ends the task's leases and forgets them and the task's record.
   void forget_task(const TaskRef& ref);
   // Forgets every task record (and its leases) of the frame from pass `first_pass` on.
-  void forget_tasks_from(const JobState& j, uint32_t frame, uint32_t first_pass);
+  void forget_tasks_from(const JobState& j, FrameNumber frame, uint32_t first_pass);
   bool needed(const JobState& j, const FrameState& f, uint32_t pass) const;
   bool is_done(const FrameState& f, uint64_t number) const;
   // The frame's first task this worker may get, as its number, or none.
@@ -182,8 +183,8 @@ class Scheduler {
   uint64_t queued_in(const JobState& j, const FrameState& f) const;
   JobState* job(const std::string& id);
   const JobState* job(const std::string& id) const;
-  FrameState* frame_of(JobState& j, uint32_t frame);
-  const FrameState* frame_of(const JobState& j, uint32_t frame) const;
+  FrameState* frame_of(JobState& j, FrameNumber frame);
+  const FrameState* frame_of(const JobState& j, FrameNumber frame) const;
   // The task's job and frame, if the task is one of a known job's.
   std::pair<JobState*, FrameState*> locate(const TaskRef& ref);
   std::pair<const JobState*, const FrameState*> locate(const TaskRef& ref) const;

@@ -299,10 +299,10 @@ AccelGeometry::~AccelGeometry() {
   if (device) rtcReleaseDevice(device);
 }
 
-Accel::Accel(const Scene& scene, uint32_t frame)
+Accel::Accel(const Scene& scene, FrameNumber frame)
     : Accel(std::make_shared<const AccelGeometry>(scene), frame) {}
 
-Accel::Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame)
+Accel::Accel(std::shared_ptr<const AccelGeometry> geometry, FrameNumber frame)
     : geometry_(std::move(geometry)),
       scene_(geometry_->scene),
       surfaces_(geometry_->surfaces),

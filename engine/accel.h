@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/frame.h"
 #include "engine/scene.h"
 
 namespace rf {
@@ -134,9 +135,9 @@ class Accel {
   // The scene's BVH for frame `frame`: the placements of moving instances and the vertices of
   // deforming meshes over that frame's shutter (a scene without moving geometry builds the same
   // BVH for every frame).
-  explicit Accel(const Scene& scene, uint32_t frame = 0);
+  explicit Accel(const Scene& scene, FrameNumber frame = 0);
   // The same on geometry built before (its scene's), building only the frame's top level.
-  Accel(std::shared_ptr<const AccelGeometry> geometry, uint32_t frame);
+  Accel(std::shared_ptr<const AccelGeometry> geometry, FrameNumber frame);
   ~Accel();
   Accel(const Accel&) = delete;
   Accel& operator=(const Accel&) = delete;

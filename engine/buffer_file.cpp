@@ -160,6 +160,13 @@ struct HeaderReader {
     }
     return v.get<uint64_t>();
   }
+  int64_t integer(const char* key, int64_t min, int64_t max) const {
+    const json& v = get(key);
+    if (!v.is_number_integer() || (v.is_number_unsigned() && v.get<uint64_t>() > uint64_t(max)) ||
+        (!v.is_number_unsigned() && (v.get<int64_t>() < min || v.get<int64_t>() > max)))
+      bad(key, "an integer from " + std::to_string(min) + " to " + std::to_string(max));
+    return v.get<int64_t>();
+  }
   double number(const char* key) const {
     const json& v = get(key);
     if (!v.is_number()) bad(key, "a number");
@@ -176,7 +183,8 @@ BufferHeader read_header(const HeaderReader& r, uint32_t version) {
   BufferHeader h;
   h.scene_digest = r.str("scene_digest");
   h.seed = r.uint("seed");
-  h.frame = uint32_t(r.uint("frame", std::numeric_limits<uint32_t>::max()));
+  h.frame = FrameNumber(r.integer("frame", std::numeric_limits<FrameNumber>::min(),
+                                  std::numeric_limits<FrameNumber>::max()));
   h.integrator = r.str("integrator");
   h.settings = r.str("settings");
   h.width = int(r.uint("width", kMaxDimension));

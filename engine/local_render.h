@@ -6,8 +6,9 @@
 #include <cstdint>
 #include <functional>
 
-#include "engine/sample_buffer.h"
+#include "engine/frame.h"
 #include "engine/render.h"
+#include "engine/sample_buffer.h"
 
 namespace rf {
 
@@ -19,7 +20,7 @@ struct LocalProgress {
 };
 
 struct LocalRenderOptions {
-  uint32_t frame = 0;        // selects the seed stream (DESIGN.md determinism contract)
+  FrameNumber frame = 0;  // selects the seed stream (DESIGN.md determinism contract)
   uint32_t first_pass = 0;
   uint32_t pass_count = 0;   // 0: all passes of the scene from first_pass on
   double noise_target = 0;   // relMSE; 0 = none

@@ -24,7 +24,7 @@ Renderer::Renderer(const Scene& scene)
   if (!per_frame_) still_ = build_frame(0);
 }
 
-std::unique_ptr<Renderer::FrameState> Renderer::build_frame(uint32_t frame) const {
+std::unique_ptr<Renderer::FrameState> Renderer::build_frame(FrameNumber frame) const {
   auto f = std::make_unique<FrameState>();
   const auto t0 = std::chrono::steady_clock::now();
   f->accel = std::make_unique<Accel>(geometry_, frame);
@@ -43,7 +43,7 @@ std::unique_ptr<Renderer::FrameState> Renderer::build_frame(uint32_t frame) cons
   return f;
 }
 
-std::shared_ptr<const Renderer::FrameState> Renderer::frame_state(uint32_t frame) const {
+std::shared_ptr<const Renderer::FrameState> Renderer::frame_state(FrameNumber frame) const {
   if (!per_frame_) return still_;
   std::shared_ptr<Entry> entry;
   {
@@ -71,7 +71,7 @@ bool Renderer::has_lights() const { return !lights_->empty(); }
 
 bool Renderer::splats() const { return integrator_splats(scene_.render.integrator.method); }
 
-BufferHeader Renderer::header(uint32_t frame, const PassSet& passes) const {
+BufferHeader Renderer::header(FrameNumber frame, const PassSet& passes) const {
   return frame_header(scene_, frame, passes);
 }
 

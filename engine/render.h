@@ -18,6 +18,7 @@
 
 #include "engine/accel.h"
 #include "engine/camera.h"
+#include "engine/frame.h"
 #include "engine/integrators/common.h"
 #include "engine/lights/light_set.h"
 #include "engine/sample_buffer.h"
@@ -46,7 +47,7 @@ class Renderer {
   // Whether anything emits light (area, punctual or environment lights).
   bool has_lights() const;
   // Header of every buffer this scene's frame produces, for the given passes.
-  BufferHeader header(uint32_t frame, const PassSet& passes) const;
+  BufferHeader header(FrameNumber frame, const PassSet& passes) const;
   // The task rects of a frame (work_units).
   std::vector<Rect> tiles(int tile_size) const { return work_units(scene_, tile_size); }
 
@@ -71,10 +72,10 @@ class Renderer {
     std::unique_ptr<Accel> accel;
     std::unique_ptr<RenderContext> context;
   };
-  std::unique_ptr<FrameState> build_frame(uint32_t frame) const;
+  std::unique_ptr<FrameState> build_frame(FrameNumber frame) const;
   // The state of `frame` (the only one when nothing moves), built by its first caller while the
   // others that ask meanwhile wait and lend it their threads.
-  std::shared_ptr<const FrameState> frame_state(uint32_t frame) const;
+  std::shared_ptr<const FrameState> frame_state(FrameNumber frame) const;
   const FrameState& first_frame() const;
 
   const Scene& scene_;
@@ -92,7 +93,7 @@ class Renderer {
     std::shared_ptr<const FrameState> state;
   };
   mutable std::mutex mu_;
-  mutable std::map<uint32_t, std::shared_ptr<Entry>> frames_;  // by frame
+  mutable std::map<FrameNumber, std::shared_ptr<Entry>> frames_;  // by frame
   mutable std::vector<uint32_t> recent_;                       // least recently used first
   mutable std::once_flag first_once_;
   mutable std::shared_ptr<const FrameState> first_;  // frame 0's, for accel() and context()

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "engine/aov.h"
+#include "engine/frame.h"
 #include "engine/math.h"
 #include "engine/pass_set.h"
 
@@ -41,7 +42,7 @@ inline double relative_error(double squared_error, double reference) {
 struct BufferHeader {
   std::string scene_digest;  // SHA-256 hex of the scene bundle
   uint64_t seed = 0;
-  uint32_t frame = 0;
+  FrameNumber frame = 0;
   std::string integrator;     // e.g. "path"
   std::string settings;       // canonical text of the other settings that change pixels
                               // (max depth, spp per pass, filter, ...)

@@ -41,8 +41,8 @@ void sobol_joint_lanes(const uint32_t* __restrict r, uint64_t h0, uint64_t h, in
 
 }  // namespace
 
-void Sampler::start_camera_samples(Sampler* s, int n, uint64_t seed, uint32_t frame, uint32_t pass,
-                                   int px, int py, uint64_t first_index) {
+void Sampler::start_camera_samples(Sampler* s, int n, uint64_t seed, FrameNumber frame,
+                                   uint32_t pass, int px, int py, uint64_t first_index) {
   if (n <= 0) return;
   const Kind kind = s[0].kind_;
   if (kind == Kind::Independent) {

@@ -19,6 +19,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "engine/frame.h"
 #include "engine/math.h"
 
 namespace rf {
@@ -47,23 +48,24 @@ class IndependentSampler {
   static constexpr uint64_t kCameraDomain = 0x63616d657261ULL;  // "camera"
   static constexpr uint64_t kLightDomain = 0x6c69676874ULL;     // "light"
 
-  void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
+  void start_camera_sample(uint64_t seed, FrameNumber frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
     start_camera_sample(pixel_key(seed, frame, pass, px, py), sample_index);
   }
   // The hashes the samples of one pixel and pass share, and the start from them.
-  static uint64_t pixel_key(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py) {
+  static uint64_t pixel_key(uint64_t seed, FrameNumber frame, uint32_t pass, int px, int py) {
     uint64_t h = hash_combine(mix64(seed), kCameraDomain);
-    h = hash_combine(h, (uint64_t(frame) << 32) | pass);
+    h = hash_combine(h, (uint64_t(frame_bits(frame)) << 32) | pass);
     return hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
   }
   void start_camera_sample(uint64_t pixel, uint64_t sample_index) {
     base_ = hash_combine(pixel, sample_index);
     dimension_ = 0;
   }
-  void start_light_path(uint64_t seed, uint32_t frame, uint32_t pass, uint64_t light_path_index) {
+  void start_light_path(uint64_t seed, FrameNumber frame, uint32_t pass,
+                        uint64_t light_path_index) {
     uint64_t h = hash_combine(mix64(seed), kLightDomain);
-    h = hash_combine(h, (uint64_t(frame) << 32) | pass);
+    h = hash_combine(h, (uint64_t(frame_bits(frame)) << 32) | pass);
     base_ = hash_combine(h, light_path_index);
     dimension_ = 0;
   }
@@ -238,16 +240,16 @@ class SobolSampler {
  public:
   static constexpr uint64_t kDomain = 0x736f626f6cULL;  // "sobol"
 
-  void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
+  void start_camera_sample(uint64_t seed, FrameNumber frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
     const SobolSampler key = keyed(pixel_key(seed, frame, pass, px, py), sample_index >> 32);
     start_camera_sample(key, sample_index);
   }
   // The hashes the samples of one pixel and pass share (pixel_key, then keyed by the sample
   // index's high bits), and the start from a sampler so keyed.
-  static uint64_t pixel_key(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py) {
+  static uint64_t pixel_key(uint64_t seed, FrameNumber frame, uint32_t pass, int px, int py) {
     uint64_t h = hash_combine(mix64(seed), kDomain);
-    h = hash_combine(h, (uint64_t(frame) << 32) | pass);
+    h = hash_combine(h, (uint64_t(frame_bits(frame)) << 32) | pass);
     return hash_combine(h, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
   }
   static SobolSampler keyed(uint64_t pixel, uint64_t index_high) {
@@ -304,7 +306,7 @@ class Sampler {
   explicit Sampler(Kind kind = Kind::Independent, uint64_t spp_per_pass = 0)
       : kind_(kind), spp_per_pass_(spp_per_pass) {}
 
-  void start_camera_sample(uint64_t seed, uint32_t frame, uint32_t pass, int px, int py,
+  void start_camera_sample(uint64_t seed, FrameNumber frame, uint32_t pass, int px, int py,
                            uint64_t sample_index) {
     sobol_active_ = kind_ != Kind::Independent;
     if (kind_ == Kind::SobolSequence)  // one scrambled sequence per pixel; a pass is a block of it
@@ -318,9 +320,10 @@ class Sampler {
   // start_camera_sample(seed, frame, pass, px, py, first_index + i) of s[i] for i < n (samplers
   // of one kind and spp_per_pass), with the hashes the samples share computed once: each s[i] is
   // started as it would be alone.
-  static void start_camera_samples(Sampler* s, int n, uint64_t seed, uint32_t frame, uint32_t pass,
-                                   int px, int py, uint64_t first_index);
-  void start_light_path(uint64_t seed, uint32_t frame, uint32_t pass, uint64_t light_path_index) {
+  static void start_camera_samples(Sampler* s, int n, uint64_t seed, FrameNumber frame,
+                                   uint32_t pass, int px, int py, uint64_t first_index);
+  void start_light_path(uint64_t seed, FrameNumber frame, uint32_t pass,
+                        uint64_t light_path_index) {
     sobol_active_ = false;
     independent_.start_light_path(seed, frame, pass, light_path_index);
   }

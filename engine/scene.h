@@ -10,6 +10,7 @@
 
 #include "engine/animated_transform.h"
 #include "engine/aov.h"
+#include "engine/frame.h"
 #include "engine/import_limits.h"
 #include "engine/integrators/registry.h"
 #include "engine/math.h"
@@ -169,7 +170,7 @@ struct ShotTime {
   double fps = 24;
   double shutter_open = 0, shutter_close = 0.5;  // in frames, relative to the frame's start
   // The time in seconds of frame `frame` at shutter position u in [0, 1].
-  double at(uint32_t frame, float u) const {
+  double at(FrameNumber frame, float u) const {
     return (double(frame) + shutter_open + double(u) * (shutter_close - shutter_open)) / fps;
   }
 };

@@ -34,7 +34,7 @@ std::vector<Rect> work_units(const SceneSummary& scene, int tile_size) {
   return out;
 }
 
-BufferHeader frame_header(const SceneSummary& scene, uint32_t frame, const PassSet& passes) {
+BufferHeader frame_header(const SceneSummary& scene, FrameNumber frame, const PassSet& passes) {
   BufferHeader h;
   h.scene_digest = scene.digest;
   h.seed = scene.seed;

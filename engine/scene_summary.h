@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "engine/aov.h"
+#include "engine/frame.h"
 #include "engine/sample_buffer.h"
 #include "engine/scene.h"
 
@@ -36,7 +37,7 @@ SceneSummary summarize(const Scene& scene);
 std::vector<Rect> work_units(const SceneSummary& scene, int tile_size);
 // The header every buffer of this scene's frame carries, for the given passes: scene digest,
 // seed, frame, integrator and settings text, resolution, this build and CPU kind.
-BufferHeader frame_header(const SceneSummary& scene, uint32_t frame, const PassSet& passes);
+BufferHeader frame_header(const SceneSummary& scene, FrameNumber frame, const PassSet& passes);
 
 // As JSON (the child process's answer, the coordinator's cache of it). from_json throws
 // std::runtime_error naming the field that is missing or of the wrong type.

@@ -8,7 +8,7 @@ std::vector<Rect> work_units(const Scene& scene, int tile_size) {
   return work_units(summarize(scene), tile_size);
 }
 
-BufferHeader frame_header(const Scene& scene, uint32_t frame, const PassSet& passes) {
+BufferHeader frame_header(const Scene& scene, FrameNumber frame, const PassSet& passes) {
   return frame_header(summarize(scene), frame, passes);
 }
 

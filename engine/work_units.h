@@ -7,13 +7,14 @@
 #include <cstdint>
 #include <vector>
 
+#include "engine/frame.h"
 #include "engine/sample_buffer.h"
 #include "engine/scene.h"
 
 namespace rf {
 
 struct TaskKey {
-  uint32_t frame = 0;
+  FrameNumber frame = 0;
   Rect rect;
   uint32_t pass = 0;
   bool operator==(const TaskKey&) const = default;
@@ -25,6 +26,6 @@ std::vector<Rect> work_units(const Scene& scene, int tile_size);
 
 // The header every buffer of this scene's frame carries, for the given passes: scene digest,
 // seed, frame, integrator and settings text, resolution, this build and CPU kind.
-BufferHeader frame_header(const Scene& scene, uint32_t frame, const PassSet& passes);
+BufferHeader frame_header(const Scene& scene, FrameNumber frame, const PassSet& passes);
 
 }  // namespace rf

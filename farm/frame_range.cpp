@@ -1,5 +1,6 @@
 #include "farm/frame_range.h"
 
+#include <algorithm>
 #include <charconv>
 #include <set>
 
@@ -29,9 +30,9 @@ bool split_range(const std::string& s, std::string& a, std::string& b) {
 
 }  // namespace
 
-std::vector<uint32_t> parse_frame_range(const std::string& text) {
-  std::vector<uint32_t> frames;
-  std::set<uint32_t> seen;
+std::vector<FrameNumber> parse_frame_range(const std::string& text) {
+  std::vector<FrameNumber> frames;
+  std::set<FrameNumber> seen;
   if (text.find_first_not_of(" \t") == std::string::npos)
     throw FrameRangeError("frame range is empty");
   size_t start = 0;
@@ -65,18 +66,17 @@ std::vector<uint32_t> parse_frame_range(const std::string& text) {
     if ((last - first) * step < 0)
       throw FrameRangeError("frame range item '" + item + "': step " + std::to_string(step) +
                             " goes away from the end");
-    if (first < 0 || last < 0)
-      throw FrameRangeError("frame range item '" + item + "': frames must be >= 0");
-    if (first > UINT32_MAX || last > UINT32_MAX)
-      throw FrameRangeError("frame range item '" + item + "': frame number too large");
+    if (std::min(first, last) < kMinFrame || std::max(first, last) > kMaxFrame)
+      throw FrameRangeError("frame range item '" + item + "': frame number out of range (" +
+                            std::to_string(kMinFrame) + " to " + std::to_string(kMaxFrame) + ")");
     for (int64_t f = first; step > 0 ? f <= last : f >= last; f += step) {
       if (frames.size() >= kMaxFrames)
         throw FrameRangeError("frame range has more than " + std::to_string(kMaxFrames) +
                               " frames");
-      if (!seen.insert(uint32_t(f)).second)
+      if (!seen.insert(FrameNumber(f)).second)
         throw FrameRangeError("frame range item '" + item + "': frame " + std::to_string(f) +
                               " is listed twice");
-      frames.push_back(uint32_t(f));
+      frames.push_back(FrameNumber(f));
     }
   }
   return frames;
@@ -100,13 +100,16 @@ size_t printf_field(const std::string& pattern, size_t i, size_t& width) {
   return j + 1 - i;
 }
 
-std::string padded(uint32_t frame, size_t width) {
-  std::string digits = std::to_string(frame);
-  return digits.size() < width ? std::string(width - digits.size(), '0') + digits : digits;
+// As printf's "%0*d": a negative frame's sign counts in the width ("-07" for -7 at width 3).
+std::string padded(FrameNumber frame, size_t width) {
+  std::string digits = std::to_string(frame < 0 ? -int64_t(frame) : int64_t(frame));
+  size_t sign = frame < 0 ? 1 : 0;
+  if (digits.size() + sign < width) digits.insert(0, width - digits.size() - sign, '0');
+  return frame < 0 ? "-" + digits : digits;
 }
 }  // namespace
 
-std::string expand_frame_pattern(const std::string& pattern, uint32_t frame, bool printf_style) {
+std::string expand_frame_pattern(const std::string& pattern, FrameNumber frame, bool printf_style) {
   std::string out;
   for (size_t i = 0; i < pattern.size();) {
     size_t width = 0;

@@ -1,12 +1,15 @@
 // Frame ranges in Open Job Description's range syntax: comma-separated items, each a frame
 // "7", a range "1-10" or a stepped range "1-10:2" / "10-1:-3" (the step's sign must match the
-// range's direction). Frames are non-negative, listed at most once, at most kMaxFrames in all.
+// range's direction). Frames may be negative ("-10--1", "-3-3", "5--5:-2"), and are listed at most
+// once, at most kMaxFrames in all.
 #pragma once
 
 #include <cstdint>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "engine/frame.h"
 
 namespace rf {
 
@@ -15,15 +18,17 @@ struct FrameRangeError : std::invalid_argument {
 };
 
 inline constexpr size_t kMaxFrames = 1000000;
+inline constexpr int64_t kMinFrame = INT32_MIN, kMaxFrame = INT32_MAX;  // engine/frame.h
 
 // The frames in the order written. Throws FrameRangeError saying which item is wrong and why.
-std::vector<uint32_t> parse_frame_range(const std::string& text);
+std::vector<FrameNumber> parse_frame_range(const std::string& text);
 
 // A per-frame file pattern: each run of '#' becomes the frame number, zero-padded to the run's
-// length ("shot.####.json", 7 -> "shot.0007.json"). A name without '#' is returned unchanged.
+// length ("shot.####.json", 7 -> "shot.0007.json"; -7 -> "shot.-007.json", the sign in the width
+// as printf's "%04d" puts it). A name without '#' is returned unchanged.
 // With `printf_style` (output templates), "%d" and "%0Nd" (N from 1 to 10) are frame numbers
 // too, "%%" a percent sign; any other '%' stays as written.
-std::string expand_frame_pattern(const std::string& pattern, uint32_t frame,
+std::string expand_frame_pattern(const std::string& pattern, FrameNumber frame,
                                  bool printf_style = false);
 // Whether a pattern names the frame at all (expand_frame_pattern gives each frame its own name).
 bool is_frame_pattern(const std::string& pattern, bool printf_style = false);

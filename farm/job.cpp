@@ -1,6 +1,7 @@
 #include "farm/job.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cstdint>
 #include <cstdio>
 
@@ -70,15 +71,33 @@ std::string task_id_text(const TaskRef& t) {
          std::to_string(t.tile);
 }
 
+namespace {
+// One number of a task id and the '/' after it (none after the last): the whole field, in T's
+// range, or false.
+template <typename T>
+bool task_id_field(const char*& p, const char* end, T& out, bool last) {
+  auto [q, ec] = std::from_chars(p, end, out);
+  if (ec != std::errc() || q == p) return false;
+  if (last) {
+    p = q;
+    return q == end;
+  }
+  if (q == end || *q != '/') return false;
+  p = q + 1;
+  return true;
+}
+}  // namespace
+
 std::optional<TaskRef> parse_task_id(std::string_view text) {
-  std::string s(text);
-  size_t slash = s.find('/');
-  if (slash == std::string::npos || slash == 0) return std::nullopt;
-  unsigned frame = 0, pass = 0, tile = 0;
-  char extra = 0;
-  if (std::sscanf(s.c_str() + slash + 1, "%u/%u/%u%c", &frame, &pass, &tile, &extra) != 3)
+  size_t slash = text.find('/');
+  if (slash == std::string_view::npos || slash == 0) return std::nullopt;
+  TaskRef t{std::string(text.substr(0, slash)), 0, 0, 0};
+  const char* p = text.data() + slash + 1;
+  const char* end = text.data() + text.size();
+  if (!task_id_field(p, end, t.frame, false) || !task_id_field(p, end, t.pass, false) ||
+      !task_id_field(p, end, t.tile, true))
     return std::nullopt;
-  return TaskRef{s.substr(0, slash), frame, pass, tile};
+  return t;
 }
 
 }  // namespace rf

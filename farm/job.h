@@ -10,6 +10,7 @@
 #include <tuple>
 #include <vector>
 
+#include "engine/frame.h"
 #include "engine/scene.h"
 #include "farm/blob_store.h"
 
@@ -32,7 +33,8 @@ struct JobSpec {
 // One task of a job: a pass of one tile (by its index in the frame's split) of one frame.
 struct TaskRef {
   std::string job_id;
-  uint32_t frame = 0, pass = 0, tile = 0;
+  FrameNumber frame = 0;
+  uint32_t pass = 0, tile = 0;
   bool operator<(const TaskRef& o) const {
     return std::tie(job_id, frame, pass, tile) < std::tie(o.job_id, o.frame, o.pass, o.tile);
   }

@@ -10,14 +10,14 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   std::string text(reinterpret_cast<const char*>(data), size);
-  std::vector<uint32_t> frames;
+  std::vector<rf::FrameNumber> frames;
   try {
     frames = rf::parse_frame_range(text);
   } catch (const rf::FrameRangeError&) {
     return 0;
   }
   if (frames.size() > rf::kMaxFrames) std::abort();
-  std::set<uint32_t> seen(frames.begin(), frames.end());
+  std::set<rf::FrameNumber> seen(frames.begin(), frames.end());
   if (seen.size() != frames.size()) std::abort();
   return 0;
 }

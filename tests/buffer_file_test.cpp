@@ -176,5 +176,25 @@ TEST(BufferFile, RejectsAHeaderThatLiesWithAValidChecksum) {
   EXPECT_THROW(decode_buffer(bad, "l.rfb"), BufferFileError);
 }
 
+// A frame is a signed 32-bit number (engine/frame.h): a negative frame round-trips, one past the
+// range is refused, and a frame >= 0 is written as it was when frames were unsigned.
+TEST(BufferFile, NegativeFramesRoundTripAndFramesOutOfRangeAreRefused) {
+  SampleBuffer b = small_tile();
+  for (FrameNumber f : {-7, INT32_MIN, INT32_MAX}) {
+    b.header.frame = f;
+    test::expect_bit_identical(decode_buffer(encode_buffer(b), "neg.rfb"), b);
+  }
+  b.header.frame = 12;
+  EXPECT_NE(encode_buffer(b).find("\"frame\":12,"), std::string::npos);
+  const std::string good = encode_buffer(b);
+  nlohmann::json j = header_of(good);
+  for (int64_t f : {int64_t(INT32_MAX) + 1, int64_t(INT32_MIN) - 1}) {
+    j["frame"] = f;
+    std::string m = test::error_of([&] { decode_buffer(with_header(good, j), "f.rfb"); });
+    EXPECT_NE(m.find("\"frame\""), std::string::npos) << m;
+    EXPECT_NE(m.find("from -2147483648 to 2147483647"), std::string::npos) << m;
+  }
+}
+
 }  // namespace
 }  // namespace rf

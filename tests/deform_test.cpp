@@ -122,7 +122,7 @@ TEST(Deform, AFramesImageDoesNotDependOnTheFramesBefore) {
   s.time = ShotTime{24, 0, 1};
   const Rect frame{0, 0, 16, 16};
   Renderer reused(s);
-  for (uint32_t f = 1; f <= 16; ++f) reused.render(TaskKey{f, frame, 0}, true);
+  for (FrameNumber f = 1; f <= 16; ++f) reused.render(TaskKey{f, frame, 0}, true);
   const SampleBuffer a = reused.render(TaskKey{17, frame, 0}, true);
   Renderer fresh(s);
   const SampleBuffer b = fresh.render(TaskKey{17, frame, 0}, true);

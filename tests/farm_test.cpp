@@ -67,7 +67,7 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
       EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 16.0);
     }
   }
-  for (uint32_t f = 1; f <= 4; ++f) {
+  for (FrameNumber f = 1; f <= 4; ++f) {
     expect_same_image(farm.fetched(a, f), farm.local(tiled, f));
     expect_same_image(farm.fetched(b, f), farm.local(splat, f));
   }
@@ -88,25 +88,27 @@ TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
                       farm.dir() + "/range/local." + f + ".exr");
   EXPECT_EQ(farm.client("fetch " + a + " -o " + farm.dir() + "/one.exr").exit_code, 2)
       << "several frames into one name";
-  // A moving camera and a moving ball (keyframes, motion blur over a shutter given at submit):
-  // each frame the farm renders is the bits of the local frame-range render, and the frames
-  // differ (they moved).
+  // A moving camera and a moving ball (keyframes from frame -2, motion blur over a shutter given
+  // at submit) over frames -1 to 1: each frame the farm renders is the bits of the local
+  // frame-range render, and the frames differ (they moved). Negative frames travel as int32.
   const std::string moving = "tests/data/motion/moving_camera.json";
-  const std::string m = farm.submit(moving + " --frames 1-3 --shutter=-0.1,0.3");
+  const std::string m = farm.submit(moving + " --frames=-1-1 --shutter=-0.1,0.3");
   farm.worker();  // (the first two left when the queue ran dry)
   farm.worker();
   EXPECT_EQ(farm.client("watch " + m).exit_code, 0);
   r = farm.client("fetch " + m + " -o " + farm.dir() + "/moving/farm.####.exr");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   r = test::run_command("cd " + test::source_dir() + " && " + test::rayfarm_binary() + " render " +
-                        moving + " --frames 1-3 --shutter=-0.1,0.3 -q -o " + farm.dir() +
+                        moving + " --frames=-1-1 --shutter=-0.1,0.3 -q -o " + farm.dir() +
                         "/moving/local.####.exr");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* f : {"0001", "0002", "0003"})
+  for (const char* f : {"-001", "0000", "0001"})
     expect_same_image(farm.dir() + "/moving/farm." + f + ".exr",
                       farm.dir() + "/moving/local." + f + ".exr");
-  EXPECT_NE(read_exr(farm.dir() + "/moving/local.0001.exr").px,
-            read_exr(farm.dir() + "/moving/local.0003.exr").px);
+  EXPECT_NE(read_exr(farm.dir() + "/moving/local.-001.exr").px,
+            read_exr(farm.dir() + "/moving/local.0000.exr").px);
+  EXPECT_NE(read_exr(farm.dir() + "/moving/local.0000.exr").px,
+            read_exr(farm.dir() + "/moving/local.0001.exr").px);
   // Each worker built at most one BVH per still job, not one per frame: a frame only changes the
   // seeds (the moving ball's job builds one per frame, and says so).
   for (const std::string& log : {farm.worker_log(0), farm.worker_log(1)}) {
@@ -241,7 +243,7 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
     EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);  // nothing lost, nothing counted twice
   }
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
-  for (uint32_t f = 1; f <= 2; ++f)
+  for (FrameNumber f = 1; f <= 2; ++f)
     expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 
@@ -609,7 +611,7 @@ TEST(Farm, PerFramePatternRendersEachFramesOwnSceneAndAMissingFrameFileIsRefused
   farm.worker();
   ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
-  for (uint32_t f = 1; f <= 2; ++f) {
+  for (FrameNumber f = 1; f <= 2; ++f) {
     char name[64];
     std::snprintf(name, sizeof name, "/shot.%04u.json", f);
     expect_same_image(farm.fetched(job, f), farm.local(shots + name + settings, f));
@@ -732,7 +734,7 @@ TEST(LongFarm, RandomKillsOfWorkersAndCoordinatorLoseNothing) {
     EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);
   }
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
-  for (uint32_t f = 1; f <= 4; ++f)
+  for (FrameNumber f = 1; f <= 4; ++f)
     expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 

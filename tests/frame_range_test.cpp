@@ -6,7 +6,7 @@
 namespace rf {
 namespace {
 
-using V = std::vector<uint32_t>;
+using V = std::vector<FrameNumber>;
 
 TEST(FrameRange, Forms) {
   EXPECT_EQ(parse_frame_range("7"), V({7}));
@@ -17,6 +17,18 @@ TEST(FrameRange, Forms) {
   EXPECT_EQ(parse_frame_range("5-2"), V({5, 4, 3, 2}));
   EXPECT_EQ(parse_frame_range(" 1 - 3 , 9 "), V({1, 2, 3, 9}));
   EXPECT_EQ(parse_frame_range("0-0"), V({0}));
+}
+
+// Negative frames (handles, pre-roll): a range's separator is the first '-' after its first
+// character, so "-3" is one frame and "-3--1", "-2-2", "2--2:-2" are ranges.
+TEST(FrameRange, NegativeFrames) {
+  EXPECT_EQ(parse_frame_range("-3"), V({-3}));
+  EXPECT_EQ(parse_frame_range("-3--1"), V({-3, -2, -1}));
+  EXPECT_EQ(parse_frame_range("-2-2"), V({-2, -1, 0, 1, 2}));
+  EXPECT_EQ(parse_frame_range("2--2:-2"), V({2, 0, -2}));
+  EXPECT_EQ(parse_frame_range("-10--4:3,1"), V({-10, -7, -4, 1}));
+  EXPECT_EQ(parse_frame_range("-2147483648"), V({INT32_MIN}));
+  EXPECT_EQ(parse_frame_range("2147483646-2147483647"), V({INT32_MAX - 1, INT32_MAX}));
 }
 
 void expect_error(const std::string& text, const std::string& what) {
@@ -34,11 +46,14 @@ TEST(FrameRange, ErrorsSayWhichItemAndWhy) {
   expect_error("1-x", "item '1-x': end 'x' is not an integer");
   expect_error("1-10:0", "step must not be 0");
   expect_error("1-10:-1", "goes away from the end");
-  expect_error("-3", "frames must be >= 0");
+  expect_error("-3--5:1", "goes away from the end");
+  expect_error("--3", "item '--3': start '-' is not an integer");
+  expect_error("-2147483649", "frame number out of range (-2147483648 to 2147483647)");
+  expect_error("2147483647-2147483648", "out of range");
   expect_error("1-3,2", "frame 2 is listed twice");
   expect_error("4:2", "a step needs a range");
   expect_error("0-2000000", "more than 1000000 frames");
-  expect_error("1-99999999999", "too large");
+  expect_error("1-99999999999", "out of range");
 }
 
 TEST(ExpandFramePattern, PadsEachRunOfHashes) {
@@ -47,6 +62,11 @@ TEST(ExpandFramePattern, PadsEachRunOfHashes) {
   EXPECT_EQ(expand_frame_pattern("a#b##", 3), "a3b03");
   EXPECT_EQ(expand_frame_pattern("scene.json", 42), "scene.json");
   EXPECT_EQ(expand_frame_pattern("#", 0), "0");
+  // A negative frame as printf's %04d writes it: the sign counts in the width.
+  EXPECT_EQ(expand_frame_pattern("shot.####.json", -7), "shot.-007.json");
+  EXPECT_EQ(expand_frame_pattern("shot.#.json", -7), "shot.-7.json");
+  EXPECT_EQ(expand_frame_pattern("shot.####.json", -12345), "shot.-12345.json");
+  EXPECT_EQ(expand_frame_pattern("s.####", INT32_MIN), "s.-2147483648");
   // Scene patterns take '#' only: a '%' in a bundle's file name stays as written.
   EXPECT_EQ(expand_frame_pattern("a%04d.json", 7), "a%04d.json");
 }
@@ -60,6 +80,8 @@ TEST(ExpandFramePattern, OutputTemplatesTakePrintfFields) {
   EXPECT_EQ(expand_frame_pattern("100%%-#.exr", 3, true), "100%-3.exr");
   EXPECT_EQ(expand_frame_pattern("a%s%4d%011d%0d.exr", 3, true), "a%s%4d%011d%0d.exr");
   EXPECT_EQ(expand_frame_pattern("shot.%04d.exr", 12345, true), "shot.12345.exr");
+  EXPECT_EQ(expand_frame_pattern("shot.%04d.exr", -7, true), "shot.-007.exr");
+  EXPECT_EQ(expand_frame_pattern("shot.%d.exr", -7, true), "shot.-7.exr");
   EXPECT_TRUE(is_frame_pattern("shot.%04d.exr", true));
   EXPECT_FALSE(is_frame_pattern("shot.%04d.exr"));
   EXPECT_TRUE(is_frame_pattern("shot.#.exr"));

@@ -196,7 +196,7 @@ TEST(MotionGeometry, AFramesImageDoesNotDependOnTheFramesBefore) {
       AnimatedTransform({{0.0, Mat4::identity()}, {5.0 / 24, tall_box_motion().keys()[1].m}});
   const Rect frame{0, 0, 16, 16};
   Renderer reused(s);
-  for (uint32_t f = 0; f < 3; ++f) reused.render(TaskKey{f, frame, 0}, true);
+  for (FrameNumber f = 0; f < 3; ++f) reused.render(TaskKey{f, frame, 0}, true);
   const SampleBuffer a = reused.render(TaskKey{3, frame, 0}, true);
   Renderer fresh(s);
   const SampleBuffer b = fresh.render(TaskKey{3, frame, 0}, true);

@@ -72,7 +72,8 @@ TEST(Motion, BoxShutterBlurIsTheMeanOfStillsAcrossTheShutter) {
 }
 
 // A zero-length shutter is the instant: the moving camera at frame 3 + 0.25 renders the bits of
-// the still camera placed where it is then (the time stream moves no other number).
+// the still camera placed where it is then (the time stream moves no other number); so does a
+// negative frame.
 TEST(Motion, AZeroShutterIsTheStillAtThatInstant) {
   Scene moving = moving_cornell(4, 4);
   SceneOverrides o;
@@ -92,6 +93,16 @@ TEST(Motion, AZeroShutterIsTheStillAtThatInstant) {
   // Another frame is another place: frame 4's image (the camera at key 1) differs.
   const SampleBuffer c = rm.render(TaskKey{4, frame, 1}, true);
   EXPECT_NE(a.sum, c.sum);
+  // A negative frame is a time before 0: with the keys at frames -4 and -3, frame -4 at 0.25 is
+  // the still at -3.75 / 24 s, with frame -4's own seeds (not frame 4's, nor frame 0's).
+  Scene early = moving;
+  early.camera.motion = AnimatedTransform({{-4.0 / 24, c0}, {-3.0 / 24, c1}});
+  const Scene still_early = still_at(early, -3.75 / 24);
+  Renderer re(early), rse(still_early);
+  const SampleBuffer d = re.render(TaskKey{-4, frame, 1}, true);
+  EXPECT_EQ(d.sum, rse.render(TaskKey{-4, frame, 1}, true).sum);
+  EXPECT_NE(rse.render(TaskKey{4, frame, 1}, true).sum, d.sum);
+  EXPECT_EQ(d.header.frame, -4);
   // The settings text names the time only where something moves.
   EXPECT_NE(settings_text(moving).find(";time=fps:24:shutter:0.25:0.25"), std::string::npos);
   EXPECT_EQ(settings_text(still).find("time="), std::string::npos);

@@ -21,7 +21,8 @@ namespace {
 
 struct Key {
   uint64_t seed = 7;
-  uint32_t frame = 3, pass = 5;
+  FrameNumber frame = 3;
+  uint32_t pass = 5;
   int px = 11, py = 13;
 };
 

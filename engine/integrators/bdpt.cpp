@@ -321,7 +321,7 @@ thread_local std::vector<Vertex> t_camera_path, t_light_path;
 }  // namespace
 
 RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, SplatTarget& splats,
-                       TraceCounters& counters, uint32_t frame, BdptStrategyRecorder* rec) {
+                       TraceCounters& counters, FrameNumber frame, BdptStrategyRecorder* rec) {
   // The camera at the sample's time: its camera ray's, its light subpath's and every t = 1
   // connection's.
   const PerspectiveCamera camera = camera_at(ctx, frame, ray.time);

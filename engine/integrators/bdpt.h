@@ -58,6 +58,7 @@
 
 #include <string>
 
+#include "engine/frame.h"
 #include "engine/integrators/module.h"
 #include "engine/math.h"
 
@@ -95,7 +96,7 @@ class BdptStrategyRecorder {
 // strategies into `splats`, with a moving camera placed at the ray's time in frame `frame`. A
 // recorder, when given, sees every strategy's contribution.
 RGB bdpt_camera_sample(const RenderContext& ctx, Ray ray, Sampler& sampler, SplatTarget& splats,
-                       TraceCounters& counters, uint32_t frame,
+                       TraceCounters& counters, FrameNumber frame,
                        BdptStrategyRecorder* recorder = nullptr);
 
 }  // namespace rf

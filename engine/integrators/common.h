@@ -17,6 +17,7 @@
 #include "engine/accel.h"
 #include "engine/bsdf.h"
 #include "engine/camera.h"
+#include "engine/frame.h"
 #include "engine/lights/light_set.h"
 #include "engine/sampler.h"
 #include "engine/scene.h"
@@ -33,8 +34,8 @@ namespace rf {
 class PassCache {
  public:
   template <class T, class Build>
-  std::shared_ptr<const T> get(uint32_t frame, uint32_t pass, Build&& build) const {
-    std::shared_ptr<Entry> entry = entry_for((uint64_t(frame) << 32) | pass);
+  std::shared_ptr<const T> get(FrameNumber frame, uint32_t pass, Build&& build) const {
+    std::shared_ptr<Entry> entry = entry_for((uint64_t(frame_bits(frame)) << 32) | pass);
     tbb::collaborative_call_once(entry->once, [&] { entry->state = build(); });
     return std::static_pointer_cast<const T>(entry->state);
   }

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "engine/filter.h"
+#include "engine/frame.h"
 #include "engine/integrators/aov_sample.h"
 #include "engine/integrators/common.h"
 #include "engine/integrators/sample_layout.h"
@@ -41,7 +42,7 @@ namespace rf {
 // In a scene where something moves, the sample's time (its position in the frame's shutter, the
 // ray's time) comes from its own hashed stream (kTimeStream), which moves no other number of the
 // sample, and a moving camera is placed where it is at that time.
-inline Ray camera_ray(const RenderContext& ctx, Sampler& sampler, uint32_t frame, int x, int y,
+inline Ray camera_ray(const RenderContext& ctx, Sampler& sampler, FrameNumber frame, int x, int y,
                       Vec2 u_filter, Vec2 u_lens, float& filter_weight) {
   const FilterSample fs = sample_filter(ctx.scene.film.filter, u_filter);
   filter_weight = fs.weight;
@@ -59,7 +60,7 @@ inline Ray camera_ray(const RenderContext& ctx, Sampler& sampler, uint32_t frame
 // The camera at shutter position u of frame `frame` (a light path's time): the context's own
 // when the camera does not move, else placed where camera_ray places it at that time, so that a
 // light path's camera connections and the camera rays of that time see one camera.
-inline PerspectiveCamera camera_at(const RenderContext& ctx, uint32_t frame, float u) {
+inline PerspectiveCamera camera_at(const RenderContext& ctx, FrameNumber frame, float u) {
   if (!ctx.scene.camera.moves()) return ctx.camera;
   return ctx.camera.placed(ctx.scene.camera.motion.at(ctx.scene.time.at(frame, u)));
 }

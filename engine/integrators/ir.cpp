@@ -114,7 +114,8 @@ void build_alias(VplSet& set, const std::vector<VplPoint>& points) {
 // The VPLs of one pass: vpl_paths light paths keyed by (seed, frame, pass, path index), and the
 // alias table over those that have weight.
 std::shared_ptr<const VplSet> build_vpls(const IrIntegrator& s, const RenderContext& ctx,
-                                         uint32_t frame, uint32_t pass, TraceCounters& counters) {
+                                         FrameNumber frame, uint32_t pass,
+                                         TraceCounters& counters) {
   auto set = std::make_shared<VplSet>();
   float dc = s.clamp_distance > 0 ? s.clamp_distance : 0.1f * ctx.lights.scene_radius();
   set->clamp_g = 1.0f / (dc * dc);

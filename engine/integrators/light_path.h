@@ -13,6 +13,7 @@
 #include <cmath>
 #include <vector>
 
+#include "engine/frame.h"
 #include "engine/integrators/common.h"
 #include "engine/integrators/drivers.h"
 #include "engine/integrators/sample_layout.h"
@@ -123,7 +124,7 @@ inline Ray light_path_ray(const RenderContext& ctx, const EmissionSample& es, fl
 // fixed chunks traced in parallel and concatenated in chunk order: the per-pass state of instant
 // radiosity and photon mapping, bit-identical whatever the thread count.
 template <class T, class TraceOne>
-std::vector<T> trace_light_paths(const RenderContext& ctx, uint32_t frame, uint32_t pass,
+std::vector<T> trace_light_paths(const RenderContext& ctx, FrameNumber frame, uint32_t pass,
                                  uint64_t paths, TraceOne&& trace_one, TraceCounters& counters) {
   constexpr uint64_t kChunk = 256;
   std::vector<T> all;

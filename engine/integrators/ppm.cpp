@@ -49,7 +49,7 @@ struct PhotonDeposit {
 // The photons of one pass: `photons` paths keyed by (seed, frame, pass, path index), in a grid of
 // the pass's radius.
 std::shared_ptr<const PhotonMap> build_photon_map(const PpmIntegrator& s, const RenderContext& ctx,
-                                                  uint32_t frame, uint32_t pass,
+                                                  FrameNumber frame, uint32_t pass,
                                                   TraceCounters& counters) {
   const uint64_t paths = uint64_t(std::max(1, s.photons));
   const float inv_paths = 1.0f / float(paths);

@@ -49,7 +49,7 @@ struct ImageRecorder final : BdptStrategyRecorder {
 }  // namespace
 
 StrategyImages render_bdpt_strategies(const Scene& scene, uint32_t pass, int max_shown_depth,
-                                      uint32_t frame) {
+                                      FrameNumber frame) {
   Renderer renderer(scene);
   const RenderContext& ctx = renderer.context();
   const int w = scene.film.width, h = scene.film.height;

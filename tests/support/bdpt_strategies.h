@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "engine/frame.h"
 #include "engine/scene.h"
 
 namespace rf {
@@ -39,6 +40,6 @@ struct StrategyImages {
 // image of that pass (up to float summation order, see tests/bdpt_test.cpp). Samples whose
 // estimate is not finite are dropped from every image, as SampleBuffer drops them.
 StrategyImages render_bdpt_strategies(const Scene& scene, uint32_t pass, int max_shown_depth,
-                                      uint32_t frame = 0);
+                                      FrameNumber frame = 0);
 
 }  // namespace rf

@@ -131,7 +131,7 @@ nlohmann::json Farm::status(const std::string& job) const {
   return nlohmann::json::parse(r.output, nullptr, false);
 }
 
-std::string Farm::local(const std::string& args, uint32_t frame) const {
+std::string Farm::local(const std::string& args, FrameNumber frame) const {
   std::string out = dir_ + "/local-" + std::to_string(local_count_++) + ".exr";
   CommandResult r = run_command("cd " + source_dir() + " && " + rayfarm_binary() + " render " +
                                 args + " --frame " + std::to_string(frame) + " -q -o " + out);
@@ -139,7 +139,7 @@ std::string Farm::local(const std::string& args, uint32_t frame) const {
   return out;
 }
 
-std::string Farm::fetched(const std::string& job, uint32_t frame) const {
+std::string Farm::fetched(const std::string& job, FrameNumber frame) const {
   char name[64];
   std::snprintf(name, sizeof name, "%s.%04u.exr", job.c_str(), frame);
   return dir_ + "/out-" + job + "/" + name;

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "engine/frame.h"
 #include "proto/rayfarm.grpc.pb.h"
 #include "tests/support/process.h"
 #include "tests/support/test_support.h"
@@ -57,9 +58,9 @@ class Farm {
   std::string submit(const std::string& args) const;    // the job id; expects success
   nlohmann::json status(const std::string& job) const;  // "": every job (status --json)
   // A local render of the same job and frame, for comparison; returns the EXR's path.
-  std::string local(const std::string& args, uint32_t frame) const;
+  std::string local(const std::string& args, FrameNumber frame) const;
   // Where `fetch JOB -o DIR/out-JOB` puts a frame.
-  std::string fetched(const std::string& job, uint32_t frame) const;
+  std::string fetched(const std::string& job, FrameNumber frame) const;
 
   std::string worker_log(size_t i) const { return workers_.at(i)->log(); }
   std::string address() const { return network_.host + ":" + std::to_string(port_); }
