@@ -9,6 +9,7 @@
 
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "tests/support/gltf_file.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -16,52 +17,15 @@ namespace {
 
 using nlohmann::json;
 
-// A glTF with one triangle mesh placed by nodes 0-4 and the animation's channels; accessors are
-// added from float arrays.
-struct AnimatedFile {
-  json j;
-  std::string bin;
-  AnimatedFile() {
-    j = {{"asset", {{"version", "2.0"}}},
-         {"bufferViews", json::array()},
-         {"accessors", json::array()},
-         {"meshes", json::array()},
-         {"nodes", json::array()},
-         {"animations", {{{"channels", json::array()}, {"samplers", json::array()}}}}};
-    const float tri[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-    const size_t pos = add(tri, 9, "VEC3");
-    j["meshes"].push_back({{"primitives", {{{"attributes", {{"POSITION", pos}}}}}}});
-  }
-  size_t add(const float* v, size_t n, const char* type) {
-    const size_t comps = std::string(type) == "SCALAR" ? 1 : std::string(type) == "VEC3" ? 3 : 4;
-    j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", n * 4}});
-    bin.append(reinterpret_cast<const char*>(v), n * 4);
-    j["accessors"].push_back({{"bufferView", j["bufferViews"].size() - 1},
-                              {"componentType", 5126},
-                              {"count", n / comps},
-                              {"type", type}});
-    return j["accessors"].size() - 1;
-  }
-  size_t node(json n) {
-    j["nodes"].push_back(n);
-    return j["nodes"].size() - 1;
-  }
-  void channel(size_t node, const char* path, const char* interp, std::vector<float> times,
-               std::vector<float> values) {
-    const char* type = std::string(path) == "rotation" ? "VEC4" : "VEC3";
-    const size_t in = add(times.data(), times.size(), "SCALAR");
-    const size_t out = add(values.data(), values.size(), type);
-    json& a = j["animations"][0];
-    a["samplers"].push_back({{"input", in}, {"output", out}, {"interpolation", interp}});
-    a["channels"].push_back(
-        {{"sampler", a["samplers"].size() - 1}, {"target", {{"node", node}, {"path", path}}}});
-  }
-  std::string text() {
-    j["buffers"] = {{{"byteLength", bin.size()},
-                     {"uri", "data:application/octet-stream;base64," + test::base64(bin)}}};
-    return j.dump();
-  }
-};
+using AnimatedFile = test::GltfFile;
+
+// A glTF with one triangle mesh (mesh 0) for nodes to place.
+AnimatedFile triangle_file() {
+  AnimatedFile f;
+  const size_t pos = f.floats({0, 0, 0, 1, 0, 0, 0, 1, 0}, "VEC3");
+  f.j["meshes"].push_back({{"primitives", {{{"attributes", {{"POSITION", pos}}}}}}});
+  return f;
+}
 
 const float kS = float(std::sqrt(0.5));  // sin and cos of 45 degrees
 
@@ -69,7 +33,7 @@ const float kS = float(std::sqrt(0.5));  // sin and cos of 45 degrees
 // snaps a quarter turn at t = 1 (STEP), node 3 follows a cubic (CUBICSPLINE), node 4's track
 // holds one value, node 5 is a child of node 0 (moved by its parent).
 AnimatedFile animated_file() {
-  AnimatedFile f;
+  AnimatedFile f = triangle_file();
   for (int i = 0; i < 5; ++i) f.node({{"mesh", 0}});
   f.node({{"mesh", 0}, {"translation", {0, 0, 5}}});
   f.j["nodes"][0]["children"] = {5};
@@ -142,7 +106,7 @@ TEST(GltfAnimation, KeyframesEvaluateToTheirClosedForms) {
 // A mesh placed once by a node whose track does not move is static world geometry, as without
 // the animation: the importer collapses the constant track.
 TEST(GltfAnimation, AConstantTrackStaysStaticGeometry) {
-  AnimatedFile f;
+  AnimatedFile f = triangle_file();
   f.node({{"mesh", 0}});
   f.j["scenes"] = {{{"nodes", {0}}}};
   f.channel(0, "translation", "LINEAR", {0, 1}, {2, 0, 0, 2, 0, 0});
@@ -186,8 +150,7 @@ TEST(GltfAnimation, BadChannelsAreNamed) {
       << load_error(f.text());
   f = animated_file();  // key times out of order
   {
-    const float bad[3] = {0, 2, 1};
-    const size_t in = f.add(bad, 3, "SCALAR");
+    const size_t in = f.floats({0, 2, 1}, "SCALAR");
     f.j["animations"][0]["samplers"][0]["input"] = in;
   }
   EXPECT_NE(load_error(f.text()).find("/animations/0/samplers/0/input: key times must be finite "

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "engine/scene.h"
+#include "tests/support/gltf_file.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -16,56 +17,7 @@ namespace {
 
 using nlohmann::json;
 
-// A glTF built from float (and unsigned short) arrays: accessors, meshes, nodes and one
-// animation.
-struct File {
-  json j;
-  std::string bin;
-  File() {
-    j = {{"asset", {{"version", "2.0"}}},
-         {"bufferViews", json::array()},
-         {"accessors", json::array()},
-         {"meshes", json::array()},
-         {"nodes", json::array()},
-         {"animations", {{{"channels", json::array()}, {"samplers", json::array()}}}}};
-  }
-  size_t add(const void* v, size_t bytes, size_t count, const char* type, int component) {
-    while (bin.size() % 4) bin.push_back('\0');
-    j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", bin.size()}, {"byteLength", bytes}});
-    bin.append(static_cast<const char*>(v), bytes);
-    j["accessors"].push_back({{"bufferView", j["bufferViews"].size() - 1},
-                              {"componentType", component},
-                              {"count", count},
-                              {"type", type}});
-    return j["accessors"].size() - 1;
-  }
-  size_t floats(const std::vector<float>& v, const char* type) {
-    const std::string t = type;
-    const size_t comps = t == "SCALAR" ? 1 : t == "VEC3" ? 3 : t == "VEC4" ? 4 : 16;
-    return add(v.data(), v.size() * 4, v.size() / comps, type, 5126);
-  }
-  size_t ushorts(const std::vector<uint16_t>& v) {  // VEC4 joint indices
-    return add(v.data(), v.size() * 2, v.size() / 4, "VEC4", 5123);
-  }
-  size_t node(json n) {
-    j["nodes"].push_back(n);
-    return j["nodes"].size() - 1;
-  }
-  void channel(size_t node, const char* path, const char* interp, std::vector<float> times,
-               std::vector<float> values, const char* type) {
-    const size_t in = floats(times, "SCALAR");
-    const size_t out = floats(values, type);
-    json& a = j["animations"][0];
-    a["samplers"].push_back({{"input", in}, {"output", out}, {"interpolation", interp}});
-    a["channels"].push_back(
-        {{"sampler", a["samplers"].size() - 1}, {"target", {{"node", node}, {"path", path}}}});
-  }
-  std::string text() {
-    j["buffers"] = {{{"byteLength", bin.size()},
-                     {"uri", "data:application/octet-stream;base64," + test::base64(bin)}}};
-    return j.dump();
-  }
-};
+using File = test::GltfFile;
 
 Scene load_text(const std::string& text) { return test::load_scene_text("scene.gltf", text); }
 std::string load_error(const std::string& text) {
@@ -100,11 +52,11 @@ File morph_file() {
                            {"weights", {0, 0}}});
   for (int i = 0; i < 5; ++i) f.node({{"mesh", 0}});
   f.j["nodes"][3]["weights"] = {0.5, 0};
-  f.channel(0, "weights", "LINEAR", {0, 1, 2}, {0, 0, 1, 0, 1, 1}, "SCALAR");
-  f.channel(1, "weights", "STEP", {0, 1}, {0, 0, 1, 0}, "SCALAR");
+  f.channel(0, "weights", "LINEAR", {0, 1, 2}, {0, 0, 1, 0, 1, 1});
+  f.channel(1, "weights", "STEP", {0, 1}, {0, 0, 1, 0});
   // (in-tangents, values, out-tangents) per key, two weights each.
-  f.channel(2, "weights", "CUBICSPLINE", {0, 1}, {0, 0, 0, 0, 3, 0, 0, 0, 1, 0, 0, 0}, "SCALAR");
-  f.channel(4, "weights", "LINEAR", {0, 1, 2}, {0.25f, 0, 0.25f, 0, 0.25f, 0}, "SCALAR");
+  f.channel(2, "weights", "CUBICSPLINE", {0, 1}, {0, 0, 0, 0, 3, 0, 0, 0, 1, 0, 0, 0});
+  f.channel(4, "weights", "LINEAR", {0, 1, 2}, {0.25f, 0, 0.25f, 0, 0.25f, 0});
   return f;
 }
 
@@ -159,7 +111,7 @@ File skin_file(uint16_t joint_of_vertex0 = 1) {
   f.j["skins"] = {{{"joints", {0, 1}}, {"inverseBindMatrices", ibm}}};
   f.j["scenes"] = {{{"nodes", {0, 2}}}};
   const float s = float(std::sqrt(0.5));
-  f.channel(1, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, s, s}, "VEC4");
+  f.channel(1, "rotation", "LINEAR", {0, 1}, {0, 0, 0, 1, 0, 0, s, s});
   return f;
 }
 
@@ -207,7 +159,7 @@ TEST(GltfDeform, BadSkinsAndWeightsAreNamed) {
   EXPECT_NE(e.find("/nodes/2/skin: skin 3 does not exist"), std::string::npos) << e;
   // A weights channel on a node whose mesh has no morph targets.
   f = skin_file();
-  f.channel(2, "weights", "LINEAR", {0, 1}, {0, 1}, "SCALAR");
+  f.channel(2, "weights", "LINEAR", {0, 1}, {0, 1});
   e = load_error(f.text());
   EXPECT_NE(e.find("/animations/0/channels/1/target/node: the channel animates the morph weights "
                    "of node 2, whose mesh has no morph targets"),
