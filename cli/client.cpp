@@ -1,4 +1,5 @@
-// The farm's client commands: submit, status, watch, fetch, cancel, health (cli/farm.h runs them).
+// The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority,
+// health (cli/farm.h runs them).
 #include "cli/commands.h"
 #include "client/commands.h"
 #include "farm/auth.h"
@@ -24,6 +25,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     std::optional<FrameNumber> fetch_frame;
     float fetch_exposure = 0;
     double timeout = 300;
+    int priority = 0;
   };
   auto a = std::make_shared<Args>();
 
@@ -94,6 +96,23 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   add_addr(cancel, &a->timeout);
   cancel->add_option("job", a->job, "job id")->required();
   out.push_back({cancel, [a, ep] { return cmd_cancel(ep(), a->job); }});
+
+  for (bool pause : {true, false}) {
+    auto* c = app.add_subcommand(
+        pause ? "pause" : "resume",
+        pause ? "pause a job: no new leases (those in flight finish)" : "resume a paused job");
+    add_addr(c, &a->timeout);
+    c->add_option("job", a->job, "job id")->required();
+    out.push_back({c, [a, ep, pause] { return cmd_pause(ep(), a->job, pause); }});
+  }
+
+  auto* priority = app.add_subcommand("priority", "change a job's priority (higher runs first)");
+  add_addr(priority, &a->timeout);
+  priority->add_option("job", a->job, "job id")->required();
+  priority->add_option("priority", a->priority, "the new priority")
+      ->required()
+      ->check(finite_in(-1e9, 1e9));
+  out.push_back({priority, [a, ep] { return cmd_priority(ep(), a->job, a->priority); }});
 
   auto* health = app.add_subcommand("health", "check a coordinator's gRPC health service");
   health->add_option("--coordinator", shared.coordinator,

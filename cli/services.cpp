@@ -46,6 +46,15 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       ->check(finite_in(0.1, 86400));
   coord->add_option("--window", co->window_frames, "frames open at once per job")
       ->check(finite_in(1, 10000));
+  coord
+      ->add_option("--fair-share", co->share,
+                   "between jobs of equal priority, share workers by tenant, then job (tenants), "
+                   "by job (jobs), or not at all: submission order (none)")
+      ->transform(
+          CLI::CheckedTransformer(std::map<std::string, FairShare>{{"tenants", FairShare::Tenants},
+                                                                   {"jobs", FairShare::Jobs},
+                                                                   {"none", FairShare::None}},
+                                  CLI::ignore_case));
   coord->add_option_function<std::vector<std::string>>(
       "--limit",
       [co](const std::vector<std::string>& items) {

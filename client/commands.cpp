@@ -1,5 +1,6 @@
-// The farm's client commands: submit, status, watch, fetch, cancel, health. Each talks to one
-// coordinator: --coordinator ADDR, else $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
+// The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority,
+// health. Each talks to one coordinator: --coordinator ADDR, else $RAYFARM_COORDINATOR, else
+// 127.0.0.1:7070.
 #include "client/commands.h"
 
 #include <grpcpp/grpcpp.h>
@@ -288,6 +289,8 @@ nlohmann::json to_json(const pb::JobStatus& j) {
           {"error", j.error()},
           {"core_seconds", j.core_seconds()},
           {"submitted_unix", j.submitted_unix()},
+          {"paused", j.paused()},
+          {"priority", j.priority()},
           {"frames", frames}};
 }
 
@@ -306,13 +309,19 @@ std::string job_line(const pb::JobStatus& j) {
       eta += f.eta_seconds();
     }
   }
+  // A paused job shows as such (its state is still queued or running underneath).
+  const std::string state = j.paused() ? std::string(state_name(j.state())) + ",paused"
+                                       : std::string(state_name(j.state()));
   char buf[512];
-  std::snprintf(
-      buf, sizeof buf,
-      "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  ETA %s",
-      printable(j.job_id()).c_str(), printable(j.name()).c_str(), state_name(j.state()), done,
-      j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
-      j.core_seconds(), eta_known ? duration_text(eta).c_str() : "?");
+  std::snprintf(buf, sizeof buf,
+                "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  "
+                "priority %d  ETA %s",
+                printable(j.job_id()).c_str(), printable(j.name()).c_str(), state.c_str(), done,
+                j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
+                j.core_seconds(), j.priority(),
+                j.paused()  ? "paused"
+                : eta_known ? duration_text(eta).c_str()
+                            : "?");
   return buf;
 }
 
@@ -525,6 +534,38 @@ int cmd_cancel(const Endpoint& ep, const std::string& job) {
   // cancel whose first attempt got through succeeds too.
   check(s, "cancel", ep, &retry);
   std::fprintf(stderr, "job %s cancelled\n", job.c_str());
+  return 0;
+}
+
+int cmd_pause(const Endpoint& ep, const std::string& job, bool pause) {
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  pb::JobRef ref;
+  ref.set_job_id(job);
+  pb::JobStatus status;
+  // Both are idempotent, so a retry whose first attempt got through succeeds too.
+  const char* what = pause ? "pause" : "resume";
+  check(retry.run(30,
+                  [&](grpc::ClientContext& ctx) {
+                    return pause ? stub->PauseJob(&ctx, ref, &status)
+                                 : stub->ResumeJob(&ctx, ref, &status);
+                  }),
+        what, ep, &retry);
+  std::fprintf(stderr, "job %s %s\n", job.c_str(), pause ? "paused" : "resumed");
+  return 0;
+}
+
+int cmd_priority(const Endpoint& ep, const std::string& job, int priority) {
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  pb::SetPriorityRequest req;
+  req.set_job_id(job);
+  req.set_priority(priority);
+  pb::JobStatus status;
+  check(retry.run(
+            30, [&](grpc::ClientContext& ctx) { return stub->SetJobPriority(&ctx, req, &status); }),
+        "priority", ep, &retry);
+  std::fprintf(stderr, "job %s priority %d\n", job.c_str(), status.priority());
   return 0;
 }
 

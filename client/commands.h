@@ -1,4 +1,5 @@
-// The farm's client commands (`rayfarm submit | status | watch | fetch | cancel | health`).
+// The farm's client commands (`rayfarm submit | status | watch | fetch | cancel | pause | resume |
+// priority | health`).
 #pragma once
 
 #include <optional>
@@ -55,6 +56,9 @@ int cmd_watch(const Endpoint& ep,
 int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out,
               const std::string& frames, float exposure);
 int cmd_cancel(const Endpoint& ep, const std::string& job);
+// pause (no new leases; leases in flight finish) or resume; idempotent.
+int cmd_pause(const Endpoint& ep, const std::string& job, bool pause);
+int cmd_priority(const Endpoint& ep, const std::string& job, int priority);
 int cmd_health(const Endpoint& ep, bool list_services);
 
 }  // namespace rf

@@ -72,7 +72,7 @@ Coordinator::Coordinator(CoreOptions o)
       ledger_(std::make_unique<Ledger>(
           SchedulerOptions{
               options_.lease_seconds, options_.max_failures, options_.window_frames,
-              options_.instance + "-L",
+              options_.instance + "-L", options_.share,
               [this](const std::string& lease, const std::string& worker, const TaskRef& task) {
                 ++counters_.leases_expired;  // the scheduler is driven under mu_
                 spdlog::warn("lease {} of worker {} on task {} expired: not renewed for {:g} s",
@@ -144,6 +144,8 @@ JobStatus Coordinator::status_of(const JobRecord& job) const {
     s.error = "waiting for the coordinator's storage: " + storage_problem_;
   s.core_seconds = job.core_seconds;
   s.submitted_unix = job.submitted_unix;
+  s.paused = job.paused;
+  s.priority = job.priority;
   for (const auto& f : job.frames) s.frames.push_back(frame_status(job, *f));
   return s;
 }

@@ -66,6 +66,8 @@ struct JobStatus {
   std::string error;  // why it failed (the workers' messages) or was cancelled
   double core_seconds = 0;
   int64_t submitted_unix = 0;
+  bool paused = false;
+  int priority = 0;
   std::vector<FrameStatus> frames;
 };
 
@@ -186,6 +188,7 @@ struct CoreOptions {
   double lease_seconds = 30;
   uint32_t window_frames = 4;
   int max_failures = 3;  // workers a task may fail on, and tasks a worker may fail, per job
+  FairShare share = FairShare::Tenants;  // between jobs of equal priority (scheduler.h)
   JobLimits limits;
   // The fraction of tasks rendered twice, on different workers, and merged only when the two
   // results are bit-identical (the determinism contract); a third worker settles a disagreement
@@ -240,6 +243,11 @@ class Coordinator {
   std::optional<JobStatus> next_status(const std::string& job_id, uint64_t& seen,
                                        double timeout_seconds, const Caller& caller = {}) const;
   void cancel(const std::string& job_id, const Caller& caller = {});
+  // No new leases for a paused job; its leases in flight finish and their results merge.
+  // Idempotent; FailedPrecondition for an ended job.
+  void set_paused(const std::string& job_id, bool paused, const Caller& caller = {});
+  // The job's priority among jobs from now on (higher first). FailedPrecondition once it ended.
+  void set_priority(const std::string& job_id, int priority, const Caller& caller = {});
   FrameImage fetch(const std::string& job_id, FrameNumber frame, const Caller& caller = {}) const;
 
   // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal

@@ -29,6 +29,13 @@ inline std::string clip(const std::string& s) {
   throw CoordinatorError(code, message);
 }
 
+// How an ended job ended, for messages: "completed", "failed", "been cancelled".
+inline const char* ended_verb(JobState s) {
+  return s == JobState::Completed ? "completed"
+         : s == JobState::Failed  ? "failed"
+                                  : "been cancelled";
+}
+
 inline double unix_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
 }
@@ -61,6 +68,8 @@ struct JobRecord {
   std::string tenant;
   std::string build_id;        // results of this build only; empty: the first merged result's
   std::string bundle_problem;  // restored without its bundle (its blobs are gone): why
+  bool paused = false;         // no new leases (`pause`); leases in flight finish and merge
+  int priority = 0;            // the spec's, or what `priority JOB N` set since
   std::vector<Rect> tiles;
   bool splats = false;
   uint32_t passes = 0;

@@ -140,6 +140,7 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
   check_limits(spec);
   job->build_id = spec.build_id;
+  job->priority = spec.priority;
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
   try {
     check_bundle(

@@ -1,7 +1,8 @@
 // The coordinator's durable job state (DESIGN.md "Coordinator": state survives a restart) behind
 // one interface with two implementations: SQLite on the state directory (WAL, one writer
 // connection; the server's) and memory (the core's unit tests and the coordinator fuzzer). It
-// records each job's spec (spec_codec.h), its state and error, every task completion, failure and
+// records each job's spec (spec_codec.h), its state and error, whether it is paused and its
+// priority when changed after submit, every task completion, failure and
 // refused result, worker registrations, which tenants uploaded which blobs, and the leases of
 // running jobs. Which task results an image contains is recorded by the frame checkpoints
 // (checkpoint.h), not here: on restart a task the store calls done but the checkpoint lacks is
@@ -47,6 +48,8 @@ struct StoredJob {
   double core_seconds = 0;
   std::string tenant;    // whose job it is ('' before tenants existed)
   std::string build_id;  // the build of its first merged result ('' until then)
+  bool paused = false;
+  std::optional<int> priority;  // set after submit (`priority JOB N`); the spec's when absent
 };
 
 // A lease as handed out, kept so that its holder's late result is accepted after a restart.
@@ -88,6 +91,14 @@ struct AddCoreSeconds {
 struct SetBuild {
   std::string job_id, build_id;
 };
+struct SetPaused {
+  std::string job_id;
+  bool paused = false;
+};
+struct SetPriority {
+  std::string job_id;
+  int priority = 0;
+};
 struct TaskEvent {
   std::string job_id;
   FrameNumber frame = 0;
@@ -119,8 +130,9 @@ struct DeleteLeases {
 
 using StoreWrite =
     std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds, store::SetBuild,
-                 store::TaskEvent, store::InsertWorker, store::RefuseWorker, store::DeleteWorker,
-                 store::AddBlobTenant, store::InsertLease, store::DeleteLeases>;
+                 store::SetPaused, store::SetPriority, store::TaskEvent, store::InsertWorker,
+                 store::RefuseWorker, store::DeleteWorker, store::AddBlobTenant, store::InsertLease,
+                 store::DeleteLeases>;
 
 // Whether losing the write in a power cut costs nothing but work: a lease's row (its holder's
 // late result is then rendered again). Batches of such writes only are not flushed to disk.

@@ -97,6 +97,12 @@ class MemoryJobStore final : public JobStore {
   void apply(const store::SetBuild& w) {
     if (StoredJob* j = job(w.job_id)) j->build_id = w.build_id;
   }
+  void apply(const store::SetPaused& w) {
+    if (StoredJob* j = job(w.job_id)) j->paused = w.paused;
+  }
+  void apply(const store::SetPriority& w) {
+    if (StoredJob* j = job(w.job_id)) j->priority = w.priority;
+  }
   void apply(const store::TaskEvent& w) { events_.push_back(w); }
   void apply(const store::InsertWorker& w) { workers_[w.worker.id] = w.worker; }
   void apply(const store::RefuseWorker& w) {

@@ -47,6 +47,7 @@ class Stmt {
   }
   int64_t integer(int col) const { return sqlite3_column_int64(s_, col); }
   double real(int col) const { return sqlite3_column_double(s_, col); }
+  bool null(int col) const { return sqlite3_column_type(s_, col) == SQLITE_NULL; }
 
  private:
   [[noreturn]] void fail(const char* what) {
@@ -157,6 +158,9 @@ void SqliteJobStore::open_schema() {
   }
   if (!columns.count("tenant")) exec("ALTER TABLE jobs ADD COLUMN tenant TEXT NOT NULL DEFAULT ''");
   if (!columns.count("build")) exec("ALTER TABLE jobs ADD COLUMN build TEXT NOT NULL DEFAULT ''");
+  if (!columns.count("paused"))
+    exec("ALTER TABLE jobs ADD COLUMN paused INTEGER NOT NULL DEFAULT 0");
+  if (!columns.count("priority")) exec("ALTER TABLE jobs ADD COLUMN priority INTEGER");
   exec(
       "CREATE TABLE IF NOT EXISTS workers (id TEXT PRIMARY KEY, principal TEXT NOT NULL, build "
       "TEXT NOT NULL DEFAULT '', registered INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
@@ -239,6 +243,12 @@ void SqliteJobStore::apply(const StoreWrite& write) {
         } else if constexpr (std::is_same_v<W, store::SetBuild>) {
           Stmt s(db_, "UPDATE jobs SET build = ? WHERE id = ?", path_);
           s.bind(w.build_id).bind(w.job_id).step();
+        } else if constexpr (std::is_same_v<W, store::SetPaused>) {
+          Stmt s(db_, "UPDATE jobs SET paused = ? WHERE id = ?", path_);
+          s.bind(int64_t(w.paused)).bind(w.job_id).step();
+        } else if constexpr (std::is_same_v<W, store::SetPriority>) {
+          Stmt s(db_, "UPDATE jobs SET priority = ? WHERE id = ?", path_);
+          s.bind(int64_t(w.priority)).bind(w.job_id).step();
         } else if constexpr (std::is_same_v<W, store::TaskEvent>) {
           // task_events.done: 1 done, 0 failed, 2 result refused (TaskEventKind).
           Stmt s(db_,
@@ -301,13 +311,16 @@ uint64_t SqliteJobStore::next_seq() const {
 std::vector<StoredJob> SqliteJobStore::jobs() const {
   std::lock_guard lock(mu_);
   Stmt s(db_,
-         "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant, build FROM jobs "
-         "ORDER BY seq",
+         "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant, build, paused, "
+         "priority FROM jobs ORDER BY seq",
          path_);
   std::vector<StoredJob> out;
-  while (s.step())
+  while (s.step()) {
     out.push_back({s.text(0), uint64_t(s.integer(1)), decode_spec(s.text(2)), int(s.integer(3)),
-                   s.text(4), s.integer(5), s.real(6), s.text(7), s.text(8)});
+                   s.text(4), s.integer(5), s.real(6), s.text(7), s.text(8), s.integer(9) != 0,
+                   std::nullopt});
+    if (!s.null(10)) out.back().priority = int(s.integer(10));
+  }
   return out;
 }
 

@@ -29,7 +29,8 @@ Ledger::Ledger(SchedulerOptions options, Journal& journal)
 
 void Ledger::add_job(const JobRecord& job) {
   scheduler_.add_job(job.id, job.frame_numbers(), uint32_t(job.tiles.size()), job.passes,
-                     job.spec.priority);
+                     job.priority, job.tenant);
+  scheduler_.set_paused(job.id, job.paused);
 }
 
 Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string& error) {
@@ -49,6 +50,26 @@ Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string&
 Ledger::Ticket Ledger::cancel(JobRecord& job, const std::string& by) {
   if (job.state == JobState::Cancelled) return journal_.append({});
   return set_state(job, JobState::Cancelled, "cancelled by " + by);
+}
+
+Ledger::Ticket Ledger::set_paused(JobRecord& job, bool paused) {
+  if (terminal(job.state))
+    throw std::logic_error(std::string("job ") + job.id + ": no pause or resume once " +
+                           job_state_name(job.state));
+  if (job.paused == paused) return journal_.append({});
+  job.paused = paused;
+  scheduler_.set_paused(job.id, paused);
+  return journal_.append({store::SetPaused{job.id, paused}});
+}
+
+Ledger::Ticket Ledger::set_priority(JobRecord& job, int priority) {
+  if (terminal(job.state))
+    throw std::logic_error(std::string("job ") + job.id + ": no priority change once " +
+                           job_state_name(job.state));
+  if (job.priority == priority) return journal_.append({});
+  job.priority = priority;
+  scheduler_.set_priority(job.id, priority);
+  return journal_.append({store::SetPriority{job.id, priority}});
 }
 
 void Ledger::restore_job(JobRecord& job, const Trail& trail) {

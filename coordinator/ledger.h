@@ -7,7 +7,8 @@
 // A job: Queued -> Running (its first lease) -> Completed (every frame done); Queued or Running ->
 // Failed (a task failed on max_failures workers, a verification with no two results agreeing, a
 // stored job that cannot be restored) or Cancelled (a client). The ended states are final: any
-// other transition from them is refused (std::logic_error: a bug, not a request).
+// other transition from them is refused (std::logic_error: a bug, not a request). A Queued or
+// Running job may be paused and resumed and given another priority; neither changes its state.
 // A task: waiting -> leased -> done; leased -> waiting (lease expired, failed, handed back, result
 // refused, result held for verification); waiting or leased -> stopped (its frame needs no more
 // passes, its job ended); failed on max_failures workers -> its job fails. Scheduler holds the
@@ -42,6 +43,12 @@ class Ledger {
   // Cancelled by `by`; a cancelled job stays so (no write). Throws std::logic_error if it has
   // completed or failed (the caller refuses that first).
   Ticket cancel(JobRecord& job, const std::string& by);
+  // Paused (no new leases; leases in flight finish and merge) or resumed; the job's priority
+  // among jobs (higher first). Neither is a state: a Queued or Running job keeps its state. A
+  // change to what the job has already is no write. Throws std::logic_error for an ended job
+  // (the caller refuses that first).
+  Ticket set_paused(JobRecord& job, bool paused);
+  Ticket set_priority(JobRecord& job, int priority);
 
   // ---- Restoring at start (nothing written: it is what the store and checkpoints hold)
   struct Trail {

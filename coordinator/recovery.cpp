@@ -28,7 +28,10 @@ void Coordinator::write_folder_record(const StoredJob& j) const {
 }
 
 void Coordinator::write_folder_state(const JobRecord& job) const {
-  nlohmann::json st = {{"state", int(job.state)}, {"error", job.error}};
+  nlohmann::json st = {{"state", int(job.state)},
+                       {"error", job.error},
+                       {"paused", job.paused},
+                       {"priority", job.priority}};
   try {
     write_file_atomic(options_.state_dir + "/jobs/" + job.id + "/state.json", st.dump() + "\n");
   } catch (const std::exception& e) {  // the database holds it; the folder's copy is a backup
@@ -108,6 +111,8 @@ void Coordinator::recover_folders() {
             nlohmann::json::parse(read_file_bytes((entry.path() / "state.json").string()));
         stored.state = st.at("state").get<int>();
         stored.error = st.at("error").get<std::string>();
+        stored.paused = st.value("paused", false);  // absent in records of earlier builds
+        if (st.contains("priority")) stored.priority = st.at("priority").get<int>();
       }
     } catch (const std::exception& e) {
       spdlog::error(
@@ -175,6 +180,8 @@ void Coordinator::restore(const StoredJob& stored) {
     job->core_seconds = stored.core_seconds;
     job->tenant = stored.tenant;
     if (job->build_id.empty()) job->build_id = stored.build_id;
+    job->paused = stored.paused;
+    job->priority = stored.priority.value_or(spec->priority);
     if (!job->bundle_problem.empty() && !terminal(job->state))
       set_state(*job, JobState::Failed,
                 "the coordinator could not restore its scene bundle: " + job->bundle_problem +

@@ -15,6 +15,7 @@ namespace rf {
 
 namespace fs = std::filesystem;
 using core_detail::clip;
+using core_detail::ended_verb;
 using core_detail::refuse;
 using core_detail::unix_now;
 
@@ -52,10 +53,8 @@ void Coordinator::cancel(const std::string& id, const Caller& caller) {
     job = find_for(id, caller);
     if (job->state == JobState::Cancelled) return;  // idempotent: a second or retried cancel
     if (terminal(job->state))
-      refuse(ErrorCode::FailedPrecondition,
-             "job " + id + " has already " +
-                 (job->state == JobState::Completed ? "completed" : "failed") +
-                 "; there is nothing to cancel");
+      refuse(ErrorCode::FailedPrecondition, "job " + id + " has already " + ended_verb(job->state) +
+                                                "; there is nothing to cancel");
     ticket = set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
   }
   wait_stored(ticket, "the cancellation");
@@ -64,6 +63,43 @@ void Coordinator::cancel(const std::string& id, const Caller& caller) {
     std::lock_guard frame_lock(f->m);
     f->acc.reset();
   }
+}
+
+void Coordinator::set_paused(const std::string& id, bool paused, const Caller& caller) {
+  Ledger::Ticket ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    std::shared_ptr<JobRecord> job = find_for(id, caller);
+    if (terminal(job->state))
+      refuse(ErrorCode::FailedPrecondition, "job " + id + " has already " + ended_verb(job->state) +
+                                                "; there is nothing to " +
+                                                (paused ? "pause" : "resume"));
+    if (job->paused == paused) return;  // idempotent: a second or retried call
+    ticket = ledger_->set_paused(*job, paused);
+    write_folder_state(*job);
+    spdlog::info("job {} {} by {}", job->id, paused ? "paused" : "resumed", caller.principal);
+    ++version_;
+    changed_.notify_all();
+  }
+  wait_stored(ticket, paused ? "the pause" : "the resume");
+}
+
+void Coordinator::set_priority(const std::string& id, int priority, const Caller& caller) {
+  Ledger::Ticket ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    std::shared_ptr<JobRecord> job = find_for(id, caller);
+    if (terminal(job->state))
+      refuse(ErrorCode::FailedPrecondition, "job " + id + " has already " + ended_verb(job->state) +
+                                                "; its priority no longer matters");
+    if (job->priority == priority) return;
+    ticket = ledger_->set_priority(*job, priority);
+    write_folder_state(*job);
+    spdlog::info("job {} priority {} by {}", job->id, priority, caller.principal);
+    ++version_;
+    changed_.notify_all();
+  }
+  wait_stored(ticket, "the priority");
 }
 
 // Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the

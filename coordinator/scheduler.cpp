@@ -50,9 +50,11 @@ bool Scheduler::is_done(const FrameState& f, uint64_t number) const {
 }
 
 void Scheduler::add_job(const std::string& job_id, const std::vector<FrameNumber>& frames,
-                        uint32_t tiles, uint32_t passes, int priority) {
+                        uint32_t tiles, uint32_t passes, int priority, const std::string& tenant) {
   JobState& j = jobs_[job_id];
-  j = JobState{job_id, priority, next_order_++, tiles, passes, {}, {}, {}, {}, false, false, {}};
+  j = JobState{};
+  j.id = job_id, j.tenant = tenant, j.priority = priority, j.order = next_order_++;
+  j.tiles = tiles, j.passes = passes;
   j.frames.reserve(frames.size());
   for (FrameNumber f : frames) {
     j.frame_index[f] = j.frames.size();
@@ -88,8 +90,20 @@ std::optional<uint64_t> Scheduler::first_for(const JobState& j, FrameState& f,
   return best;
 }
 
+void Scheduler::count_live(const TaskRef& task, int delta) {
+  JobState* j = job(task.job_id);
+  if (!j) return;
+  j->live_leases += uint64_t(int64_t(delta));
+  uint64_t& t = tenant_leases_[j->tenant];
+  t += uint64_t(int64_t(delta));
+  if (t == 0) tenant_leases_.erase(j->tenant);
+}
+
 void Scheduler::end_lease(const std::string& id, LeaseState& l) {
-  if (l.live) expiry_.erase({l.expires_at, id});
+  if (l.live) {
+    expiry_.erase({l.expires_at, id});
+    count_live(l.task, -1);
+  }
   l.live = false;
   auto t = tasks_.find(l.task);
   if (t != tasks_.end() && t->second.leases.erase(id)) t->second.ended.insert(id);
@@ -102,7 +116,10 @@ void Scheduler::forget_task(const TaskRef& ref) {
     for (const std::string& id : *ids) {
       auto l = leases_.find(id);
       if (l == leases_.end()) continue;
-      if (l->second.live) expiry_.erase({l->second.expires_at, id});
+      if (l->second.live) {
+        expiry_.erase({l->second.expires_at, id});
+        count_live(l->second.task, -1);
+      }
       leases_.erase(l);
     }
   tasks_.erase(t);
@@ -133,6 +150,14 @@ void Scheduler::cancel_job(const std::string& job_id) {
   drop_job_tasks(*j);
 }
 
+void Scheduler::set_paused(const std::string& job_id, bool paused) {
+  if (JobState* j = job(job_id)) j->paused = paused;
+}
+
+void Scheduler::set_priority(const std::string& job_id, int priority) {
+  if (JobState* j = job(job_id)) j->priority = priority;
+}
+
 void Scheduler::drop_job_tasks(JobState& j) {
   for (FrameState& f : j.frames) {
     forget_tasks_from(j, f.frame, 0);
@@ -156,9 +181,24 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
   expire(now);
   std::vector<JobState*> order;
   for (auto& [id, j] : jobs_)
-    if (!j.failed && !j.cancelled && (!may || may(id))) order.push_back(&j);
-  std::sort(order.begin(), order.end(), [](const JobState* a, const JobState* b) {
-    return std::tie(b->priority, a->order) < std::tie(a->priority, b->order);
+    if (!j.failed && !j.cancelled && !j.paused && (!may || may(id))) order.push_back(&j);
+  // Priority first; between equal priorities the fair share's measure, live leases (of the
+  // tenant, then of the job); then submission.
+  auto tenant_load = [&](const JobState* j) -> uint64_t {
+    if (options_.share != FairShare::Tenants) return 0;
+    auto it = tenant_leases_.find(j->tenant);
+    return it == tenant_leases_.end() ? 0 : it->second;
+  };
+  auto job_load = [&](const JobState* j) -> uint64_t {
+    return options_.share == FairShare::None ? 0 : j->live_leases;
+  };
+  std::sort(order.begin(), order.end(), [&](const JobState* a, const JobState* b) {
+    if (a->priority != b->priority) return a->priority > b->priority;
+    const uint64_t ta = tenant_load(a), tb = tenant_load(b);
+    if (ta != tb) return ta < tb;
+    const uint64_t ja = job_load(a), jb = job_load(b);
+    if (ja != jb) return ja < jb;
+    return a->order < b->order;
   });
   for (JobState* j : order) {
     auto wf = j->worker_failures.find(worker_id);
@@ -198,6 +238,7 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
     j->worker_frame[worker_id] = f.frame;
     std::string id = options_.lease_prefix + std::to_string(++next_lease_);
     leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
+    count_live(ref, +1);
     expiry_.insert({now + options_.lease_seconds, id});
     tasks_[ref].leases.insert(id);
     return Lease{id, ref, now + options_.lease_seconds};

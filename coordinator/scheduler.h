@@ -2,16 +2,17 @@
 // explicit clock so it is tested without servers or sleeps. The coordinator's core (core.h)
 // drives it beside the SQLite store; it knows nothing of either, nor of gRPC.
 //
-// Order: jobs by priority (higher first), then submission; within a job, a window of at most
-// `window_frames` unfinished frames is open; within the window, passes in order (all tiles of
-// pass 0 of every open frame before pass 1), then the frame this worker was last leased in the
-// job (frame affinity: its renderer holds that frame's BVH of moving geometry), then frame, then
-// tile.
-// Leases: a task leased to a worker must be renewed within lease_seconds or it is queued again.
-// The first completion of a task wins, from whichever lease (an expired one included): later
-// ones are answered accepted = false, and the task's other leases end. A task that fails on
-// max_failures different workers fails its job; a worker that fails max_failures tasks of a job
-// gets no more of them. A task handed back (worker shutting down) is re-queued without counting.
+// Order: jobs by priority (higher first), then fair share between equal priorities (FairShare),
+// then submission, paused jobs left out; within a job, a
+// window of at most `window_frames` unfinished frames is open; within the window, passes in order
+// (all tiles of pass 0 of every open frame before pass 1), then the frame this worker was last
+// leased in the job (frame affinity: its renderer holds that frame's BVH of moving geometry), then
+// frame, then tile. Leases: a task leased to a worker must be renewed within lease_seconds or it is
+// queued again. The first completion of a task wins, from whichever lease (an expired one
+// included): later ones are answered accepted = false, and the task's other leases end. A task that
+// fails on max_failures different workers fails its job; a worker that fails max_failures tasks of
+// a job gets no more of them. A task handed back (worker shutting down) is re-queued without
+// counting.
 //
 // Memory is bounded by what is in flight, not by the job's size: a task exists as its number
 // in its frame (pass * tiles + tile) until it is handed out; a frame holds one bit per task
@@ -34,11 +35,18 @@
 
 namespace rf {
 
+// How workers are shared between jobs of equal priority (docs/farm.md "Fair share"): each lease
+// goes to the job whose tenant holds the fewest live leases, then to that tenant's job holding the
+// fewest (Tenants); to the job holding the fewest (Jobs); or to the earliest submitted (None:
+// strict submission order, one job at a time). Ties go to the earlier job.
+enum class FairShare { Tenants, Jobs, None };
+
 struct SchedulerOptions {
   double lease_seconds = 30;
   int max_failures = 3;
   uint32_t window_frames = 4;
   std::string lease_prefix = "L";  // lease ids are prefix + a counter: unique per coordinator run
+  FairShare share = FairShare::Tenants;
   // Called when a lease ends for want of renewal (how a crashed, stalled or cut-off worker is
   // noticed), with the lease, its worker and its task.
   std::function<void(const std::string& lease_id, const std::string& worker_id,
@@ -59,10 +67,14 @@ class Scheduler {
  public:
   explicit Scheduler(SchedulerOptions options = {}) : options_(options) {}
 
-  // A job of `frames` (in order), each split into `tiles` x `passes` tasks.
+  // A job of `frames` (in order), each split into `tiles` x `passes` tasks, of `tenant`.
   void add_job(const std::string& job_id, const std::vector<FrameNumber>& frames, uint32_t tiles,
-               uint32_t passes, int priority);
+               uint32_t passes, int priority, const std::string& tenant = "");
   void cancel_job(const std::string& job_id);  // drops its queued tasks and ends its leases
+  // A paused job gets no new leases; its leases in flight run on, and their results are taken.
+  // Its tasks still count as work left (work_left_for): a pause is not an end.
+  void set_paused(const std::string& job_id, bool paused);
+  void set_priority(const std::string& job_id, int priority);
 
   // Which jobs a worker may get tasks of (all when empty).
   using JobFilter = std::function<bool(const std::string& job_id)>;
@@ -145,16 +157,17 @@ class Scheduler {
     std::set<uint64_t> waiting;  // numbered below fresh, queued again
   };
   struct JobState {
-    std::string id;
-    int priority;
-    uint64_t order;
-    uint32_t tiles, passes;
+    std::string id, tenant;
+    int priority = 0;
+    uint64_t order = 0;
+    uint32_t tiles = 0, passes = 0;
     std::vector<FrameState> frames;
     std::map<FrameNumber, size_t> frame_index;  // frame number -> position in frames
     std::map<std::string, int> worker_failures;
     std::map<std::string, FrameNumber> worker_frame;  // the frame each worker was last leased
-    bool failed = false, cancelled = false;
+    bool failed = false, cancelled = false, paused = false;
     std::string error;
+    uint64_t live_leases = 0;  // its fair share's measure
   };
   struct LeaseState {
     TaskRef task;
@@ -165,6 +178,7 @@ class Scheduler {
 
   void expire(double now);
   void end_lease(const std::string& lease_id, LeaseState& lease);  // ends it if live
+  void count_live(const TaskRef& task, int delta);  // a live lease began (+1) or ended (-1)
   // Queues the task again when it is still needed and no live lease holds it.
   void requeue_if_needed(const TaskRef& task);
   CompleteOutcome complete_task(const TaskRef& ref);
@@ -194,6 +208,7 @@ class Scheduler {
   std::map<TaskRef, TaskState> tasks_;
   std::map<std::string, LeaseState> leases_;
   std::set<std::pair<double, std::string>> expiry_;  // live leases by expiry time
+  std::map<std::string, uint64_t> tenant_leases_;    // live leases per tenant
   uint64_t next_order_ = 0, next_lease_ = 0;
 };
 

@@ -309,6 +309,8 @@ pb::JobStatus to_wire(const JobStatus& s) {
   out.set_submitted_unix(s.submitted_unix);
   out.set_tenant(s.tenant);
   out.set_build_id(s.build_id);
+  out.set_paused(s.paused);
+  out.set_priority(s.priority);
   for (const FrameStatus& f : s.frames) *out.add_frames() = to_wire(f);
   return out;
 }
@@ -422,6 +424,25 @@ class JobServiceImpl final : public pb::JobService::Service {
   Status CancelJob(ServerContext* ctx, const pb::JobRef* r, pb::CancelResponse*) override {
     return guarded(g_, ctx, Access::Client, "CancelJob",
                    [&](const Caller& caller) { c_.cancel(r->job_id(), caller); });
+  }
+  Status PauseJob(ServerContext* ctx, const pb::JobRef* r, pb::JobStatus* o) override {
+    return guarded(g_, ctx, Access::Client, "PauseJob", [&](const Caller& caller) {
+      c_.set_paused(r->job_id(), true, caller);
+      *o = to_wire(c_.status(r->job_id(), caller));
+    });
+  }
+  Status ResumeJob(ServerContext* ctx, const pb::JobRef* r, pb::JobStatus* o) override {
+    return guarded(g_, ctx, Access::Client, "ResumeJob", [&](const Caller& caller) {
+      c_.set_paused(r->job_id(), false, caller);
+      *o = to_wire(c_.status(r->job_id(), caller));
+    });
+  }
+  Status SetJobPriority(ServerContext* ctx, const pb::SetPriorityRequest* r,
+                        pb::JobStatus* o) override {
+    return guarded(g_, ctx, Access::Client, "SetJobPriority", [&](const Caller& caller) {
+      c_.set_priority(r->job_id(), r->priority(), caller);
+      *o = to_wire(c_.status(r->job_id(), caller));
+    });
   }
   Status FetchFrame(ServerContext* ctx, const pb::FetchRequest* r,
                     grpc::ServerWriter<pb::FetchResponse>* w) override {
@@ -585,6 +606,7 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   core.state_dir = o.state_dir;
   core.lease_seconds = o.lease_seconds;
   core.window_frames = o.window_frames;
+  core.share = o.share;
   core.limits = o.limits;
   core.verify_fraction = o.verify_fraction;
   core.scene_checker = child_scene_checker(o.scene_check_binary, o.limits.scene_check);

@@ -27,6 +27,7 @@ struct CoordinatorOptions {
   std::string metrics_listen;
   double lease_seconds = 30;
   uint32_t window_frames = 4;
+  FairShare share = FairShare::Tenants;    // between jobs of equal priority (scheduler.h)
   JobLimits limits;                        // per job (core.h)
   double verify_fraction = 0;              // CoreOptions::verify_fraction
   uint64_t max_blob_bytes = 1ull << 30;    // one scene asset

@@ -8,8 +8,8 @@
 // Requests: submit (a mutated valid spec, or any bytes as a serialized rayfarm.v1.JobSpec, read
 // by the service's own conversion), upload a blob, register, lease, renew, upload a result (a
 // valid buffer, one with flipped bytes, or any bytes; the upload's header checked first, as the
-// service does), fail, cancel, status/list/watch, fetch, missing blobs, a clock jump (leases
-// expire) and a restart of the coordinator on the same state directory.
+// service does), fail, cancel, pause/resume, priority, status/list/watch, fetch, missing blobs, a
+// clock jump (leases expire) and a restart of the coordinator on the same state directory.
 //
 // Findings, beyond what the sanitizers see:
 // - an exception other than CoordinatorError (the service would answer INTERNAL to a client's
@@ -131,6 +131,8 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
+constexpr int kRequests = 16;  // the operations of Farm::request
+
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
 
@@ -153,14 +155,15 @@ class Farm {
     for (int steps = 0; !in.empty() && steps < 64; ++steps) {
       uint8_t op = in.byte();
       const Caller& caller = kCallers[in.byte() % 3];
-      if (trace_) std::fprintf(stderr, "request %d by %s\n", op % 14, caller.principal.c_str());
+      if (trace_)
+        std::fprintf(stderr, "request %d by %s\n", op % kRequests, caller.principal.c_str());
       try {
-        request(op % 14, caller, in);
+        request(op % kRequests, caller, in);
       } catch (const CoordinatorError& e) {
         // A refusal, with its code: what a bad request should get.
         if (trace_) std::fprintf(stderr, "  refused: %s\n", e.what());
       } catch (const std::exception& e) {
-        finding("request " + std::to_string(op % 14) + " threw a non-refusal: " + e.what());
+        finding("request " + std::to_string(op % kRequests) + " threw a non-refusal: " + e.what());
       }
     }
     check_job0();
@@ -309,6 +312,14 @@ class Farm {
       case 13: {  // an upload's header only, as a hostile worker's that never sends the bytes
         const Held* h = pick(leases_, in);
         if (h) core_->check_upload(h->worker_id, h->task.lease_id, h->task.task, caller);
+        return;
+      }
+      case 14:  // pause or resume
+        core_->set_paused(job_id(in), in.byte() & 1, caller);
+        return;
+      case 15: {  // a new priority, any 32-bit value
+        const std::string job = job_id(in);
+        core_->set_priority(job, int(int32_t(in.u32())), caller);
         return;
       }
     }

@@ -574,6 +574,77 @@ TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
   for (float v : mid.px) EXPECT_TRUE(std::isfinite(v));
 }
 
+// Pause, resume and priority with real processes: a paused job gets no lease while the others
+// render (and keeps an --exit-when-idle worker waiting), a job raised after submit finishes before
+// one submitted earlier, both survive a coordinator crash (stored), and the resumed job's image
+// equals the local render.
+TEST(Farm, PausedJobsWaitRaisedJobsGoFirstAndAResumedJobFinishesAsLocally) {
+  Farm farm("farm-pause");
+  const std::string args =
+      "scenes/cornell-box/scene.json --spp 8 --passes 4 --res 32x32 --tile-size 16";
+  const std::string a = farm.submit(args + " --frames 1");
+  const std::string b = farm.submit(args + " --frames 2");
+  const std::string c = farm.submit(args + " --frames 3");
+  ASSERT_EQ(farm.client("pause " + a).exit_code, 0);
+  EXPECT_EQ(farm.client("pause " + a).exit_code, 0) << "pause is idempotent";
+  ASSERT_EQ(farm.client("priority " + c + " 10").exit_code, 0);
+  farm.restart_coordinator();  // SIGKILL: what was acknowledged is stored
+  nlohmann::json s = farm.status(a);
+  EXPECT_EQ(s["paused"], true);
+  EXPECT_EQ(s["state"], "queued") << "a pause is not a state";
+  EXPECT_EQ(farm.status(c)["priority"], 10);
+  EXPECT_NE(farm.client("status " + a).output.find("queued,paused"), std::string::npos);
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + b).exit_code, 0);
+  s = farm.status(a);
+  EXPECT_EQ(s["frames"][0]["passes_merged"], 0) << "a paused job gets no lease";
+  EXPECT_EQ(s["core_seconds"], 0.0);
+  const std::string log = farm.coordinator().log();
+  const size_t done_c = log.find("job " + c + " JOB_COMPLETED");
+  const size_t done_b = log.find("job " + b + " JOB_COMPLETED");
+  ASSERT_NE(done_c, std::string::npos) << log;
+  EXPECT_LT(done_c, done_b) << "the raised job goes first";
+  ASSERT_EQ(farm.client("resume " + a).exit_code, 0);
+  EXPECT_EQ(farm.client("watch " + a).exit_code, 0);
+  EXPECT_EQ(farm.status(a)["paused"], false);
+  ASSERT_EQ(farm.client("fetch " + a + " -o " + farm.dir() + "/out-" + a).exit_code, 0);
+  expect_same_image(farm.fetched(a, 1), farm.local(args, 1));
+  test::CommandResult r = farm.client("pause " + a);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("FAILED_PRECONDITION: job " + a + " has already completed"),
+            std::string::npos)
+      << r.output;
+}
+
+// Fair share with real processes: a small job submitted while a large one of the same priority
+// holds both workers finishes while the large one is still running (in strict submission order it
+// would wait for all of it), and both images equal their local renders.
+TEST(Farm, ASmallJobIsNotStarvedByALargeOneOfTheSamePriority) {
+  Farm farm("farm-share");
+  const std::string large_args =
+      "scenes/cornell-box/scene.json --spp 16 --passes 8 --res 64x64 --tile-size 16";
+  const std::string small_args =
+      "scenes/cornell-box/scene.json --spp 4 --passes 2 --res 32x32 --tile-size 16";
+  const std::string large = farm.submit(large_args + " --frames 1-8");  // 1,024 tasks
+  farm.worker();
+  farm.worker();
+  for (int i = 0; i < 200 && farm.status(large)["state"] != "running"; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const std::string small = farm.submit(small_args + " --frames 1");  // 8 tasks
+  EXPECT_EQ(farm.client("watch " + small).exit_code, 0);
+  nlohmann::json s = farm.status(large);
+  EXPECT_EQ(s["state"], "running") << "the small job finished first";
+  int merged = 0;
+  for (const auto& f : s["frames"]) merged += f["passes_merged"].get<int>();
+  EXPECT_LT(merged, 64) << s.dump();
+  EXPECT_EQ(farm.client("watch " + large).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + small + " -o " + farm.dir() + "/out-" + small).exit_code, 0);
+  expect_same_image(farm.fetched(small, 1), farm.local(small_args, 1));
+  ASSERT_EQ(
+      farm.client("fetch " + large + " --frame 8 -o " + farm.dir() + "/out-" + large).exit_code, 0);
+  expect_same_image(farm.fetched(large, 8), farm.local(large_args, 8));
+}
+
 TEST(Farm, HealthAndReflectionNameBothServices) {
   Farm farm("farm-health");
   EXPECT_EQ(check_health(farm.address()), "SERVING");

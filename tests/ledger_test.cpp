@@ -155,6 +155,67 @@ TEST(Ledger, EndingAJobStoresItsStateDropsItsLeasesAndItsTasks) {
   EXPECT_FALSE(b.ledger.lease("w", b.now, {})) << "no task of an ended job";
 }
 
+// Pause and resume, and a new priority: not states (a Queued or Running job keeps its state),
+// stored, idempotent, refused on an ended job. A paused job gets no new lease; its lease in
+// flight completes and is counted; resumed, it is leased again. A job raised above another is
+// leased first.
+TEST(Ledger, PauseResumeAndPriorityAreStoredAndSteerLeases) {
+  Bench b;
+  auto a = make_job("j1"), c = make_job("j2");
+  for (const char* id : {"j1", "j2"})
+    b.store.write(store::InsertJob{{id, 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*a);
+  b.ledger.add_job(*c);
+  std::optional<Lease> first = b.ledger.lease("w1", b.now, {});
+  ASSERT_TRUE(first);
+  EXPECT_EQ(first->task.job_id, "j1");
+  b.ledger.set_state(*a, JobState::Running, "");
+  b.ledger.set_paused(*a, true);
+  b.flush();
+  EXPECT_TRUE(a->paused);
+  EXPECT_EQ(a->state, JobState::Running) << "a pause is not a state";
+  EXPECT_TRUE(b.store.jobs()[0].paused);
+  for (int i = 0; i < 8; ++i) {  // every task of j2, none of the paused j1
+    std::optional<Lease> l = b.ledger.lease("w2", b.now, {});
+    ASSERT_TRUE(l);
+    EXPECT_EQ(l->task.job_id, "j2");
+  }
+  EXPECT_FALSE(b.ledger.lease("w2", b.now, {})) << "the paused job's tasks wait";
+  EXPECT_TRUE(b.ledger.scheduler().work_left_for("w2")) << "a pause is not an end";
+  // The lease in flight completes and counts.
+  b.ledger.complete(*a, first->lease_id, first->task, "w1", 1.0, "B", b.now);
+  b.flush();
+  EXPECT_EQ(b.store.tasks_done("j1"), 1u);
+  // Pausing again writes nothing; resuming leases j1's remaining tasks.
+  const size_t writes = b.store.jobs().size();
+  b.ledger.set_paused(*a, true);
+  EXPECT_EQ(b.store.jobs().size(), writes);
+  b.ledger.set_paused(*a, false);
+  b.flush();
+  EXPECT_FALSE(b.store.jobs()[0].paused);
+  std::optional<Lease> again = b.ledger.lease("w2", b.now, {});
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->task.job_id, "j1");
+  // Priority: a third job submitted later but raised above j1 gets every lease while it has
+  // tasks, though it then holds more leases than j1 (priority before fair share).
+  auto d = make_job("j3");
+  b.store.write(store::InsertJob{{"j3", 3, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*d);
+  b.ledger.set_priority(*d, 5);
+  b.flush();
+  EXPECT_EQ(d->priority, 5);
+  EXPECT_EQ(b.store.jobs()[2].priority, std::optional<int>(5));
+  EXPECT_FALSE(b.store.jobs()[0].priority) << "untouched: the spec's";
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(b.ledger.lease("w2", b.now, {})->task.job_id, "j3");
+  EXPECT_EQ(b.ledger.lease("w2", b.now, {})->task.job_id, "j1");
+  // Ended jobs take neither.
+  b.ledger.set_state(*c, JobState::Completed, "");
+  EXPECT_THROW(b.ledger.set_paused(*c, true), std::logic_error);
+  EXPECT_THROW(b.ledger.set_priority(*c, 9), std::logic_error);
+  EXPECT_FALSE(c->paused);
+  EXPECT_EQ(c->priority, 0);
+}
+
 // A task: leased, then done (one event, the core seconds, the build pinned once); a second
 // result needs nothing stored; refused, failed and held tasks go back to the queue (held ones to
 // another worker), a failure and a refusal are stored; a frame's stop ends its tasks.

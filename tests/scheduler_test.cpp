@@ -1,6 +1,11 @@
 // Task order, leases, late results, failures and hand-backs, on an explicit clock.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <functional>
+#include <map>
+#include <queue>
+
 #include "coordinator/scheduler.h"
 
 namespace rf {
@@ -47,6 +52,95 @@ TEST(Scheduler, AWorkerKeepsItsFrameWithinAPass) {
   EXPECT_EQ(lease("b"), T(1, 2, 0));  // b holds frame 1
   EXPECT_EQ(lease("a"), T(1, 2, 1));
   EXPECT_EQ(lease("a"), T(2, 2, 0));
+}
+
+// Workers on the scheduler's clock: each takes `task_seconds` per task and leases the next one at
+// once (a worker that gets nothing asks again a quarter second later); they start task_seconds /
+// n apart, as a farm's do. `arrive` is called once at time `at` (a job submitted then), `done`
+// for every completed task with the time it completed. Runs until `until`.
+struct Workers {
+  Scheduler& s;
+  int n = 8;
+  double task_seconds = 1;
+  void run(double until, double at, const std::function<void()>& arrive,
+           const std::function<void(const TaskRef&, double)>& done) {
+    using Event = std::pair<double, int>;  // (time, worker)
+    std::priority_queue<Event, std::vector<Event>, std::greater<Event>> events;
+    std::vector<std::optional<Lease>> held(static_cast<size_t>(n));
+    for (int w = 0; w < n; ++w) events.push({w * task_seconds / n, w});
+    bool arrived = false;
+    while (!events.empty() && events.top().first <= until) {
+      auto [t, w] = events.top();
+      events.pop();
+      if (!arrived && t >= at) arrived = true, arrive();
+      if (held[size_t(w)]) {
+        EXPECT_EQ(s.complete(held[size_t(w)]->lease_id, t), CompleteOutcome::Accepted);
+        done(held[size_t(w)]->task, t);
+      }
+      held[size_t(w)] = s.lease("w" + std::to_string(w), t);
+      events.push({t + (held[size_t(w)] ? task_seconds : 0.25), w});
+    }
+  }
+};
+
+// Fair share (docs/farm.md "Fair share"): a huge job (10,000 one-second tasks) holds all 8
+// workers when a small job of 40 tasks of the same priority arrives at t = 10.3. Its fair share
+// is half the farm, so its fair-share time is 40 / 4 = 10 s: it must finish within 1.2 times
+// that plus one task (13 s of its arrival), whether it is another tenant's (shared by tenant)
+// or the same tenant's (then by job). Under strict submission order (FairShare::None) it waits
+// for the huge job's 1,250 s: the test's own check that the bound can fail.
+TEST(Scheduler, ASmallJobAfterAHugeOneFinishesWithinItsFairShareTime) {
+  for (FairShare share : {FairShare::Tenants, FairShare::Jobs, FairShare::None})
+    for (const char* tenant : {"other", "same"}) {
+      SchedulerOptions o{30, 3, 4};
+      o.share = share;
+      Scheduler s(o);
+      s.add_job("huge", {0, 1, 2, 3, 4, 5, 6, 7, 8, 9}, /*tiles=*/1000, /*passes=*/1, 0, "same");
+      const double at = 10.3;
+      double finished = -1;
+      int small_done = 0;
+      Workers{s}.run(
+          60, at, [&] { s.add_job("small", {0}, /*tiles=*/40, /*passes=*/1, 0, tenant); },
+          [&](const TaskRef& t, double when) {
+            if (t.job_id == "small" && ++small_done == 40) finished = when;
+          });
+      const double fair = 40.0 / (8 / 2), bound = 1.2 * fair + 1;
+      if (share == FairShare::None) {
+        EXPECT_EQ(finished, -1) << "strict order: the small job waits for the huge one";
+        continue;
+      }
+      ASSERT_GT(finished, 0) << tenant;
+      std::printf(
+          "share %s, %s tenant: the small job finished %.2f s after it arrived (fair %.0f s, "
+          "bound %.0f s)\n",
+          share == FairShare::Tenants ? "tenants" : "jobs", tenant, finished - at, fair, bound);
+      EXPECT_LE(finished - at, bound) << tenant << " tenant, share " << int(share);
+      EXPECT_GE(finished - at, fair - 1) << "no more than its share";
+    }
+}
+
+// Shared by tenant, a tenant with two jobs and a tenant with one each hold half the workers; shared
+// by job, each of the three jobs holds a third.
+TEST(Scheduler, TenantsShareFirstThenTheirJobs) {
+  for (FairShare share : {FairShare::Tenants, FairShare::Jobs}) {
+    SchedulerOptions o{30, 3, 4};
+    o.share = share;
+    Scheduler s(o);
+    s.add_job("a1", {0}, 1000, 1, 0, "a");
+    s.add_job("a2", {0}, 1000, 1, 0, "a");
+    s.add_job("b", {0}, 1000, 1, 0, "b");
+    std::map<std::string, int> held;
+    for (int w = 0; w < 12; ++w) ++held[s.lease("w" + std::to_string(w), 0)->task.job_id];
+    if (share == FairShare::Tenants) {
+      EXPECT_EQ(held["b"], 6);
+      EXPECT_EQ(held["a1"] + held["a2"], 6);
+      EXPECT_EQ(held["a1"], 3);
+    } else {
+      EXPECT_EQ(held["a1"], 4);
+      EXPECT_EQ(held["a2"], 4);
+      EXPECT_EQ(held["b"], 4);
+    }
+  }
 }
 
 TEST(Scheduler, PriorityThenSubmissionOrder) {
