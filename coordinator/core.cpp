@@ -261,7 +261,7 @@ CoordinatorMetrics Coordinator::metrics() const {
       j.tasks_queued = it->second.queued;
       j.tasks_leased = it->second.leased;
     }
-    m.tasks_queued += j.tasks_queued;
+    (job->paused ? m.tasks_paused : m.tasks_queued) += j.tasks_queued;
     m.tasks_leased += j.tasks_leased;
     for (const auto& f : job->frames)
       if (!f->progress.done && f->progress.passes_merged > 0)

@@ -174,7 +174,8 @@ struct CoordinatorMetrics {
     std::vector<FrameStatus> frames;  // frames with a merged pass and not done
   };
   Counters counters;
-  uint64_t tasks_queued = 0;  // over all jobs
+  uint64_t tasks_queued = 0;  // over all jobs but paused ones (the autoscalers scale on it)
+  uint64_t tasks_paused = 0;  // waiting in paused jobs (no worker would get them)
   uint64_t tasks_leased = 0;
   size_t workers_registered = 0;
   size_t workers_connected = 0;  // heard from within one lease time

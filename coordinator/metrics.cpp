@@ -52,8 +52,11 @@ std::vector<MetricFamily> metric_families(const CoordinatorMetrics& m) {
   const auto C = MetricType::Counter, G = MetricType::Gauge;
   const CoordinatorMetrics::Counters& c = m.counters;
   std::vector<MetricFamily> out;
-  out.push_back(single("rayfarm_tasks_queued", "Tasks waiting for a worker, over all jobs", G,
+  out.push_back(single("rayfarm_tasks_queued",
+                       "Tasks waiting for a worker, over all jobs but paused ones", G,
                        double(m.tasks_queued)));
+  out.push_back(
+      single("rayfarm_tasks_paused", "Tasks waiting in paused jobs", G, double(m.tasks_paused)));
   out.push_back(single("rayfarm_tasks_in_flight", "Tasks leased to a worker now, over all jobs", G,
                        double(m.tasks_leased)));
   out.push_back(

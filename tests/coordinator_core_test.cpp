@@ -256,6 +256,32 @@ TEST(CoordinatorCore, AWorkerThatFailsRepeatedlyGetsNoMoreTasksOfTheJob) {
   EXPECT_TRUE(failed.count(good.task)) << "a failed task is queued again";
 }
 
+// A paused job leases nothing, its lease in flight still merges, and its waiting tasks leave the
+// autoscalers' queue (rayfarm_tasks_queued) for rayfarm_tasks_paused; resumed, it leases again.
+// Pause is idempotent and refused once the job ended.
+TEST(CoordinatorCore, APausedJobLeasesNothingAndLeavesTheQueueMetric) {
+  CoreBench bench("core-pause");
+  std::string job = bench.submit(2);  // 2 passes of 4 tiles
+  TaskAssignment out = bench.lease();
+  bench.core().set_paused(job, true);
+  bench.core().set_paused(job, true);
+  EXPECT_FALSE(bench.core().lease(bench.worker("w")).task);
+  CoordinatorMetrics m = bench.core().metrics();
+  EXPECT_EQ(m.tasks_queued, 0u);
+  EXPECT_EQ(m.tasks_paused, 7u);
+  EXPECT_EQ(m.tasks_leased, 1u);
+  EXPECT_TRUE(bench.complete(out, 0.5f)) << "a lease in flight merges";
+  EXPECT_TRUE(bench.core().status(job).paused);
+  bench.core().set_paused(job, false);
+  m = bench.core().metrics();
+  EXPECT_EQ(m.tasks_queued, 7u);
+  EXPECT_EQ(m.tasks_paused, 0u);
+  for (int i = 0; i < 7; ++i) EXPECT_TRUE(bench.complete(bench.lease(), 0.5f));
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
+  EXPECT_EQ(refusal([&] { bench.core().set_paused(job, true); }), ErrorCode::FailedPrecondition);
+  EXPECT_EQ(refusal([&] { bench.core().set_priority(job, 3); }), ErrorCode::FailedPrecondition);
+}
+
 // A task failing on max_failures (3) different workers fails its job with their messages, also
 // when the failures straddle a restart.
 TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {

@@ -101,6 +101,7 @@ TEST(Metrics, ASnapshotBecomesFamiliesWithJobSeriesOnlyForLiveJobs) {
   m.counters.lease_buckets[0] = 2;  // <= 0.5 ms
   m.counters.lease_buckets[4] = 1;  // <= 10 ms
   m.tasks_queued = 5;
+  m.tasks_paused = 3;
   m.jobs_by_state[size_t(JobState::Running)] = 1;
   CoordinatorMetrics::Job j;
   j.job_id = "j000004";
@@ -122,6 +123,7 @@ TEST(Metrics, ASnapshotBecomesFamiliesWithJobSeriesOnlyForLiveJobs) {
   EXPECT_EQ(by_name["rayfarm_tasks_leased_total"]->type, prometheus::MetricType::Counter);
   EXPECT_EQ(by_name["rayfarm_tasks_leased_total"]->metric.at(0).counter.value, 7);
   EXPECT_EQ(by_name["rayfarm_tasks_queued"]->metric.at(0).gauge.value, 5);
+  EXPECT_EQ(by_name["rayfarm_tasks_paused"]->metric.at(0).gauge.value, 3);
   const auto& h = by_name["rayfarm_lease_duration_seconds"]->metric.at(0).histogram;
   EXPECT_EQ(h.sample_count, 3u);
   ASSERT_EQ(h.bucket.size(), std::size(CoordinatorMetrics::kLeaseBuckets) + 1);
