@@ -1,5 +1,5 @@
 // The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority,
-// health (cli/farm.h runs them).
+// workers, health (cli/farm.h runs them).
 #include "cli/commands.h"
 #include "client/commands.h"
 #include "farm/auth.h"
@@ -113,6 +113,11 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
       ->required()
       ->check(finite_in(-1e9, 1e9));
   out.push_back({priority, [a, ep] { return cmd_priority(ep(), a->job, a->priority); }});
+
+  auto* workers = app.add_subcommand("workers", "list the registered workers");
+  add_addr(workers, &a->timeout);
+  workers->add_flag("--json", a->json, "machine-readable output");
+  out.push_back({workers, [a, ep] { return cmd_workers(ep(), a->json); }});
 
   auto* health = app.add_subcommand("health", "check a coordinator's gRPC health service");
   health->add_option("--coordinator", shared.coordinator,

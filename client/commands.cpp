@@ -1,6 +1,6 @@
 // The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority,
-// health. Each talks to one coordinator: --coordinator ADDR, else $RAYFARM_COORDINATOR, else
-// 127.0.0.1:7070.
+// workers, health. Each talks to one coordinator: --coordinator ADDR, else $RAYFARM_COORDINATOR,
+// else 127.0.0.1:7070.
 #include "client/commands.h"
 
 #include <grpcpp/grpcpp.h>
@@ -566,6 +566,44 @@ int cmd_priority(const Endpoint& ep, const std::string& job, int priority) {
             30, [&](grpc::ClientContext& ctx) { return stub->SetJobPriority(&ctx, req, &status); }),
         "priority", ep, &retry);
   std::fprintf(stderr, "job %s priority %d\n", job.c_str(), status.priority());
+  return 0;
+}
+
+int cmd_workers(const Endpoint& ep, bool json) {
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  pb::ListWorkersResponse resp;
+  check(retry.run(30,
+                  [&](grpc::ClientContext& ctx) {
+                    return stub->ListWorkers(&ctx, pb::ListWorkersRequest{}, &resp);
+                  }),
+        "workers", ep, &retry);
+  nlohmann::json all = nlohmann::json::array();
+  for (const pb::WorkerStatus& w : resp.workers()) {
+    if (json) {
+      all.push_back({{"worker_id", w.worker_id()},
+                     {"hostname", w.hostname()},
+                     {"cores", w.cores()},
+                     {"build_id", w.build_id()},
+                     {"isa", w.isa()},
+                     {"tasks", std::vector<std::string>(w.tasks().begin(), w.tasks().end())},
+                     {"failures", w.failures()},
+                     {"seconds_since_contact", w.seconds_since_contact()},
+                     {"refused", w.refused()},
+                     {"principal", w.principal()}});
+      continue;
+    }
+    std::string tasks;
+    for (const std::string& t : w.tasks()) tasks += (tasks.empty() ? "" : ",") + printable(t);
+    const std::string contact = w.seconds_since_contact() < 0
+                                    ? std::string("never")
+                                    : duration_text(w.seconds_since_contact()) + " ago";
+    std::printf("%-32s %3u cores %-8s failures %u  last contact %s  %s%s\n",
+                printable(w.worker_id()).c_str(), w.cores(), printable(w.isa()).c_str(),
+                w.failures(), contact.c_str(), tasks.empty() ? "idle" : tasks.c_str(),
+                w.refused().empty() ? "" : ("  REFUSED: " + printable(w.refused())).c_str());
+  }
+  if (json) std::printf("%s\n", all.dump(2).c_str());
   return 0;
 }
 

@@ -1,5 +1,5 @@
 // The farm's client commands (`rayfarm submit | status | watch | fetch | cancel | pause | resume |
-// priority | health`).
+// priority | workers | health`).
 #pragma once
 
 #include <optional>
@@ -59,6 +59,8 @@ int cmd_cancel(const Endpoint& ep, const std::string& job);
 // pause (no new leases; leases in flight finish) or resume; idempotent.
 int cmd_pause(const Endpoint& ep, const std::string& job, bool pause);
 int cmd_priority(const Endpoint& ep, const std::string& job, int priority);
+// The registered workers: tasks, failures, last contact (--json: machine-readable).
+int cmd_workers(const Endpoint& ep, bool json);
 int cmd_health(const Endpoint& ep, bool list_services);
 
 }  // namespace rf

@@ -83,7 +83,7 @@ Coordinator::Coordinator(CoreOptions o)
   next_seq_ = store_->next_seq();
   for (const StoredWorker& w : store_->workers()) {
     // A worker of before the restart has the sweep's time from now to call.
-    workers_[w.id] = {w.principal, w.build_id, now()};
+    workers_[w.id] = {w.principal, w.build_id, {}, now()};
     if (!w.refused.empty()) outvoted_[w.id] = w.refused;
   }
   for (const StoredJob& j : store_->jobs()) restore(j);

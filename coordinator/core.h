@@ -84,6 +84,17 @@ struct WorkerInfo {
   std::string build_id, isa;
 };
 
+// A registered worker as `workers` lists it.
+struct WorkerStatus {
+  std::string worker_id;
+  std::string principal;  // who registered it (empty for a caller who may not see it)
+  WorkerInfo info;        // as registered in this coordinator's run (empty after a restart)
+  std::vector<std::string> tasks;  // its live leases' task ids ("another tenant's task" hidden)
+  int failures = 0;                // failed tasks and refused results, in jobs not ended
+  double seconds_since_contact = 0;
+  std::string refused;  // why it is refused for good (outvoted), or empty
+};
+
 struct Registration {
   std::string worker_id;
   uint32_t lease_seconds = 0;      // renew well within this
@@ -282,6 +293,10 @@ class Coordinator {
   void refuse_upload(const std::string& worker_id, const std::string& lease_id, const TaskRef& task,
                      const std::string& why);
 
+  // The registered workers, by id. A caller without all_tenants sees other tenants' tasks as
+  // "(another tenant's task)" and no principals.
+  std::vector<WorkerStatus> workers(const Caller& caller = {}) const;
+
   // Refuses leases and ends watches from now on.
   void shut_down();
 
@@ -373,6 +388,7 @@ class Coordinator {
   struct WorkerRecord {
     std::string principal;      // the identity that registered it
     std::string build_id;       // the build it said it runs
+    WorkerInfo info;            // as registered in this run (empty when restored)
     double registered_at = 0;   // now() at its registration, or at this coordinator's start
     mutable bool used = false;  // a call other than Register named it (check_worker)
   };

@@ -460,6 +460,22 @@ bool Scheduler::work_left_for(const std::string& worker_id, const JobFilter& may
   return false;
 }
 
+std::vector<TaskRef> Scheduler::leased_to(const std::string& worker_id) const {
+  std::vector<TaskRef> out;
+  for (const auto& [id, l] : leases_)
+    if (l.live && l.worker_id == worker_id) out.push_back(l.task);
+  return out;
+}
+
+int Scheduler::failures_of(const std::string& worker_id) const {
+  int n = 0;
+  for (const auto& [id, j] : jobs_) {
+    if (j.failed || j.cancelled) continue;
+    if (auto it = j.worker_failures.find(worker_id); it != j.worker_failures.end()) n += it->second;
+  }
+  return n;
+}
+
 uint64_t Scheduler::queued_in(const JobState& j, const FrameState& f) const {
   if (f.open_tasks == 0) return 0;
   uint64_t limit = uint64_t(f.passes_needed) * j.tiles;

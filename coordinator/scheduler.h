@@ -126,6 +126,9 @@ class Scheduler {
   // The jobs of the live leases held by workers for which `whose` is true.
   std::set<std::string> leased_jobs(
       const std::function<bool(const std::string& worker_id)>& whose) const;
+  // A worker's live leases' tasks, and its failures and refused results in jobs not ended.
+  std::vector<TaskRef> leased_to(const std::string& worker_id) const;
+  int failures_of(const std::string& worker_id) const;
   // Queued or leased tasks this worker could still get (for --exit-when-idle).
   bool work_left_for(const std::string& worker_id, const JobFilter& may = {}) const;
   size_t queued_tasks() const;

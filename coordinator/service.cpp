@@ -444,6 +444,24 @@ class JobServiceImpl final : public pb::JobService::Service {
       *o = to_wire(c_.status(r->job_id(), caller));
     });
   }
+  Status ListWorkers(ServerContext* ctx, const pb::ListWorkersRequest*,
+                     pb::ListWorkersResponse* o) override {
+    return guarded(g_, ctx, Access::Client, "ListWorkers", [&](const Caller& caller) {
+      for (const WorkerStatus& w : c_.workers(caller)) {
+        pb::WorkerStatus* p = o->add_workers();
+        p->set_worker_id(w.worker_id);
+        p->set_hostname(w.info.hostname);
+        p->set_cores(w.info.cores);
+        p->set_build_id(w.info.build_id);
+        p->set_isa(w.info.isa);
+        for (const std::string& t : w.tasks) p->add_tasks(t);
+        p->set_failures(uint32_t(w.failures));
+        p->set_seconds_since_contact(w.seconds_since_contact);
+        p->set_refused(w.refused);
+        p->set_principal(w.principal);
+      }
+    });
+  }
   Status FetchFrame(ServerContext* ctx, const pb::FetchRequest* r,
                     grpc::ServerWriter<pb::FetchResponse>* w) override {
     return guarded(g_, ctx, Access::Client, "FetchFrame", [&](const Caller& caller) {

@@ -60,11 +60,35 @@ Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& cal
     refuse(ErrorCode::Unavailable, std::string("cannot store the registration now: ") + e.what());
   }
   std::lock_guard lock(mu_);
-  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256), now()};
+  WorkerInfo info{host, w.cores, w.build_id.substr(0, 256), w.isa.substr(0, 64)};
+  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256), info, now()};
   last_seen_[r.worker_id] = now();
   spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
                w.cores, clip(w.build_id), clip(w.isa));
   return r;
+}
+
+std::vector<WorkerStatus> Coordinator::workers(const Caller& caller) const {
+  std::lock_guard lock(mu_);
+  std::vector<WorkerStatus> out;
+  for (const auto& [id, w] : workers_) {
+    WorkerStatus s;
+    s.worker_id = id;
+    if (caller.all_tenants) s.principal = w.principal;
+    s.info = w.info;
+    for (const TaskRef& t : ledger_->scheduler().leased_to(id)) {
+      auto job = jobs_.find(t.job_id);
+      const bool visible =
+          caller.all_tenants || (job != jobs_.end() && job->second->tenant == caller.tenant);
+      s.tasks.push_back(visible ? task_id_text(t) : "(another tenant's task)");
+    }
+    s.failures = ledger_->scheduler().failures_of(id);
+    auto seen = last_seen_.find(id);
+    s.seconds_since_contact = seen == last_seen_.end() ? -1 : now() - seen->second;
+    if (auto o = outvoted_.find(id); o != outvoted_.end()) s.refused = o->second;
+    out.push_back(std::move(s));
+  }
+  return out;
 }
 
 void Coordinator::check_worker(const std::string& worker_id, const Caller& caller) const {

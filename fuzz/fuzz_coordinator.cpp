@@ -8,7 +8,8 @@
 // Requests: submit (a mutated valid spec, or any bytes as a serialized rayfarm.v1.JobSpec, read
 // by the service's own conversion), upload a blob, register, lease, renew, upload a result (a
 // valid buffer, one with flipped bytes, or any bytes; the upload's header checked first, as the
-// service does), fail, cancel, pause/resume, priority, status/list/watch, fetch, missing blobs, a
+// service does), fail, cancel, pause/resume, priority, workers, status/list/watch, fetch, missing
+// blobs, a
 // clock jump (leases expire) and a restart of the coordinator on the same state directory.
 //
 // Findings, beyond what the sanitizers see:
@@ -131,7 +132,7 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
-constexpr int kRequests = 16;  // the operations of Farm::request
+constexpr int kRequests = 17;  // the operations of Farm::request
 
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
@@ -316,6 +317,9 @@ class Farm {
       }
       case 14:  // pause or resume
         core_->set_paused(job_id(in), in.byte() & 1, caller);
+        return;
+      case 16:
+        core_->workers(caller);
         return;
       case 15: {  // a new priority, any 32-bit value
         const std::string job = job_id(in);

@@ -282,6 +282,43 @@ TEST(CoordinatorCore, APausedJobLeasesNothingAndLeavesTheQueueMetric) {
   EXPECT_EQ(refusal([&] { bench.core().set_priority(job, 3); }), ErrorCode::FailedPrecondition);
 }
 
+// `workers`: each registered worker with what it registered, its live leases' tasks, its
+// failures in jobs not ended, and how long since it called; another tenant sees the tasks of
+// jobs not its own hidden, and no principals.
+TEST(CoordinatorCore, WorkersListTheirTasksFailuresAndLastContact) {
+  CoreBench bench("core-workers");
+  const Caller shot1{"alice", "shot1", false}, shot2{"bob", "shot2", false};
+  std::string job = bench.submit(2, shot1);
+  TaskAssignment a = bench.lease("busy");
+  TaskAssignment b = bench.lease("flaky");
+  bench.core().fail({bench.worker("flaky"), b.lease_id, "out of memory", false});
+  bench.now += 5;
+  bench.core().renew(bench.worker("busy"), a.lease_id);
+  bench.now += 2;
+  std::map<std::string, WorkerStatus> by_host;
+  for (const WorkerStatus& w : bench.core().workers()) by_host[w.info.hostname] = w;
+  ASSERT_EQ(by_host.size(), 2u);
+  EXPECT_EQ(by_host["busy"].tasks, std::vector<std::string>{task_id_text(a.task)});
+  EXPECT_EQ(by_host["busy"].failures, 0);
+  EXPECT_DOUBLE_EQ(by_host["busy"].seconds_since_contact, 2);
+  EXPECT_EQ(by_host["busy"].principal, "local");
+  EXPECT_EQ(by_host["busy"].info.cores, 1u);
+  EXPECT_TRUE(by_host["flaky"].tasks.empty());
+  EXPECT_EQ(by_host["flaky"].failures, 1);
+  EXPECT_DOUBLE_EQ(by_host["flaky"].seconds_since_contact, 7);
+  for (const WorkerStatus& w : bench.core().workers(shot1))
+    if (w.info.hostname == "busy") EXPECT_EQ(w.tasks[0], task_id_text(a.task));
+  for (const WorkerStatus& w : bench.core().workers(shot2)) {
+    EXPECT_TRUE(w.principal.empty());
+    if (w.info.hostname == "busy") EXPECT_EQ(w.tasks[0], "(another tenant's task)");
+  }
+  bench.core().cancel(job, shot1);
+  for (const WorkerStatus& w : bench.core().workers()) {
+    EXPECT_TRUE(w.tasks.empty()) << w.worker_id;
+    EXPECT_EQ(w.failures, 0) << "failures count in jobs not ended";
+  }
+}
+
 // A task failing on max_failures (3) different workers fails its job with their messages, also
 // when the failures straddle a restart.
 TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {

@@ -609,7 +609,16 @@ TEST(Farm, PausedJobsWaitRaisedJobsGoFirstAndAResumedJobFinishesAsLocally) {
   EXPECT_EQ(farm.status(a)["paused"], false);
   ASSERT_EQ(farm.client("fetch " + a + " -o " + farm.dir() + "/out-" + a).exit_code, 0);
   expect_same_image(farm.fetched(a, 1), farm.local(args, 1));
-  test::CommandResult r = farm.client("pause " + a);
+  // `workers`: the one worker, as it registered, with no task left.
+  test::CommandResult r = farm.client("workers --json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json workers = nlohmann::json::parse(r.output.substr(r.output.find('[')));
+  ASSERT_EQ(workers.size(), 1u) << r.output;
+  EXPECT_GE(workers[0]["cores"].get<int>(), 1);
+  EXPECT_FALSE(workers[0]["isa"].get<std::string>().empty());
+  EXPECT_TRUE(workers[0]["tasks"].empty());
+  EXPECT_NE(farm.client("workers").output.find("idle"), std::string::npos);
+  r = farm.client("pause " + a);
   EXPECT_EQ(r.exit_code, 1) << r.output;
   EXPECT_NE(r.output.find("FAILED_PRECONDITION: job " + a + " has already completed"),
             std::string::npos)

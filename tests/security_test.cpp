@@ -92,6 +92,10 @@ std::map<std::string, grpc::StatusCode> call_every_method(std::shared_ptr<grpc::
     pb::JobStatus r;
     return jobs->SetJobPriority(&c, req, &r);
   });
+  unary("ListWorkers", [&](grpc::ClientContext& c) {
+    pb::ListWorkersResponse r;
+    return jobs->ListWorkers(&c, pb::ListWorkersRequest{}, &r);
+  });
   unary("FetchFrame", [&](grpc::ClientContext& c) {
     pb::FetchRequest req;
     req.set_job_id("j999999");
