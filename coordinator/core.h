@@ -353,6 +353,14 @@ class Coordinator {
   // Waits (without mu_) until the journal has stored everything up to `ticket`; after
   // kStoreWaitSeconds refuses UNAVAILABLE naming `what` and the store's problem.
   void wait_stored(uint64_t ticket, const std::string& what) const;
+  // A setting of a Queued or Running job that a client changes (pause, resume, priority):
+  // refused with FailedPrecondition ("... has already completed; " + refused_because) once the
+  // job ended, nothing when `unchanged`, else `change` (the ledger's), the folder's copy, a log
+  // line "job J <action> by P" and the watchers told; returns once the change is stored.
+  void change_setting(const std::string& id, const Caller& caller, const std::string& action,
+                      const std::string& refused_because,
+                      const std::function<bool(const JobRecord&)>& unchanged,
+                      const std::function<uint64_t(JobRecord&)>& change);
   static constexpr double kStoreWaitSeconds = 10;
   JobStatus status_of(const JobRecord& job) const;                             // under mu_
   FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;  // under mu_

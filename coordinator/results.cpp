@@ -65,41 +65,40 @@ void Coordinator::cancel(const std::string& id, const Caller& caller) {
   }
 }
 
-void Coordinator::set_paused(const std::string& id, bool paused, const Caller& caller) {
+void Coordinator::change_setting(const std::string& id, const Caller& caller,
+                                 const std::string& action, const std::string& refused_because,
+                                 const std::function<bool(const JobRecord&)>& unchanged,
+                                 const std::function<uint64_t(JobRecord&)>& change) {
   Ledger::Ticket ticket = 0;
   {
     std::lock_guard lock(mu_);
     std::shared_ptr<JobRecord> job = find_for(id, caller);
     if (terminal(job->state))
-      refuse(ErrorCode::FailedPrecondition, "job " + id + " has already " + ended_verb(job->state) +
-                                                "; there is nothing to " +
-                                                (paused ? "pause" : "resume"));
-    if (job->paused == paused) return;  // idempotent: a second or retried call
-    ticket = ledger_->set_paused(*job, paused);
+      refuse(ErrorCode::FailedPrecondition,
+             "job " + id + " has already " + ended_verb(job->state) + "; " + refused_because);
+    if (unchanged(*job)) return;  // idempotent: a second or retried call
+    ticket = change(*job);
     write_folder_state(*job);
-    spdlog::info("job {} {} by {}", job->id, paused ? "paused" : "resumed", caller.principal);
+    spdlog::info("job {} {} by {}", job->id, action, caller.principal);
     ++version_;
     changed_.notify_all();
   }
-  wait_stored(ticket, paused ? "the pause" : "the resume");
+  wait_stored(ticket, "the change (" + action + ")");
+}
+
+void Coordinator::set_paused(const std::string& id, bool paused, const Caller& caller) {
+  change_setting(
+      id, caller, paused ? "paused" : "resumed",
+      std::string("there is nothing to ") + (paused ? "pause" : "resume"),
+      [&](const JobRecord& j) { return j.paused == paused; },
+      [&](JobRecord& j) { return ledger_->set_paused(j, paused); });
 }
 
 void Coordinator::set_priority(const std::string& id, int priority, const Caller& caller) {
-  Ledger::Ticket ticket = 0;
-  {
-    std::lock_guard lock(mu_);
-    std::shared_ptr<JobRecord> job = find_for(id, caller);
-    if (terminal(job->state))
-      refuse(ErrorCode::FailedPrecondition, "job " + id + " has already " + ended_verb(job->state) +
-                                                "; its priority no longer matters");
-    if (job->priority == priority) return;
-    ticket = ledger_->set_priority(*job, priority);
-    write_folder_state(*job);
-    spdlog::info("job {} priority {} by {}", job->id, priority, caller.principal);
-    ++version_;
-    changed_.notify_all();
-  }
-  wait_stored(ticket, "the priority");
+  change_setting(
+      id, caller, "given priority " + std::to_string(priority), "its priority no longer matters",
+      [&](const JobRecord& j) { return j.priority == priority; },
+      [&](JobRecord& j) { return ledger_->set_priority(j, priority); });
 }
 
 // Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
