@@ -3,6 +3,7 @@
 #include "cli/commands.h"
 #include "client/commands.h"
 #include "farm/auth.h"
+#include "farm/tags.h"
 
 namespace rf::cli {
 
@@ -19,8 +20,8 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   struct Args {
     OverrideArgs overrides;
     SubmitArgs submit;
-    std::string job, fetch_dir, fetch_frames, health_addr;
-    bool json = false, services = false;
+    std::string job, fetch_dir, fetch_frames, retry_frames, health_addr;
+    bool json = false, services = false, force = false;
     StatusPage page;
     std::optional<FrameNumber> fetch_frame;
     float fetch_exposure = 0;
@@ -52,6 +53,11 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
       ->check(finite_in(8, 4096));
   submit->add_option("--build-id", a->submit.build_id,
                      "merge results of this worker build only (default: the first result's)");
+  submit
+      ->add_option("--require", a->submit.required_tags,
+                   "a worker tag the job needs: NAME, NAME=VALUE or NAME>=NUMBER (repeatable; "
+                   "pool=NAME picks a worker pool)")
+      ->check([](const std::string& r) { return requirement_problem(r); });
   out.push_back({submit, [a, ep] {
                    a->submit.overrides = overrides_of(a->overrides);
                    return cmd_submit(ep(), a->submit);
@@ -113,6 +119,22 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
       ->required()
       ->check(finite_in(-1e9, 1e9));
   out.push_back({priority, [a, ep] { return cmd_priority(ep(), a->job, a->priority); }});
+
+  auto* retry = app.add_subcommand(
+      "retry", "run a failed or cancelled job's unfinished frames again (failure counts afresh)");
+  add_addr(retry, &a->timeout);
+  retry->add_option("job", a->job, "job id")->required();
+  retry->add_option("--frames", a->retry_frames,
+                    "only these frames (1-24, 1-24:2, 1,5,9); the job's other unfinished frames "
+                    "are held until a later retry");
+  out.push_back({retry, [a, ep] { return cmd_retry(ep(), a->job, a->retry_frames); }});
+
+  auto* del =
+      app.add_subcommand("delete", "remove an ended job and its files (its scene blobs stay)");
+  add_addr(del, &a->timeout);
+  del->add_option("job", a->job, "job id")->required();
+  del->add_flag("--force", a->force, "also a queued or running job (its work in flight is lost)");
+  out.push_back({del, [a, ep] { return cmd_delete(ep(), a->job, a->force); }});
 
   auto* workers = app.add_subcommand("workers", "list the registered workers");
   add_addr(workers, &a->timeout);

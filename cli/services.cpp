@@ -4,6 +4,7 @@
 #include "coordinator/scene_check.h"
 #include "coordinator/service.h"
 #include "farm/auth.h"
+#include "farm/tags.h"
 #include "worker/worker.h"
 
 #include <cctype>
@@ -166,6 +167,16 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                    "rewrite this file at least every max(15 s, lease/3) while the worker runs, "
                    "for container health checks (default: $RAYFARM_HEARTBEAT_FILE; docs/deploy.md)")
       ->envname("RAYFARM_HEARTBEAT_FILE");
+  worker
+      ->add_option("--tag", wo->tags,
+                   "a tag to advertise, NAME or NAME=VALUE (repeatable; jobs may require tags); "
+                   "isa=, cores= and memory_gb= are automatic")
+      ->check([](const std::string& t) { return tag_problem(t); });
+  worker
+      ->add_option_function<std::string>(
+          "--pool", [wo](const std::string& p) { wo->tags.push_back("pool=" + p); },
+          "the worker pool it belongs to (the tag pool=NAME)")
+      ->check([](const std::string& p) { return tag_problem("pool=" + p); });
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)")
       ->check(finite_in(0, 4096));
   add_credential_options(*worker, shared);

@@ -1,6 +1,6 @@
-// The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority,
-// workers, health. Each talks to one coordinator: --coordinator ADDR, else $RAYFARM_COORDINATOR,
-// else 127.0.0.1:7070.
+// The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority, retry,
+// delete, workers, health. Each talks to one coordinator: --coordinator ADDR, else
+// $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
 #include "client/commands.h"
 
 #include <grpcpp/grpcpp.h>
@@ -208,6 +208,7 @@ JobSpec job_spec(const SubmitArgs& a) {
   spec.priority = a.priority;
   spec.tile_size = uint32_t(a.tile_size);
   spec.build_id = a.build_id;
+  spec.required_tags = a.required_tags;
   return spec;
 }
 
@@ -291,6 +292,10 @@ nlohmann::json to_json(const pb::JobStatus& j) {
           {"submitted_unix", j.submitted_unix()},
           {"paused", j.paused()},
           {"priority", j.priority()},
+          {"held_frames", j.held_frames()},
+          {"build_id", j.build_id()},
+          {"cpu_kind", j.cpu_kind()},
+          {"waiting_for", j.waiting_for()},
           {"frames", frames}};
 }
 
@@ -322,7 +327,10 @@ std::string job_line(const pb::JobStatus& j) {
                 j.paused()  ? "paused"
                 : eta_known ? duration_text(eta).c_str()
                             : "?");
-  return buf;
+  std::string line = buf;
+  if (!j.held_frames().empty()) line += "  held " + printable(j.held_frames());
+  if (!j.waiting_for().empty()) line += "  WAITING: " + printable(j.waiting_for());
+  return line;
 }
 
 }  // namespace
@@ -569,6 +577,39 @@ int cmd_priority(const Endpoint& ep, const std::string& job, int priority) {
   return 0;
 }
 
+int cmd_retry(const Endpoint& ep, const std::string& job, const std::string& frames) {
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  pb::RetryRequest req;
+  req.set_job_id(job);
+  req.set_frames(frames);
+  pb::JobStatus status;
+  // Idempotent for frames that run already: a retry whose first attempt got through succeeds.
+  check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->RetryJob(&ctx, req, &status); }),
+        "retry", ep, &retry);
+  std::fprintf(stderr, "job %s %s%s\n", job.c_str(), state_name(status.state()),
+               status.held_frames().empty()
+                   ? ""
+                   : ("; frames " + printable(status.held_frames()) + " held").c_str());
+  return 0;
+}
+
+int cmd_delete(const Endpoint& ep, const std::string& job, bool force) {
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  pb::DeleteRequest req;
+  req.set_job_id(job);
+  req.set_force(force);
+  pb::DeleteResponse resp;
+  grpc::Status s =
+      retry.run(30, [&](grpc::ClientContext& ctx) { return stub->DeleteJob(&ctx, req, &resp); });
+  // A retried delete whose first attempt got through finds no job: that is what was asked.
+  if (retry.retries() > 0 && s.error_code() == grpc::StatusCode::NOT_FOUND) s = grpc::Status::OK;
+  check(s, "delete", ep, &retry);
+  std::fprintf(stderr, "job %s deleted\n", job.c_str());
+  return 0;
+}
+
 int cmd_workers(const Endpoint& ep, bool json) {
   auto stub = job_stub(ep);
   Retry retry(ep);
@@ -586,6 +627,7 @@ int cmd_workers(const Endpoint& ep, bool json) {
                      {"cores", w.cores()},
                      {"build_id", w.build_id()},
                      {"isa", w.isa()},
+                     {"tags", std::vector<std::string>(w.tags().begin(), w.tags().end())},
                      {"tasks", std::vector<std::string>(w.tasks().begin(), w.tasks().end())},
                      {"failures", w.failures()},
                      {"seconds_since_contact", w.seconds_since_contact()},
@@ -598,9 +640,14 @@ int cmd_workers(const Endpoint& ep, bool json) {
     const std::string contact = w.seconds_since_contact() < 0
                                     ? std::string("never")
                                     : duration_text(w.seconds_since_contact()) + " ago";
-    std::printf("%-32s %3u cores %-8s failures %u  last contact %s  %s%s\n",
+    std::string tags;  // the ones set by hand: isa, cores and memory are every worker's
+    for (const std::string& t : w.tags())
+      if (t.rfind("isa=", 0) && t.rfind("cores=", 0) && t.rfind("memory_gb=", 0))
+        tags += " " + printable(t);
+    std::printf("%-32s %3u cores %-8s failures %u  last contact %s  %s%s%s\n",
                 printable(w.worker_id()).c_str(), w.cores(), printable(w.isa()).c_str(),
                 w.failures(), contact.c_str(), tasks.empty() ? "idle" : tasks.c_str(),
+                tags.empty() ? "" : ("  tags:" + tags).c_str(),
                 w.refused().empty() ? "" : ("  REFUSED: " + printable(w.refused())).c_str());
   }
   if (json) std::printf("%s\n", all.dump(2).c_str());

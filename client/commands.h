@@ -39,6 +39,7 @@ struct SubmitArgs {
   int priority = 0;
   int tile_size = 0;     // 0: the coordinator's default
   std::string build_id;  // merge results of this build only (empty: the first result's)
+  std::vector<std::string> required_tags;  // worker tags the job needs (farm/tags.h)
 };
 
 int cmd_submit(const Endpoint& ep, const SubmitArgs& args);  // prints the job id
@@ -59,6 +60,11 @@ int cmd_cancel(const Endpoint& ep, const std::string& job);
 // pause (no new leases; leases in flight finish) or resume; idempotent.
 int cmd_pause(const Endpoint& ep, const std::string& job, bool pause);
 int cmd_priority(const Endpoint& ep, const std::string& job, int priority);
+// Failed or cancelled work runs again: the frames in `frames` (a range; empty: all unfinished);
+// the others unfinished are held until a later retry. Idempotent.
+int cmd_retry(const Endpoint& ep, const std::string& job, const std::string& frames);
+// Removes an ended job and its files (a queued or running one only with `force`).
+int cmd_delete(const Endpoint& ep, const std::string& job, bool force);
 // The registered workers: tasks, failures, last contact (--json: machine-readable).
 int cmd_workers(const Endpoint& ep, bool json);
 int cmd_health(const Endpoint& ep, bool list_services);

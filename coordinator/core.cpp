@@ -11,6 +11,7 @@
 
 #include "engine/buffer_file.h"
 #include "engine/digest.h"
+#include "farm/tags.h"
 
 namespace rf {
 
@@ -83,9 +84,11 @@ Coordinator::Coordinator(CoreOptions o)
   next_seq_ = store_->next_seq();
   for (const StoredWorker& w : store_->workers()) {
     // A worker of before the restart has the sweep's time from now to call.
-    workers_[w.id] = {w.principal, w.build_id, {}, now()};
+    workers_[w.id] = {w.principal, w.build_id, w.isa, WorkerInfo{"", 0, w.build_id, w.isa, w.tags},
+                      now()};
     if (!w.refused.empty()) outvoted_[w.id] = w.refused;
   }
+  finish_deletes();
   for (const StoredJob& j : store_->jobs()) restore(j);
   recover_folders();
 }
@@ -97,8 +100,21 @@ Coordinator::~Coordinator() {
   journal_.reset();
 }
 
-bool Coordinator::build_ok(const JobRecord& job, const std::string& build_id) const {
-  return job.build_id.empty() || job.build_id == build_id;
+bool Coordinator::pin_ok(const JobRecord& job, const std::string& build_id,
+                         const std::string& cpu_kind) const {
+  return (job.build_id.empty() || job.build_id == build_id) &&
+         (job.cpu_kind.empty() || cpu_kind.empty() || job.cpu_kind == cpu_kind);
+}
+
+std::string Coordinator::pin_problem(const JobRecord& job, const BufferHeader& h) const {
+  if (!job.build_id.empty() && job.build_id != h.build_id)
+    return "job " + job.id + " merges results of build '" + job.build_id + "'; this one is from '" +
+           clip(h.build_id) + "'";
+  if (!job.cpu_kind.empty() && job.cpu_kind != h.isa)
+    return "job " + job.id + " merges results of CPU kind '" + job.cpu_kind +
+           "' (the determinism contract holds per build and CPU kind); this one is from '" +
+           clip(h.isa) + "'";
+  return "";
 }
 
 std::shared_ptr<JobRecord> Coordinator::find(const std::string& id) const {
@@ -132,12 +148,26 @@ FrameStatus Coordinator::frame_status(const JobRecord& job, const FrameRecord& f
   return s;
 }
 
+std::string Coordinator::waiting_for(const JobRecord& job) const {
+  for (const auto& [id, w] : workers_)
+    if (!outvoted_.count(id) && pin_ok(job, w.build_id, w.isa) &&
+        satisfies_all(w.info.tags, job.spec.required_tags))
+      return "";
+  if (workers_.empty()) return "no worker is registered";
+  std::string needs;
+  for (const std::string& r : job.spec.required_tags) needs += (needs.empty() ? "tags " : " ") + r;
+  if (!job.build_id.empty()) needs += (needs.empty() ? "" : "; ") + ("build " + job.build_id);
+  if (!job.cpu_kind.empty()) needs += (needs.empty() ? "" : "; ") + ("CPU kind " + job.cpu_kind);
+  return "no registered worker has what it needs: " + needs;
+}
+
 JobStatus Coordinator::status_of(const JobRecord& job) const {
   JobStatus s;
   s.job_id = job.id;
   s.name = job.spec.name;
   s.tenant = job.tenant;
   s.build_id = job.build_id;
+  s.cpu_kind = job.cpu_kind;
   s.state = job.state;
   s.error = job.error;
   if (!terminal(job.state) && !storage_problem_.empty())
@@ -146,7 +176,11 @@ JobStatus Coordinator::status_of(const JobRecord& job) const {
   s.submitted_unix = job.submitted_unix;
   s.paused = job.paused;
   s.priority = job.priority;
-  for (const auto& f : job.frames) s.frames.push_back(frame_status(job, *f));
+  if (!terminal(job.state) && !job.paused) s.waiting_for = waiting_for(job);
+  for (const auto& f : job.frames) {
+    s.frames.push_back(frame_status(job, *f));
+    if (f->held && !f->progress.done) s.held.push_back(f->number);
+  }
   return s;
 }
 
@@ -248,6 +282,7 @@ CoordinatorMetrics Coordinator::metrics() const {
   m.counters.calls_refused = refused_calls_;
   m.counters.refusal_lines_suppressed = suppressed_refusal_lines_;
   m.storage_ok = storage_problem_.empty();
+  m.pools[kAnyPool];  // always shown, 0 when idle
   for (const auto& [id, w] : workers_) m.workers_registered += !outvoted_.count(id);
   for (const auto& [id, seen] : last_seen_)
     m.workers_connected += now() - seen <= options_.lease_seconds && !outvoted_.count(id);
@@ -263,6 +298,10 @@ CoordinatorMetrics Coordinator::metrics() const {
     }
     (job->paused ? m.tasks_paused : m.tasks_queued) += j.tasks_queued;
     m.tasks_leased += j.tasks_leased;
+    const std::string pool = pool_of(job->spec.required_tags);
+    CoordinatorMetrics::Pool& p = m.pools[pool.empty() ? kAnyPool : pool];
+    if (!job->paused) p.tasks_queued += j.tasks_queued;
+    p.tasks_leased += j.tasks_leased;
     for (const auto& f : job->frames)
       if (!f->progress.done && f->progress.passes_merged > 0)
         j.frames.push_back(frame_status(*job, *f));

@@ -31,6 +31,7 @@
 #include "coordinator/scheduler.h"
 #include "coordinator/state_dir.h"
 #include "engine/frame.h"
+#include "engine/frame_accumulator.h"
 #include "engine/progress.h"
 #include "engine/sample_buffer.h"
 #include "farm/blob_store.h"
@@ -62,12 +63,17 @@ struct JobStatus {
   std::string job_id, name;
   std::string tenant;    // whose job it is
   std::string build_id;  // the build whose results it merges, once known
+  std::string cpu_kind;  // the CPU kind (Embree ISA and configuration) of those results
   JobState state = JobState::Queued;
   std::string error;  // why it failed (the workers' messages) or was cancelled
   double core_seconds = 0;
   int64_t submitted_unix = 0;
   bool paused = false;
   int priority = 0;
+  std::vector<FrameNumber> held;  // unfinished frames a `retry --frames` left out
+  // Why no registered worker can take its tasks (its required tags, or its build and CPU kind
+  // pin, met by none), or "" (also for an ended or paused job).
+  std::string waiting_for;
   std::vector<FrameStatus> frames;
 };
 
@@ -82,13 +88,14 @@ struct WorkerInfo {
   std::string hostname;
   uint32_t cores = 0;
   std::string build_id, isa;
+  std::vector<std::string> tags;  // farm/tags.h: what jobs may require of it
 };
 
 // A registered worker as `workers` lists it.
 struct WorkerStatus {
   std::string worker_id;
   std::string principal;  // who registered it (empty for a caller who may not see it)
-  WorkerInfo info;        // as registered in this coordinator's run (empty after a restart)
+  WorkerInfo info;        // as registered (after a restart: its build and CPU kind only)
   std::vector<std::string> tasks;  // its live leases' task ids ("another tenant's task" hidden)
   int failures = 0;                // failed tasks and refused results, in jobs not ended
   double seconds_since_contact = 0;
@@ -178,6 +185,13 @@ struct CoordinatorMetrics {
   };
   static constexpr double kLeaseBuckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
                                              0.05,   0.1,   0.25,   0.5,   1,    2.5};
+  struct Pool {
+    uint64_t tasks_queued = 0;  // waiting, in jobs not paused that require this pool
+    uint64_t tasks_leased = 0;
+  };
+  // By the pool jobs require (their `pool=NAME` requirement; kAnyPool, "any", for none): what
+  // the autoscaler of each pool's workers scales on.
+  std::map<std::string, Pool> pools;
   struct Job {
     std::string job_id;
     uint64_t tasks_queued = 0;        // waiting for a worker, in every frame (not only the window)
@@ -260,11 +274,26 @@ class Coordinator {
   void set_paused(const std::string& job_id, bool paused, const Caller& caller = {});
   // The job's priority among jobs from now on (higher first). FailedPrecondition once it ended.
   void set_priority(const std::string& job_id, int priority, const Caller& caller = {});
+  // Failed or cancelled work runs again: the job's unfinished frames in `frames` (a frame range,
+  // farm/frame_range.h; empty: all) are queued again with the failure counts afresh (the store
+  // keeps the old failures as history) and the job is Running; its other unfinished frames are
+  // held, and once the rest is done the job fails again naming them. On a Queued or Running job
+  // it releases held frames; a retry of frames that run already changes nothing (idempotent).
+  // FailedPrecondition for a completed job or one that cannot run (its bundle is gone) and when
+  // every frame named is done; InvalidArgument for a bad range or a frame the job lacks.
+  void retry(const std::string& job_id, const std::string& frames, const Caller& caller = {});
+  // Removes an ended job: its folder (checkpoints, its record), its store rows and its state;
+  // from then on it is NotFound, and its id is never given to another job. A queued or running
+  // job is refused (FailedPrecondition) unless `force`, which deletes it as it is (its leases
+  // end; their results are answered NotFound). Its scene blobs stay (other jobs may share them).
+  // A delete interrupted by a crash is finished at the next start.
+  void delete_job(const std::string& job_id, bool force, const Caller& caller = {});
   FrameImage fetch(const std::string& job_id, FrameNumber frame, const Caller& caller = {}) const;
 
   // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal
   // (stored, so it outlives a restart); every later call naming it must come from the same
   // principal, and a lease is renewed, failed or completed only by the worker holding it.
+  // Its tags are checked (InvalidArgument naming a bad one; at most kMaxTags) and stored.
   Registration register_worker(const WorkerInfo& worker, const Caller& caller = {});
   LeaseResult lease(const std::string& worker_id, const Caller& caller = {});
   // The lease's length from now, in seconds.
@@ -334,18 +363,36 @@ class Coordinator {
   // Jobs with a folder but no row (the database lost them): recovered; folders of submits that
   // never finished: removed. Job ids are never reused: next_seq_ passes every folder's.
   void recover_folders();
+  // Deletes whose folder was renamed to jobs/.deleted-ID (the point of no return) but that a
+  // crash interrupted: their rows are deleted and the folders removed. Before any job is restored.
+  void finish_deletes();
   void check_limits(const JobSpec& spec) const;
   bool verified(const TaskRef& task) const;
   // A verified task's result: true when it agrees with another worker's (merge it now); false
   // when it is held (the task goes to another worker) or the job failed.          // under mu_
   bool verify(JobRecord& job, const TaskResult& r, const SampleBuffer& buffer);
-  // Whether the job merges results of this build (its pin, or any while none is known).
-  bool build_ok(const JobRecord& job, const std::string& build_id) const;  // under mu_
-  void resume_frame(JobRecord& job, FrameRecord& f);
+  // Whether the job merges results of this build and CPU kind (its pin, or any while none is
+  // known; a worker whose kind is unknown, '', may lease any).
+  bool pin_ok(const JobRecord& job, const std::string& build_id,
+              const std::string& cpu_kind) const;  // under mu_
+  // Why a result of this build and kind is not the job's, or "".
+  std::string pin_problem(const JobRecord& job, const BufferHeader& header) const;  // under mu_
+  // A frame's checkpoint read back: its accumulator and the tasks it holds (no accumulator when
+  // it holds none). Reads and writes files: called without mu_, under the frame's lock or before
+  // any merge can reach it.
+  struct LoadedFrame {
+    std::unique_ptr<FrameAccumulator> acc;
+    std::vector<TaskRef> done;
+  };
+  LoadedFrame load_frame(const JobRecord& job, FrameRecord& f) const;
+  // The loaded state made the frame's: the scheduler learns its done tasks, its figures are
+  // published. Under mu_ (and the frame's lock, or no merge can reach it).
+  void adopt_frame(JobRecord& job, FrameRecord& f, LoadedFrame loaded);
+  void resume_frame(JobRecord& job, FrameRecord& f) { adopt_frame(job, f, load_frame(job, f)); }
   SampleBuffer checked_buffer(const JobRecord& job, const FrameRecord& f,
                               const TaskResult& r) const;
-  bool record_result(JobRecord& job, const TaskResult& r, double core_seconds,  // under mu_
-                     const std::string& build_id);
+  bool record_result(JobRecord& job, const TaskResult& r,  // under mu_
+                     const BufferHeader& header);
   void publish_frame(JobRecord& job, FrameRecord& f);                          // under mu_
   // The ledger's transition, and what the coordinator keeps beside the state: the folder's copy,
   // held verification results, watchers. Returns the journal ticket to wait for.   // under mu_
@@ -363,6 +410,8 @@ class Coordinator {
                       const std::function<uint64_t(JobRecord&)>& change);
   static constexpr double kStoreWaitSeconds = 10;
   JobStatus status_of(const JobRecord& job) const;                             // under mu_
+  // JobStatus::waiting_for of a job not ended.                                  // under mu_
+  std::string waiting_for(const JobRecord& job) const;
   FrameStatus frame_status(const JobRecord& job, const FrameRecord& f) const;  // under mu_
   std::shared_ptr<JobRecord> find(const std::string& id) const;                // under mu_
   std::shared_ptr<JobRecord> find_or_throw(const std::string& id) const;       // under mu_
@@ -396,7 +445,8 @@ class Coordinator {
   struct WorkerRecord {
     std::string principal;      // the identity that registered it
     std::string build_id;       // the build it said it runs
-    WorkerInfo info;            // as registered in this run (empty when restored)
+    std::string isa;            // and its CPU kind ('' when registered by an earlier build)
+    WorkerInfo info;            // as registered (restored: its build and kind only)
     double registered_at = 0;   // now() at its registration, or at this coordinator's start
     mutable bool used = false;  // a call other than Register named it (check_worker)
   };

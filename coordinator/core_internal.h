@@ -55,6 +55,7 @@ struct FrameRecord {
   FrameProgress progress;
   double first_lease_at = -1;
   bool leases_dropped = false;  // its lease rows were deleted when it was done
+  bool held = false;            // unfinished and left out of a `retry --frames`: not queued
 };
 
 struct JobRecord {
@@ -67,9 +68,11 @@ struct JobRecord {
   double core_seconds = 0;
   std::string tenant;
   std::string build_id;        // results of this build only; empty: the first merged result's
+  std::string cpu_kind;        // and of this CPU kind only (BufferHeader::isa), the same way
   std::string bundle_problem;  // restored without its bundle (its blobs are gone): why
   bool paused = false;         // no new leases (`pause`); leases in flight finish and merge
   int priority = 0;            // the spec's, or what `priority JOB N` set since
+  bool deleted = false;        // `delete`: gone from the coordinator; a merge in flight stops
   std::vector<Rect> tiles;
   bool splats = false;
   uint32_t passes = 0;

@@ -14,6 +14,7 @@
 #include "engine/digest.h"
 #include "engine/work_units.h"
 #include "farm/frame_range.h"
+#include "farm/tags.h"
 
 namespace rf {
 
@@ -304,6 +305,13 @@ void Coordinator::check_limits(const JobSpec& spec) const {
              std::string(what) + ": " + why +
                  " (names and paths are printed in terminals and logs: control characters and "
                  "bytes that are not UTF-8 are refused)");
+  if (spec.required_tags.size() > kMaxTags)
+    refuse(ErrorCode::InvalidArgument,
+           "required_tags: " + std::to_string(spec.required_tags.size()) +
+               " worker tags; at most " + std::to_string(kMaxTags));
+  for (const std::string& r : spec.required_tags)
+    if (std::string why = requirement_problem(r); !why.empty())
+      refuse(ErrorCode::InvalidArgument, "required_tags: " + why);
   if (spec.files.size() > l.bundle_files)
     refuse(ErrorCode::ResourceExhausted, "the bundle has " + std::to_string(spec.files.size()) +
                                              " files; the limit bundle_files is " +

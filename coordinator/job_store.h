@@ -50,6 +50,8 @@ struct StoredJob {
   std::string build_id;  // the build of its first merged result ('' until then)
   bool paused = false;
   std::optional<int> priority;  // set after submit (`priority JOB N`); the spec's when absent
+  std::vector<FrameNumber> held;  // unfinished frames a `retry --frames` left out, sorted
+  std::string cpu_kind;  // the CPU kind (BufferHeader::isa) of its first merged result, or ''
 };
 
 // A lease as handed out, kept so that its holder's late result is accepted after a restart.
@@ -64,12 +66,15 @@ struct StoredLease {
 struct StoredWorker {
   std::string id, principal, build_id;
   std::string refused;  // why it is refused for good (outvoted), or empty
+  std::string isa;      // its CPU kind as it registered ('' in rows of earlier builds)
+  std::vector<std::string> tags;  // as registered (none in rows of earlier builds)
 };
 
 struct TaskFailure {
   FrameNumber frame;
   uint32_t pass, tile;
   std::string worker_id, message;
+  bool counted = true;  // false once a retry of its job forgot it (failure_history only)
 };
 
 enum class TaskEventKind : int { Failed = 0, Done = 1, ResultRefused = 2 };
@@ -88,8 +93,9 @@ struct AddCoreSeconds {
   std::string job_id;
   double seconds = 0;
 };
+// The job's pin: results of this build and CPU kind only (its first merged result's).
 struct SetBuild {
-  std::string job_id, build_id;
+  std::string job_id, build_id, cpu_kind;
 };
 struct SetPaused {
   std::string job_id;
@@ -98,6 +104,19 @@ struct SetPaused {
 struct SetPriority {
   std::string job_id;
   int priority = 0;
+};
+// The job runs again (`retry`): `held` are its unfinished frames left out (not queued until a
+// later retry names them); with forget_failures, its failures and refused results so far stop
+// counting (they stay in the history).
+struct Retry {
+  std::string job_id;
+  std::vector<FrameNumber> held;
+  bool forget_failures = false;
+};
+// The job is deleted: its events and leases go, and its row is reduced to its id and sequence
+// number (so that no later job gets its id); jobs() no longer lists it.
+struct DeleteJob {
+  std::string job_id;
 };
 struct TaskEvent {
   std::string job_id;
@@ -130,9 +149,9 @@ struct DeleteLeases {
 
 using StoreWrite =
     std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds, store::SetBuild,
-                 store::SetPaused, store::SetPriority, store::TaskEvent, store::InsertWorker,
-                 store::RefuseWorker, store::DeleteWorker, store::AddBlobTenant, store::InsertLease,
-                 store::DeleteLeases>;
+                 store::SetPaused, store::SetPriority, store::Retry, store::DeleteJob,
+                 store::TaskEvent, store::InsertWorker, store::RefuseWorker, store::DeleteWorker,
+                 store::AddBlobTenant, store::InsertLease, store::DeleteLeases>;
 
 // Whether losing the write in a power cut costs nothing but work: a lease's row (its holder's
 // late result is then rendered again). Batches of such writes only are not flushed to disk.
@@ -147,16 +166,20 @@ class JobStore {
   virtual void write(const std::vector<StoreWrite>& batch) = 0;
   void write(StoreWrite w) { write(std::vector<StoreWrite>{std::move(w)}); }
 
-  virtual uint64_t next_seq() const = 0;            // one past the largest job sequence number
-  virtual std::vector<StoredJob> jobs() const = 0;  // in submission order
+  // One past the largest job sequence number, deleted jobs' included.
+  virtual uint64_t next_seq() const = 0;
+  virtual std::vector<StoredJob> jobs() const = 0;  // in submission order, deleted ones left out
   virtual std::vector<StoredWorker> workers() const = 0;
   // Which tenants uploaded a blob: a client sees a blob as present only once its tenant did.
   virtual bool blob_tenant(const std::string& tenant, const std::string& sha256) const = 0;
   // The job's lease rows in the order written, one at a time (a large job may have many).
   virtual void for_each_lease(const std::string& job_id,
                               const std::function<void(const StoredLease&)>& f) const = 0;
+  // The failures and refused results that count (none from before a retry that forgot them).
   virtual std::vector<TaskFailure> failures(const std::string& job_id) const = 0;  // in order
   virtual std::vector<std::string> refused_workers(const std::string& job_id) const = 0;
+  // Every failure of the job, those a retry forgot included (counted = false), in order.
+  virtual std::vector<TaskFailure> failure_history(const std::string& job_id) const = 0;
   virtual uint64_t tasks_done(const std::string& job_id) const = 0;
 
   std::vector<StoredLease> leases(const std::string& job_id) const;

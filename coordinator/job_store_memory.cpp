@@ -32,7 +32,9 @@ class MemoryJobStore final : public JobStore {
   }
   std::vector<StoredJob> jobs() const override {
     std::lock_guard lock(mu_);
-    std::vector<StoredJob> out = jobs_;
+    std::vector<StoredJob> out;
+    for (const StoredJob& j : jobs_)
+      if (!deleted_.count(j.id)) out.push_back(j);
     std::stable_sort(out.begin(), out.end(),
                      [](const StoredJob& a, const StoredJob& b) { return a.seq < b.seq; });
     return out;
@@ -58,23 +60,29 @@ class MemoryJobStore final : public JobStore {
     for (const StoredLease& l : mine) f(l);
   }
   std::vector<TaskFailure> failures(const std::string& job_id) const override {
+    std::vector<TaskFailure> out = failure_history(job_id);
+    std::erase_if(out, [](const TaskFailure& f) { return !f.counted; });
+    return out;
+  }
+  std::vector<TaskFailure> failure_history(const std::string& job_id) const override {
     std::lock_guard lock(mu_);
     std::vector<TaskFailure> out;
-    for (const store::TaskEvent& e : events_)
+    for (const Event& e : events_)
       if (e.job_id == job_id && e.kind == TaskEventKind::Failed)
-        out.push_back({e.frame, e.pass, e.tile, e.worker_id, e.message});
+        out.push_back({e.frame, e.pass, e.tile, e.worker_id, e.message, e.counted});
     return out;
   }
   std::vector<std::string> refused_workers(const std::string& job_id) const override {
     std::lock_guard lock(mu_);
     std::vector<std::string> out;
-    for (const store::TaskEvent& e : events_)
-      if (e.job_id == job_id && e.kind == TaskEventKind::ResultRefused) out.push_back(e.worker_id);
+    for (const Event& e : events_)
+      if (e.job_id == job_id && e.kind == TaskEventKind::ResultRefused && e.counted)
+        out.push_back(e.worker_id);
     return out;
   }
   uint64_t tasks_done(const std::string& job_id) const override {
     std::lock_guard lock(mu_);
-    return uint64_t(std::count_if(events_.begin(), events_.end(), [&](const store::TaskEvent& e) {
+    return uint64_t(std::count_if(events_.begin(), events_.end(), [&](const Event& e) {
       return e.job_id == job_id && e.kind == TaskEventKind::Done;
     }));
   }
@@ -95,7 +103,7 @@ class MemoryJobStore final : public JobStore {
     if (StoredJob* j = job(w.job_id)) j->core_seconds += w.seconds;
   }
   void apply(const store::SetBuild& w) {
-    if (StoredJob* j = job(w.job_id)) j->build_id = w.build_id;
+    if (StoredJob* j = job(w.job_id)) j->build_id = w.build_id, j->cpu_kind = w.cpu_kind;
   }
   void apply(const store::SetPaused& w) {
     if (StoredJob* j = job(w.job_id)) j->paused = w.paused;
@@ -103,7 +111,18 @@ class MemoryJobStore final : public JobStore {
   void apply(const store::SetPriority& w) {
     if (StoredJob* j = job(w.job_id)) j->priority = w.priority;
   }
-  void apply(const store::TaskEvent& w) { events_.push_back(w); }
+  void apply(const store::Retry& w) {
+    if (StoredJob* j = job(w.job_id)) j->held = w.held;
+    if (w.forget_failures)
+      for (Event& e : events_)
+        if (e.job_id == w.job_id && e.kind != TaskEventKind::Done) e.counted = false;
+  }
+  void apply(const store::DeleteJob& w) {
+    deleted_.insert(w.job_id);
+    std::erase_if(events_, [&](const Event& e) { return e.job_id == w.job_id; });
+    std::erase_if(leases_, [&](const StoredLease& l) { return l.job_id == w.job_id; });
+  }
+  void apply(const store::TaskEvent& w) { events_.push_back({w, true}); }
   void apply(const store::InsertWorker& w) { workers_[w.worker.id] = w.worker; }
   void apply(const store::RefuseWorker& w) {
     if (auto it = workers_.find(w.worker_id); it != workers_.end()) it->second.refused = w.why;
@@ -123,7 +142,11 @@ class MemoryJobStore final : public JobStore {
   mutable std::mutex mu_;
   std::vector<StoredJob> jobs_;
   std::map<std::string, size_t> index_;
-  std::vector<store::TaskEvent> events_;
+  std::set<std::string> deleted_;  // their rows stay (next_seq), unlisted
+  struct Event : store::TaskEvent {
+    bool counted = true;
+  };
+  std::vector<Event> events_;
   std::map<std::string, StoredWorker> workers_;
   std::set<std::pair<std::string, std::string>> blob_tenants_;
   std::vector<StoredLease> leases_;

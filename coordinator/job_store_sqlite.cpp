@@ -6,6 +6,7 @@
 
 #include "coordinator/job_store.h"
 #include "coordinator/spec_codec.h"
+#include "farm/frame_range.h"
 
 namespace rf {
 
@@ -77,6 +78,7 @@ class SqliteJobStore final : public JobStore {
                       const std::function<void(const StoredLease&)>& f) const override;
   std::vector<TaskFailure> failures(const std::string& job_id) const override;
   std::vector<std::string> refused_workers(const std::string& job_id) const override;
+  std::vector<TaskFailure> failure_history(const std::string& job_id) const override;
   uint64_t tasks_done(const std::string& job_id) const override;
 
  private:
@@ -161,6 +163,22 @@ void SqliteJobStore::open_schema() {
   if (!columns.count("paused"))
     exec("ALTER TABLE jobs ADD COLUMN paused INTEGER NOT NULL DEFAULT 0");
   if (!columns.count("priority")) exec("ALTER TABLE jobs ADD COLUMN priority INTEGER");
+  // The CPU kind its results come from (BufferHeader::isa), pinned with the build.
+  if (!columns.count("cpu_kind"))
+    exec("ALTER TABLE jobs ADD COLUMN cpu_kind TEXT NOT NULL DEFAULT ''");
+  // 1: deleted (the row keeps the id and sequence number only).
+  if (!columns.count("deleted"))
+    exec("ALTER TABLE jobs ADD COLUMN deleted INTEGER NOT NULL DEFAULT 0");
+  // Frames a retry left out, in the range syntax (farm/frame_range.h).
+  if (!columns.count("held")) exec("ALTER TABLE jobs ADD COLUMN held TEXT NOT NULL DEFAULT ''");
+  columns.clear();
+  {
+    Stmt s(db_, "SELECT name FROM pragma_table_info('task_events')", path_);
+    while (s.step()) columns.insert(s.text(0));
+  }
+  // 0 for a failure or refused result a retry forgot: history, no longer counted.
+  if (!columns.count("counted"))
+    exec("ALTER TABLE task_events ADD COLUMN counted INTEGER NOT NULL DEFAULT 1");
   exec(
       "CREATE TABLE IF NOT EXISTS workers (id TEXT PRIMARY KEY, principal TEXT NOT NULL, build "
       "TEXT NOT NULL DEFAULT '', registered INTEGER NOT NULL DEFAULT (strftime('%s','now')))");
@@ -171,6 +189,9 @@ void SqliteJobStore::open_schema() {
   }
   if (!columns.count("refused"))
     exec("ALTER TABLE workers ADD COLUMN refused TEXT NOT NULL DEFAULT ''");
+  if (!columns.count("isa")) exec("ALTER TABLE workers ADD COLUMN isa TEXT NOT NULL DEFAULT ''");
+  // Its tags, one per line (a tag holds no newline: farm/tags.h).
+  if (!columns.count("tags")) exec("ALTER TABLE workers ADD COLUMN tags TEXT NOT NULL DEFAULT ''");
   exec(
       "CREATE TABLE IF NOT EXISTS leases (id TEXT PRIMARY KEY, job_id TEXT NOT NULL, frame "
       "INTEGER NOT NULL, pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL)");
@@ -241,14 +262,32 @@ void SqliteJobStore::apply(const StoreWrite& write) {
           Stmt s(db_, "UPDATE jobs SET core_seconds = core_seconds + ? WHERE id = ?", path_);
           s.bind(w.seconds).bind(w.job_id).step();
         } else if constexpr (std::is_same_v<W, store::SetBuild>) {
-          Stmt s(db_, "UPDATE jobs SET build = ? WHERE id = ?", path_);
-          s.bind(w.build_id).bind(w.job_id).step();
+          Stmt s(db_, "UPDATE jobs SET build = ?, cpu_kind = ? WHERE id = ?", path_);
+          s.bind(w.build_id).bind(w.cpu_kind).bind(w.job_id).step();
         } else if constexpr (std::is_same_v<W, store::SetPaused>) {
           Stmt s(db_, "UPDATE jobs SET paused = ? WHERE id = ?", path_);
           s.bind(int64_t(w.paused)).bind(w.job_id).step();
         } else if constexpr (std::is_same_v<W, store::SetPriority>) {
           Stmt s(db_, "UPDATE jobs SET priority = ? WHERE id = ?", path_);
           s.bind(int64_t(w.priority)).bind(w.job_id).step();
+        } else if constexpr (std::is_same_v<W, store::Retry>) {
+          Stmt s(db_, "UPDATE jobs SET held = ? WHERE id = ?", path_);
+          s.bind(frame_range_text(w.held)).bind(w.job_id).step();
+          if (w.forget_failures) {
+            Stmt f(db_, "UPDATE task_events SET counted = 0 WHERE job_id = ? AND done != 1", path_);
+            f.bind(w.job_id).step();
+          }
+        } else if constexpr (std::is_same_v<W, store::DeleteJob>) {
+          Stmt s(db_,
+                 "UPDATE jobs SET deleted = 1, spec = x'', error = '', build = '', held = '' "
+                 "WHERE id = ?",
+                 path_);
+          s.bind(w.job_id).step();
+          for (const char* sql : {"DELETE FROM task_events WHERE job_id = ?",
+                                  "DELETE FROM leases WHERE job_id = ?"}) {
+            Stmt d(db_, sql, path_);
+            d.bind(w.job_id).step();
+          }
         } else if constexpr (std::is_same_v<W, store::TaskEvent>) {
           // task_events.done: 1 done, 0 failed, 2 result refused (TaskEventKind).
           Stmt s(db_,
@@ -264,9 +303,18 @@ void SqliteJobStore::apply(const StoreWrite& write) {
               .bind(w.message)
               .step();
         } else if constexpr (std::is_same_v<W, store::InsertWorker>) {
-          Stmt s(db_, "INSERT OR REPLACE INTO workers (id, principal, build) VALUES (?,?,?)",
+          Stmt s(db_,
+                 "INSERT OR REPLACE INTO workers (id, principal, build, isa, tags) VALUES "
+                 "(?,?,?,?,?)",
                  path_);
-          s.bind(w.worker.id).bind(w.worker.principal).bind(w.worker.build_id).step();
+          std::string tags;
+          for (const std::string& t : w.worker.tags) tags += (tags.empty() ? "" : "\n") + t;
+          s.bind(w.worker.id)
+              .bind(w.worker.principal)
+              .bind(w.worker.build_id)
+              .bind(w.worker.isa)
+              .bind(tags)
+              .step();
         } else if constexpr (std::is_same_v<W, store::RefuseWorker>) {
           Stmt s(db_, "UPDATE workers SET refused = ? WHERE id = ?", path_);
           s.bind(w.why).bind(w.worker_id).step();
@@ -312,7 +360,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
   std::lock_guard lock(mu_);
   Stmt s(db_,
          "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant, build, paused, "
-         "priority FROM jobs ORDER BY seq",
+         "priority, held, cpu_kind FROM jobs WHERE deleted = 0 ORDER BY seq",
          path_);
   std::vector<StoredJob> out;
   while (s.step()) {
@@ -320,15 +368,31 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
                    s.text(4), s.integer(5), s.real(6), s.text(7), s.text(8), s.integer(9) != 0,
                    std::nullopt});
     if (!s.null(10)) out.back().priority = int(s.integer(10));
+    out.back().cpu_kind = s.text(12);
+    if (std::string held = s.text(11); !held.empty()) {
+      try {
+        out.back().held = parse_frame_range(held);
+      } catch (const std::exception&) {  // not written by rayfarm: the job runs every frame
+        out.back().held.clear();
+      }
+    }
   }
   return out;
 }
 
 std::vector<StoredWorker> SqliteJobStore::workers() const {
   std::lock_guard lock(mu_);
-  Stmt s(db_, "SELECT id, principal, build, refused FROM workers", path_);
+  Stmt s(db_, "SELECT id, principal, build, refused, isa, tags FROM workers", path_);
   std::vector<StoredWorker> out;
-  while (s.step()) out.push_back({s.text(0), s.text(1), s.text(2), s.text(3)});
+  while (s.step()) {
+    out.push_back({s.text(0), s.text(1), s.text(2), s.text(3), s.text(4), {}});
+    std::string tags = s.text(5);
+    for (size_t at = 0; at < tags.size();) {
+      size_t end = std::min(tags.find('\n', at), tags.size());
+      out.back().tags.push_back(tags.substr(at, end - at));
+      at = end + 1;
+    }
+  }
   return out;
 }
 
@@ -352,7 +416,10 @@ void SqliteJobStore::for_each_lease(const std::string& job_id,
 
 std::vector<std::string> SqliteJobStore::refused_workers(const std::string& id) const {
   std::lock_guard lock(mu_);
-  Stmt s(db_, "SELECT worker FROM task_events WHERE job_id = ? AND done = 2 ORDER BY rowid", path_);
+  Stmt s(db_,
+         "SELECT worker FROM task_events WHERE job_id = ? AND done = 2 AND counted = 1 ORDER BY "
+         "rowid",
+         path_);
   s.bind(id);
   std::vector<std::string> out;
   while (s.step()) out.push_back(s.text(0));
@@ -360,16 +427,22 @@ std::vector<std::string> SqliteJobStore::refused_workers(const std::string& id) 
 }
 
 std::vector<TaskFailure> SqliteJobStore::failures(const std::string& id) const {
+  std::vector<TaskFailure> out = failure_history(id);
+  std::erase_if(out, [](const TaskFailure& f) { return !f.counted; });
+  return out;
+}
+
+std::vector<TaskFailure> SqliteJobStore::failure_history(const std::string& id) const {
   std::lock_guard lock(mu_);
   Stmt s(db_,
-         "SELECT frame, pass, tile, worker, message FROM task_events WHERE job_id = ? AND done = 0 "
-         "ORDER BY rowid",
+         "SELECT frame, pass, tile, worker, message, counted FROM task_events WHERE job_id = ? AND "
+         "done = 0 ORDER BY rowid",
          path_);
   s.bind(id);
   std::vector<TaskFailure> out;
   while (s.step())
     out.push_back({FrameNumber(s.integer(0)), uint32_t(s.integer(1)), uint32_t(s.integer(2)),
-                   s.text(3), s.text(4)});
+                   s.text(3), s.text(4), s.integer(5) != 0});
   return out;
 }
 

@@ -1,5 +1,6 @@
 #include "coordinator/ledger.h"
 
+#include <set>
 #include <stdexcept>
 
 namespace rf {
@@ -8,6 +9,8 @@ namespace {
 
 // The job state machine (ledger.h): which transitions exist.
 bool legal(JobState from, JobState to) {
+  if (to == JobState::Running && (from == JobState::Failed || from == JobState::Cancelled))
+    return true;  // retry
   if (terminal(from)) return false;
   switch (to) {
     case JobState::Queued:
@@ -34,7 +37,7 @@ void Ledger::add_job(const JobRecord& job) {
 }
 
 Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string& error) {
-  if (!legal(job.state, to))
+  if (!legal(job.state, to) || terminal(job.state))  // an ended job leaves by retry() only
     throw std::logic_error(std::string("job ") + job.id + ": no transition " +
                            job_state_name(job.state) + " -> " + job_state_name(to));
   job.state = to;
@@ -72,12 +75,41 @@ Ledger::Ticket Ledger::set_priority(JobRecord& job, int priority) {
   return journal_.append({store::SetPriority{job.id, priority}});
 }
 
+Ledger::Ticket Ledger::retry(JobRecord& job, const std::vector<FrameNumber>& reopen,
+                             const std::vector<FrameNumber>& held) {
+  const bool ended = terminal(job.state);
+  std::vector<StoreWrite> writes;
+  if (ended) {
+    if (!legal(job.state, JobState::Running))
+      throw std::logic_error(std::string("job ") + job.id + ": no retry once " +
+                             job_state_name(job.state));
+    job.state = JobState::Running;
+    job.error.clear();
+    writes.push_back(store::SetState{job.id, int(JobState::Running), ""});
+    scheduler_.reopen_job(job.id);
+    std::set<FrameNumber> open(reopen.begin(), reopen.end());
+    for (FrameNumber f : job.frame_numbers())
+      if (!open.count(f)) scheduler_.stop_frame(job.id, f, 0);
+  } else {
+    for (FrameNumber f : reopen) scheduler_.reopen_frame(job.id, f);
+  }
+  writes.push_back(store::Retry{job.id, held, ended});
+  return journal_.append(std::move(writes));
+}
+
+Ledger::Ticket Ledger::delete_job(const JobRecord& job) {
+  scheduler_.remove_job(job.id);
+  return journal_.append({store::DeleteJob{job.id}});
+}
+
 void Ledger::restore_job(JobRecord& job, const Trail& trail) {
   add_job(job);
   if (terminal(job.state)) {
     scheduler_.cancel_job(job.id);
     return;
   }
+  for (const auto& f : job.frames)  // left out of a retry: they wait for the next
+    if (f->held) scheduler_.stop_frame(job.id, f->number, 0);
   // Leases from before the restart, ended: their holders' late results are still accepted.
   for (const StoredLease& l : trail.leases)
     scheduler_.restore_lease(l.lease_id, TaskRef{job.id, l.frame, l.pass, l.tile}, l.worker_id);
@@ -112,11 +144,13 @@ LeaseOutcome Ledger::renew(const std::string& lease_id, double now) {
 
 Ledger::Ticket Ledger::complete(JobRecord& job, const std::string& lease_id, const TaskRef& task,
                                 const std::string& worker_id, double core_seconds,
-                                const std::string& build_id, double now) {
+                                const std::string& build_id, const std::string& cpu_kind,
+                                double now) {
   std::vector<StoreWrite> writes;
-  if (job.build_id.empty()) {  // the first merged result pins the job
-    job.build_id = build_id;
-    writes.push_back(store::SetBuild{job.id, build_id});
+  if (job.build_id.empty() || job.cpu_kind.empty()) {  // the first merged result pins the job
+    if (job.build_id.empty()) job.build_id = build_id;
+    if (job.cpu_kind.empty()) job.cpu_kind = cpu_kind;
+    writes.push_back(store::SetBuild{job.id, job.build_id, job.cpu_kind});
   }
   writes.push_back(store::TaskEvent{job.id, task.frame, task.pass, task.tile, worker_id,
                                     TaskEventKind::Done, ""});

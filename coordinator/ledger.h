@@ -6,9 +6,10 @@
 //
 // A job: Queued -> Running (its first lease) -> Completed (every frame done); Queued or Running ->
 // Failed (a task failed on max_failures workers, a verification with no two results agreeing, a
-// stored job that cannot be restored) or Cancelled (a client). The ended states are final: any
-// other transition from them is refused (std::logic_error: a bug, not a request). A Queued or
-// Running job may be paused and resumed and given another priority; neither changes its state.
+// stored job that cannot be restored, frames left out of a retry when the others are done) or
+// Cancelled (a client); Failed or Cancelled -> Running (`retry`). Completed is final. Any other
+// transition is refused (std::logic_error: a bug, not a request). A Queued or Running job may be
+// paused and resumed and given another priority; neither changes its state.
 // A task: waiting -> leased -> done; leased -> waiting (lease expired, failed, handed back, result
 // refused, result held for verification); waiting or leased -> stopped (its frame needs no more
 // passes, its job ended); failed on max_failures workers -> its job fails. Scheduler holds the
@@ -49,6 +50,17 @@ class Ledger {
   // (the caller refuses that first).
   Ticket set_paused(JobRecord& job, bool paused);
   Ticket set_priority(JobRecord& job, int priority);
+  // `retry`: a Failed or Cancelled job runs again (-> Running) with its failure counts afresh
+  // (the store keeps the old ones as history), or a Queued or Running job's held frames run. The
+  // frames in `reopen` need their tasks again (the caller then marks those their checkpoints
+  // hold: restore_done, restore_passes); those in `held` wait for a later retry; the others of an
+  // ended job need nothing (done). The build pin, merged passes and noise-target stops stay.
+  // Throws std::logic_error for a completed job.
+  Ticket retry(JobRecord& job, const std::vector<FrameNumber>& reopen,
+               const std::vector<FrameNumber>& held);
+
+  // `delete`: the job is forgotten (its tasks and leases) and its store rows go (store::DeleteJob).
+  Ticket delete_job(const JobRecord& job);
 
   // ---- Restoring at start (nothing written: it is what the store and checkpoints hold)
   struct Trail {
@@ -71,10 +83,10 @@ class Ledger {
                              const Scheduler::JobFilter& may);
   LeaseOutcome renew(const std::string& lease_id, double now);
   // A result merged: the task is done, its event and the job's core seconds stored, and the job
-  // pinned to the result's build if it was not.
+  // pinned to the result's build and CPU kind if it was not.
   Ticket complete(JobRecord& job, const std::string& lease_id, const TaskRef& task,
                   const std::string& worker_id, double core_seconds, const std::string& build_id,
-                  double now);
+                  const std::string& cpu_kind, double now);
   // A result for a task that needs none (settled, merged already, or beyond its frame's stop):
   // its lease ends and the task counts as done; nothing is stored.
   void not_needed(const std::string& lease_id, const TaskRef& task, double now);

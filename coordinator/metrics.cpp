@@ -117,6 +117,21 @@ std::vector<MetricFamily> metric_families(const CoordinatorMetrics& m) {
         value(G, double(m.jobs_by_state[size_t(s)]), {{"state", state_label(s)}}));
   out.push_back(std::move(jobs));
 
+  // Per pool (the `pool=NAME` a job requires; "any" for none): each pool's autoscaler's input.
+  MetricFamily pool_queued =
+      family("rayfarm_pool_tasks_queued",
+             "Tasks waiting for a worker, by the pool their job requires (\"any\": none), paused "
+             "jobs left out",
+             G);
+  MetricFamily pool_leased =
+      family("rayfarm_pool_tasks_in_flight", "Tasks leased now, by the pool their job requires", G);
+  for (const auto& [name, p] : m.pools) {
+    pool_queued.metric.push_back(value(G, double(p.tasks_queued), {{"pool", name}}));
+    pool_leased.metric.push_back(value(G, double(p.tasks_leased), {{"pool", name}}));
+  }
+  out.push_back(std::move(pool_queued));
+  out.push_back(std::move(pool_leased));
+
   MetricFamily queued = family("rayfarm_job_tasks_queued",
                                "Tasks of a queued or running job waiting for a worker", G);
   MetricFamily leased =

@@ -28,10 +28,14 @@ void Coordinator::write_folder_record(const StoredJob& j) const {
 }
 
 void Coordinator::write_folder_state(const JobRecord& job) const {
+  std::vector<FrameNumber> held;
+  for (const auto& f : job.frames)
+    if (f->held) held.push_back(f->number);
   nlohmann::json st = {{"state", int(job.state)},
                        {"error", job.error},
                        {"paused", job.paused},
-                       {"priority", job.priority}};
+                       {"priority", job.priority},
+                       {"held", held}};
   try {
     write_file_atomic(options_.state_dir + "/jobs/" + job.id + "/state.json", st.dump() + "\n");
   } catch (const std::exception& e) {  // the database holds it; the folder's copy is a backup
@@ -61,6 +65,20 @@ void remove_stale_temporaries(const std::string& dir) {
 }
 
 }  // namespace
+
+void Coordinator::finish_deletes() {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(options_.state_dir + "/jobs", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (name.rfind(".deleted-", 0) != 0) continue;
+    const std::string id = name.substr(9);
+    journal_->write_ahead({store::DeleteJob{id}});
+    std::error_code rm;
+    fs::remove_all(entry.path(), rm);
+    spdlog::info("job {}: finished its deletion, which a stop interrupted{}", id,
+                 rm ? " (" + entry.path().string() + " not removed: " + rm.message() + ")" : "");
+  }
+}
 
 void Coordinator::recover_folders() {
   remove_stale_temporaries(options_.state_dir + "/jobs");
@@ -113,6 +131,7 @@ void Coordinator::recover_folders() {
         stored.error = st.at("error").get<std::string>();
         stored.paused = st.value("paused", false);  // absent in records of earlier builds
         if (st.contains("priority")) stored.priority = st.at("priority").get<int>();
+        if (st.contains("held")) stored.held = st.at("held").get<std::vector<FrameNumber>>();
       }
     } catch (const std::exception& e) {
       spdlog::error(
@@ -136,34 +155,42 @@ void Coordinator::recover_folders() {
   }
 }
 
-// Rebuilds a frame's accumulator from its checkpoint; the scheduler learns which tasks are in.
-void Coordinator::resume_frame(JobRecord& job, FrameRecord& f) {
+// Rebuilds a frame's accumulator from its checkpoint.
+Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameRecord& f) const {
+  LoadedFrame out;
   FrameCheckpoint::Loaded loaded = f.checkpoint->load();
   for (const std::string& p : loaded.problems)
     spdlog::warn("job {} frame {}: {} (its tasks will be rendered again)", job.id, f.number, p);
-  if (!loaded.prefix && loaded.tasks.empty()) return;
-  f.acc = std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+  if (!loaded.prefix && loaded.tasks.empty()) return out;
+  out.acc = std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
   if (loaded.prefix) {
     try {
-      f.acc->resume_from(std::move(*loaded.prefix));
+      out.acc->resume_from(std::move(*loaded.prefix));
     } catch (const std::exception& e) {
       spdlog::warn("job {} frame {}: checkpoint not used: {}", job.id, f.number, e.what());
-      f.acc =
+      out.acc =
           std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
     }
   }
   for (FrameCheckpoint::TaskResult& t : loaded.tasks) {
     if (t.tile >= job.tiles.size()) continue;
     try {
-      if (f.acc->add(std::move(t.buffer)) != FrameAccumulator::AddResult::Dropped)
-        ledger_->restore_done(TaskRef{job.id, f.number, t.pass, t.tile});
+      if (out.acc->add(std::move(t.buffer)) != FrameAccumulator::AddResult::Dropped)
+        out.done.push_back(TaskRef{job.id, f.number, t.pass, t.tile});
     } catch (const std::exception& e) {
       spdlog::warn("job {} frame {} task {}/{}: not used: {}", job.id, f.number, t.pass, t.tile,
                    e.what());
     }
   }
+  if (out.acc->passes_merged() > 0) f.checkpoint->save_prefix(out.acc->frame());
+  return out;
+}
+
+void Coordinator::adopt_frame(JobRecord& job, FrameRecord& f, LoadedFrame loaded) {
+  if (!loaded.acc) return;
+  f.acc = std::move(loaded.acc);
+  for (const TaskRef& t : loaded.done) ledger_->restore_done(t);
   ledger_->restore_passes(job.id, f.number, f.acc->passes_merged());
-  if (f.acc->passes_merged() > 0) f.checkpoint->save_prefix(f.acc->frame());
   publish_frame(job, f);
 }
 
@@ -180,8 +207,11 @@ void Coordinator::restore(const StoredJob& stored) {
     job->core_seconds = stored.core_seconds;
     job->tenant = stored.tenant;
     if (job->build_id.empty()) job->build_id = stored.build_id;
+    job->cpu_kind = stored.cpu_kind;
     job->paused = stored.paused;
     job->priority = stored.priority.value_or(spec->priority);
+    for (FrameNumber n : stored.held)
+      if (auto it = job->by_number.find(n); it != job->by_number.end()) it->second->held = true;
     if (!job->bundle_problem.empty() && !terminal(job->state))
       set_state(*job, JobState::Failed,
                 "the coordinator could not restore its scene bundle: " + job->bundle_problem +

@@ -10,6 +10,7 @@
 
 #include "engine/buffer_file.h"
 #include "engine/digest.h"
+#include "farm/frame_range.h"
 
 namespace rf {
 
@@ -26,8 +27,21 @@ void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
                                 f.acc->stopped_on_target(), job.noise_target, -1);
   if (f.progress.done) ledger_->frame_done(job, f, f.progress.passes_merged);
   bool all_done = true;
-  for (auto& g : job.frames) all_done &= g->progress.done;
-  if (all_done && !terminal(job.state)) set_state(job, JobState::Completed, "");
+  std::vector<FrameNumber> held;
+  for (auto& g : job.frames) {
+    if (g->held && !g->progress.done)
+      held.push_back(g->number);
+    else
+      all_done &= g->progress.done;
+  }
+  if (all_done && !terminal(job.state)) {
+    if (held.empty())
+      set_state(job, JobState::Completed, "");
+    else
+      set_state(job, JobState::Failed,
+                "frames " + frame_range_text(held) +
+                    " were left out of a retry and are not rendered; `retry` renders them");
+  }
   ++version_;
   changed_.notify_all();
 }
@@ -101,6 +115,141 @@ void Coordinator::set_priority(const std::string& id, int priority, const Caller
       [&](JobRecord& j) { return ledger_->set_priority(j, priority); });
 }
 
+void Coordinator::retry(const std::string& id, const std::string& frames, const Caller& caller) {
+  std::shared_ptr<JobRecord> job;
+  JobState was = JobState::Queued;
+  std::vector<FrameRecord*> reopen;
+  std::vector<FrameNumber> held;
+  {
+    std::lock_guard lock(mu_);
+    job = find_for(id, caller);
+    was = job->state;
+    if (was == JobState::Completed)
+      refuse(ErrorCode::FailedPrecondition,
+             "job " + id +
+                 " has completed; there is nothing to retry (`requeue` renders frames "
+                 "again)");
+    if (job->frames.empty() || !job->bundle_problem.empty())
+      refuse(ErrorCode::FailedPrecondition,
+             "job " + id + " cannot run again: " +
+                 (job->bundle_problem.empty() ? job->error : job->bundle_problem));
+    std::set<FrameNumber> named;
+    if (frames.empty()) {
+      for (FrameNumber n : job->frame_numbers()) named.insert(n);
+    } else {
+      try {
+        for (FrameNumber n : parse_frame_range(frames)) {
+          if (!job->by_number.count(n))
+            refuse(ErrorCode::InvalidArgument,
+                   "frames: job " + id + " has no frame " + std::to_string(n));
+          named.insert(n);
+        }
+      } catch (const FrameRangeError& e) {
+        refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
+      }
+    }
+    const bool ended = terminal(was);
+    for (const auto& f : job->frames) {
+      if (f->progress.done || !(ended || f->held)) continue;  // done, or running already
+      if (named.count(f->number))
+        reopen.push_back(f.get());
+      else
+        held.push_back(f->number);
+    }
+    std::sort(held.begin(), held.end());
+    if (reopen.empty()) {
+      if (!ended) return;  // what it names runs already: a second or retried call
+      refuse(ErrorCode::FailedPrecondition, "job " + id + ": frames " +
+                                                frame_range_text({named.begin(), named.end()}) +
+                                                " are done; there is nothing to retry");
+    }
+  }
+  // Each frame's checkpoint is read under its own lock (merges take it before mu_), off mu_.
+  std::vector<std::unique_lock<std::mutex>> frame_locks;
+  std::vector<LoadedFrame> loaded;
+  for (FrameRecord* f : reopen) {
+    frame_locks.emplace_back(f->m);
+    loaded.push_back(load_frame(*job, *f));
+  }
+  Ledger::Ticket ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    bool same = job->state == was;
+    for (FrameRecord* f : reopen) same &= terminal(was) || f->held;
+    if (!same) return;  // another retry (or a cancel) came between: it stands
+    std::vector<FrameNumber> numbers;
+    for (FrameRecord* f : reopen) numbers.push_back(f->number);
+    ticket = ledger_->retry(*job, numbers, held);
+    for (const auto& f : job->frames)
+      f->held = std::binary_search(held.begin(), held.end(), f->number);
+    for (size_t i = 0; i < reopen.size(); ++i) {
+      reopen[i]->leases_dropped = false;
+      reopen[i]->first_lease_at = -1;
+      reopen[i]->acc.reset();  // the checkpoint holds every merged result
+      adopt_frame(*job, *reopen[i], std::move(loaded[i]));
+    }
+    write_folder_state(*job);
+    spdlog::info("job {} retried by {}: frames {} queued{}", job->id, caller.principal,
+                 frame_range_text(numbers),
+                 held.empty() ? "" : ", frames " + frame_range_text(held) + " held");
+    ++version_;
+    changed_.notify_all();
+  }
+  frame_locks.clear();
+  wait_stored(ticket, "the retry");
+}
+
+void Coordinator::delete_job(const std::string& id, bool force, const Caller& caller) {
+  std::shared_ptr<JobRecord> job;
+  auto check = [&] {
+    if (!terminal(job->state) && !force)
+      refuse(ErrorCode::FailedPrecondition,
+             "job " + id + " is " + (job->state == JobState::Queued ? "queued" : "running") +
+                 "; cancel it first, or delete --force");
+  };
+  {
+    std::lock_guard lock(mu_);
+    job = find_for(id, caller);
+    check();
+  }
+  // No merge of the job is in progress while it goes (merges take a frame's lock before mu_).
+  std::vector<std::unique_lock<std::mutex>> frame_locks;
+  for (auto& f : job->frames) frame_locks.emplace_back(f->m);
+  const std::string dir = options_.state_dir + "/jobs/" + job->id;
+  const std::string tomb = options_.state_dir + "/jobs/.deleted-" + job->id;
+  Ledger::Ticket ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(id) + "'");
+    check();
+    // The point of no return: a restart finishes the delete from the renamed folder.
+    if (fs::exists(dir)) {
+      try {
+        rename_durably(dir, tomb);
+      } catch (const std::exception& e) {
+        refuse(ErrorCode::Unavailable, std::string("cannot delete job ") + id +
+                                           " now: " + e.what() + "; nothing was deleted");
+      }
+    }
+    job->deleted = true;
+    ticket = ledger_->delete_job(*job);
+    jobs_.erase(job->id);
+    std::erase_if(requests_, [&](const auto& r) { return r.second == job->id; });
+    std::erase_if(verifying_, [&](const auto& v) { return v.first.job_id == job->id; });
+    spdlog::info("job {} ({}) deleted by {}", job->id, job_state_name(job->state),
+                 caller.principal);
+    ++version_;
+    changed_.notify_all();
+  }
+  for (auto& f : job->frames) f->acc.reset();
+  frame_locks.clear();
+  wait_stored(ticket, "the deletion");
+  std::error_code ec;
+  fs::remove_all(tomb, ec);
+  if (ec)
+    spdlog::warn("job {}: {} not removed ({}); the next start removes it", id, tomb, ec.message());
+}
+
 // Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
 // frame's header (scene digest, seed, frame, integrator, settings, resolution).
 SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord& f,
@@ -131,14 +280,13 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
 
 // The ledger's verdict on a durable result: the task done (its rows to the journal), or, when it
 // is settled already, its lease ended.
-bool Coordinator::record_result(JobRecord& job, const TaskResult& r, double core_seconds,
-                                const std::string& build_id) {
-  if (!build_ok(job, build_id)) return false;  // another build's result was merged meanwhile
+bool Coordinator::record_result(JobRecord& job, const TaskResult& r, const BufferHeader& h) {
+  if (!pin_problem(job, h).empty()) return false;  // another kind's result was merged meanwhile
   if (ledger_->scheduler().settled(r.task)) {
     ledger_->not_needed(r.lease_id, r.task, now());
     return false;  // another result came first, or the job was cancelled or failed meanwhile
   }
-  ledger_->complete(job, r.lease_id, r.task, r.worker_id, core_seconds, build_id, now());
+  ledger_->complete(job, r.lease_id, r.task, r.worker_id, h.core_seconds, h.build_id, h.isa, now());
   return true;
 }
 
@@ -181,16 +329,27 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   SampleBuffer buffer;
   try {
     buffer = checked_buffer(*job, *f, r);
-    std::lock_guard lock(mu_);
-    if (!build_ok(*job, buffer.header.build_id))
-      refuse(ErrorCode::FailedPrecondition, "job " + job->id + " merges results of build '" +
-                                                job->build_id + "'; this one is from '" +
-                                                clip(buffer.header.build_id) + "'");
   } catch (const CoordinatorError& e) {
     refuse_upload(r.worker_id, r.lease_id, r.task, e.what());
     throw;
   }
+  {
+    // Another build's or CPU kind's result (the job was pinned while the task was out) is not
+    // the worker's fault: the task goes back to the queue for a worker of the pin, uncounted.
+    std::lock_guard lock(mu_);
+    if (std::string why = pin_problem(*job, buffer.header); !why.empty()) {
+      Ledger::Ticket ticket = 0;
+      ledger_->fail(r.lease_id, r.worker_id, why, /*handed_back=*/true, now(), &ticket);
+      spdlog::info("result of task {} from worker {} not merged: {}", task_id_text(r.task),
+                   r.worker_id, why);
+      refuse(ErrorCode::FailedPrecondition, why);
+    }
+  }
   std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
+  {
+    std::lock_guard lock(mu_);
+    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
+  }
   if (!f->acc) {
     {
       std::lock_guard lock(mu_);
@@ -223,7 +382,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   {
     std::lock_guard lock(mu_);
     if (journal_->problem().empty()) storage_ok();
-    if (!record_result(*job, r, buffer.header.core_seconds, buffer.header.build_id)) return false;
+    if (!record_result(*job, r, buffer.header)) return false;
     ++counters_.tasks_completed;
     counters_.samples_merged += buffer.total_samples();
     counters_.bytes_merged += r.buffer.size();

@@ -150,6 +150,32 @@ void Scheduler::cancel_job(const std::string& job_id) {
   drop_job_tasks(*j);
 }
 
+void Scheduler::remove_job(const std::string& job_id) {
+  JobState* j = job(job_id);
+  if (!j) return;
+  drop_job_tasks(*j);
+  jobs_.erase(job_id);
+}
+
+void Scheduler::reopen_job(const std::string& job_id) {
+  JobState* j = job(job_id);
+  if (!j) return;
+  drop_job_tasks(*j);
+  j->failed = j->cancelled = false;
+  j->error.clear();
+  j->worker_failures.clear();
+  j->worker_frame.clear();
+  for (FrameState& f : j->frames) reopen_frame(job_id, f.frame);
+}
+
+void Scheduler::reopen_frame(const std::string& job_id, FrameNumber frame) {
+  JobState* j = job(job_id);
+  FrameState* f = j ? frame_of(*j, frame) : nullptr;
+  if (!f) return;
+  forget_tasks_from(*j, frame, 0);
+  *f = FrameState{frame, j->passes, uint64_t(j->tiles) * j->passes, 0, 0, {}, {}};
+}
+
 void Scheduler::set_paused(const std::string& job_id, bool paused) {
   if (JobState* j = job(job_id)) j->paused = paused;
 }

@@ -71,6 +71,14 @@ class Scheduler {
   void add_job(const std::string& job_id, const std::vector<FrameNumber>& frames, uint32_t tiles,
                uint32_t passes, int priority, const std::string& tenant = "");
   void cancel_job(const std::string& job_id);  // drops its queued tasks and ends its leases
+  void remove_job(const std::string& job_id);  // forgets it (deleted): its tasks, leases, counts
+  // A failed or cancelled job runs again (`retry`): its failure counts (per task and per worker)
+  // start afresh and every frame's tasks are queued (the caller marks the done ones, mark_done,
+  // and stops the frames that need none, stop_frame); its order, tenant, priority and pause stay.
+  void reopen_job(const std::string& job_id);
+  // A frame that was stopped (stop_frame) needs all its tasks again; the caller marks the done
+  // ones. Its task records and their leases go.
+  void reopen_frame(const std::string& job_id, FrameNumber frame);
   // A paused job gets no new leases; its leases in flight run on, and their results are taken.
   // Its tasks still count as work left (work_left_for): a pause is not an end.
   void set_paused(const std::string& job_id, bool paused);

@@ -25,6 +25,7 @@
 #include "farm/auth.h"
 #include "farm/chunking.h"
 #include "farm/convert.h"
+#include "farm/frame_range.h"
 #include "proto/rayfarm.grpc.pb.h"
 
 namespace rf {
@@ -309,8 +310,11 @@ pb::JobStatus to_wire(const JobStatus& s) {
   out.set_submitted_unix(s.submitted_unix);
   out.set_tenant(s.tenant);
   out.set_build_id(s.build_id);
+  out.set_cpu_kind(s.cpu_kind);
+  out.set_waiting_for(s.waiting_for);
   out.set_paused(s.paused);
   out.set_priority(s.priority);
+  out.set_held_frames(frame_range_text(s.held));
   for (const FrameStatus& f : s.frames) *out.add_frames() = to_wire(f);
   return out;
 }
@@ -444,6 +448,16 @@ class JobServiceImpl final : public pb::JobService::Service {
       *o = to_wire(c_.status(r->job_id(), caller));
     });
   }
+  Status RetryJob(ServerContext* ctx, const pb::RetryRequest* r, pb::JobStatus* o) override {
+    return guarded(g_, ctx, Access::Client, "RetryJob", [&](const Caller& caller) {
+      c_.retry(r->job_id(), r->frames(), caller);
+      *o = to_wire(c_.status(r->job_id(), caller));
+    });
+  }
+  Status DeleteJob(ServerContext* ctx, const pb::DeleteRequest* r, pb::DeleteResponse*) override {
+    return guarded(g_, ctx, Access::Client, "DeleteJob",
+                   [&](const Caller& caller) { c_.delete_job(r->job_id(), r->force(), caller); });
+  }
   Status ListWorkers(ServerContext* ctx, const pb::ListWorkersRequest*,
                      pb::ListWorkersResponse* o) override {
     return guarded(g_, ctx, Access::Client, "ListWorkers", [&](const Caller& caller) {
@@ -454,6 +468,7 @@ class JobServiceImpl final : public pb::JobService::Service {
         p->set_cores(w.info.cores);
         p->set_build_id(w.info.build_id);
         p->set_isa(w.info.isa);
+        for (const std::string& t : w.info.tags) p->add_tags(t);
         for (const std::string& t : w.tasks) p->add_tasks(t);
         p->set_failures(uint32_t(w.failures));
         p->set_seconds_since_contact(w.seconds_since_contact);
@@ -489,8 +504,12 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
   Status Register(ServerContext* ctx, const pb::RegisterRequest* r,
                   pb::RegisterResponse* o) override {
     return guarded(g_, ctx, Access::Worker, "Register", [&](const Caller& caller) {
-      Registration reg =
-          c_.register_worker({r->hostname(), r->cores(), r->build_id(), r->isa()}, caller);
+      Registration reg = c_.register_worker({r->hostname(),
+                                             r->cores(),
+                                             r->build_id(),
+                                             r->isa(),
+                                             {r->tags().begin(), r->tags().end()}},
+                                            caller);
       o->set_worker_id(reg.worker_id);
       o->set_lease_seconds(reg.lease_seconds);
       o->set_keepalive_seconds(reg.keepalive_seconds);

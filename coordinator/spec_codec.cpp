@@ -67,6 +67,8 @@ std::optional<JobSpec> from_json(const std::string& text) {
     s.tile_size = j.at("tile_size").get<uint32_t>();
     s.build_id = j.at("build_id").get<std::string>();
     s.request_id = j.at("request_id").get<std::string>();
+    if (j.contains("required_tags"))
+      s.required_tags = j.at("required_tags").get<std::vector<std::string>>();
     return s;
   } catch (const Json::exception&) {
     return std::nullopt;
@@ -281,6 +283,8 @@ std::string encode_spec(const JobSpec& s) {
             {"tile_size", s.tile_size},
             {"build_id", s.build_id},
             {"request_id", s.request_id}};
+  if (!s.required_tags.empty())
+    j["required_tags"] = s.required_tags;  // specs without it encode as before
   // Submitted text is checked to be UTF-8 (text_problem); replace guards the rest.
   return j.dump(-1, ' ', false, Json::error_handler_t::replace);
 }

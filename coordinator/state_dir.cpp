@@ -47,4 +47,18 @@ StateDirLock::~StateDirLock() {
   if (fd_ >= 0) ::close(fd_);
 }
 
+void rename_durably(const std::string& from, const std::string& to) {
+  std::error_code ec;
+  std::filesystem::rename(from, to, ec);
+  if (ec) throw StoreError(from + ": cannot rename to " + to + ": " + ec.message());
+  const std::string dir = std::filesystem::path(to).parent_path().string();
+  int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0 || ::fsync(fd) != 0) {
+    const int e = errno;
+    if (fd >= 0) ::close(fd);
+    throw StoreError(dir + ": cannot flush the directory: " + std::strerror(e));
+  }
+  ::close(fd);
+}
+
 }  // namespace rf

@@ -19,4 +19,8 @@ class StateDirLock {
   int fd_ = -1;
 };
 
+// Renames `from` to `to` (same directory) and flushes the directory, so that the rename
+// survives a power cut before anything that relies on it is written. Throws StoreError.
+void rename_durably(const std::string& from, const std::string& to);
+
 }  // namespace rf

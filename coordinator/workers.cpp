@@ -8,6 +8,7 @@
 #include <cctype>
 #include <filesystem>
 #include "engine/digest.h"
+#include "farm/tags.h"
 
 namespace rf {
 
@@ -41,6 +42,12 @@ void Coordinator::forget_unused_workers() {
 }
 
 Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& caller) {
+  if (w.tags.size() > kMaxTags)
+    refuse(ErrorCode::InvalidArgument,
+           "tags: " + std::to_string(w.tags.size()) + " tags; at most " + std::to_string(kMaxTags));
+  for (const std::string& t : w.tags)
+    if (std::string why = tag_problem(t); !why.empty())
+      refuse(ErrorCode::InvalidArgument, "tags: " + why);
   std::string host;
   for (char c : w.hostname.substr(0, 64))  // part of an id that appears in logs and file rows
     if (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '.') host += c;
@@ -55,16 +62,19 @@ Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& cal
   r.keepalive_seconds = uint32_t(std::max(1.0, options_.lease_seconds / 3));
   try {  // stored before the worker may use it, without the coordinator's lock
     journal_->write_ahead(
-        {store::InsertWorker{{r.worker_id, caller.principal, w.build_id.substr(0, 256), ""}}});
+        {store::InsertWorker{{r.worker_id, caller.principal, w.build_id.substr(0, 256), "",
+                              w.isa.substr(0, 256), w.tags}}});
   } catch (const StoreError& e) {
     refuse(ErrorCode::Unavailable, std::string("cannot store the registration now: ") + e.what());
   }
   std::lock_guard lock(mu_);
-  WorkerInfo info{host, w.cores, w.build_id.substr(0, 256), w.isa.substr(0, 64)};
-  workers_[r.worker_id] = {caller.principal, w.build_id.substr(0, 256), info, now()};
+  WorkerInfo info{host, w.cores, w.build_id.substr(0, 256), w.isa.substr(0, 256), w.tags};
+  workers_[r.worker_id] = {caller.principal, info.build_id, info.isa, info, now()};
   last_seen_[r.worker_id] = now();
-  spdlog::info("worker {} registered by {}: {} cores, {}, {}", r.worker_id, caller.principal,
-               w.cores, clip(w.build_id), clip(w.isa));
+  std::string tags;
+  for (const std::string& t : w.tags) tags += " " + t;
+  spdlog::info("worker {} registered by {}: {} cores, {}, {}, tags:{}", r.worker_id,
+               caller.principal, w.cores, clip(w.build_id), clip(w.isa), tags);
   return r;
 }
 
@@ -157,11 +167,13 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
     refuse(ErrorCode::Unavailable,
            "the coordinator cannot store leases now (" + problem + "); retry later");
   LeaseResult out;
-  // Only jobs that merge this worker's build (a job pinned to another build is not its work).
-  const std::string& build = workers_.at(worker_id).build_id;
+  // Only jobs that merge this worker's build and CPU kind (a job pinned to others is not its
+  // work).
+  const WorkerRecord& me = workers_.at(worker_id);
   Scheduler::JobFilter may = [&](const std::string& job_id) {
     std::shared_ptr<JobRecord> job = find(job_id);
-    return job && build_ok(*job, build);
+    return job && pin_ok(*job, me.build_id, me.isa) &&
+           satisfies_all(me.info.tags, job->spec.required_tags);
   };
   std::optional<Lease> l = ledger_->lease(worker_id, now(), may);
   if (!l) {

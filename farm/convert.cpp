@@ -59,6 +59,7 @@ JobSpec from_wire(const pb::JobSpec& spec) {
   s.tile_size = spec.tile_size();
   s.build_id = spec.build_id();
   s.request_id = spec.request_id();
+  s.required_tags.assign(spec.required_tags().begin(), spec.required_tags().end());
   return s;
 }
 
@@ -74,6 +75,7 @@ pb::JobSpec to_wire(const JobSpec& s) {
   spec.set_frames(s.frames);
   spec.set_build_id(s.build_id);
   spec.set_request_id(s.request_id);
+  for (const std::string& r : s.required_tags) spec.add_required_tags(r);
   *spec.mutable_overrides() = to_wire_overrides(s.overrides);
   spec.set_priority(s.priority);
   spec.set_tile_size(s.tile_size);

@@ -30,6 +30,21 @@ bool split_range(const std::string& s, std::string& a, std::string& b) {
 
 }  // namespace
 
+std::string frame_range_text(std::vector<FrameNumber> frames) {
+  std::sort(frames.begin(), frames.end());
+  frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+  std::string out;
+  for (size_t i = 0; i < frames.size();) {
+    size_t j = i;
+    while (j + 1 < frames.size() && int64_t(frames[j + 1]) == int64_t(frames[j]) + 1) ++j;
+    if (!out.empty()) out += ',';
+    out += std::to_string(frames[i]);
+    if (j > i) out += '-' + std::to_string(frames[j]);
+    i = j + 1;
+  }
+  return out;
+}
+
 std::vector<FrameNumber> parse_frame_range(const std::string& text) {
   std::vector<FrameNumber> frames;
   std::set<FrameNumber> seen;

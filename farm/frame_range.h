@@ -23,6 +23,11 @@ inline constexpr int64_t kMinFrame = INT32_MIN, kMaxFrame = INT32_MAX;  // engin
 // The frames in the order written. Throws FrameRangeError saying which item is wrong and why.
 std::vector<FrameNumber> parse_frame_range(const std::string& text);
 
+// The frames, sorted, as the range syntax above writes them most briefly: runs of consecutive
+// frames as "A-B", the rest one by one ("1-5,7,9-12", "-3--1,2"); "" for none. parse_frame_range
+// reads it back (as a set: sorted, each once).
+std::string frame_range_text(std::vector<FrameNumber> frames);
+
 // A per-frame file pattern: each run of '#' becomes the frame number, zero-padded to the run's
 // length ("shot.####.json", 7 -> "shot.0007.json"; -7 -> "shot.-007.json", the sign in the width
 // as printf's "%04d" puts it). A name without '#' is returned unchanged.

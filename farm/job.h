@@ -27,6 +27,7 @@ struct JobSpec {
   uint32_t tile_size = 0;          // pixels; 0: the coordinator's default
   std::string build_id;            // results only from this build; empty: the first result's
   std::string request_id;          // the submit's idempotency key (client-made; may be empty)
+  std::vector<std::string> required_tags;  // worker tags it needs (farm/tags.h), e.g. pool=gpu
   bool operator==(const JobSpec&) const = default;
 };
 

@@ -8,8 +8,8 @@
 // Requests: submit (a mutated valid spec, or any bytes as a serialized rayfarm.v1.JobSpec, read
 // by the service's own conversion), upload a blob, register, lease, renew, upload a result (a
 // valid buffer, one with flipped bytes, or any bytes; the upload's header checked first, as the
-// service does), fail, cancel, pause/resume, priority, workers, status/list/watch, fetch, missing
-// blobs, a
+// service does), fail, cancel, pause/resume, priority, retry, delete, workers, status/list/watch,
+// fetch, missing blobs, workers with tags and jobs requiring them, a
 // clock jump (leases expire) and a restart of the coordinator on the same state directory.
 //
 // Findings, beyond what the sanitizers see:
@@ -132,7 +132,7 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
-constexpr int kRequests = 17;  // the operations of Farm::request
+constexpr int kRequests = 21;  // the operations of Farm::request
 
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
@@ -231,7 +231,7 @@ class Farm {
         core_->put_blob(in.blob(), caller);
         return;
       case 2: {
-        WorkerInfo w{in.str(64), in.byte(), in.byte() & 1 ? in.str(64) : build_id(), "fuzz"};
+        WorkerInfo w{in.str(64), in.byte(), in.byte() & 1 ? in.str(64) : build_id(), cpu_isa()};
         workers_.push_back(core_->register_worker(w, caller).worker_id);
         return;
       }
@@ -321,6 +321,28 @@ class Farm {
       case 16:
         core_->workers(caller);
         return;
+      case 17: {  // retry: every unfinished frame, or a range (any text)
+        const std::string job = job_id(in);
+        core_->retry(job, in.byte() & 1 ? in.str(16) : "", caller);
+        return;
+      }
+      case 18: {  // delete, forced or not
+        const std::string job = job_id(in);
+        core_->delete_job(job, in.byte() & 1, caller);
+        if (job == job0_) job0_deleted_ = true;
+        return;
+      }
+      case 19: {  // register with tags (any text: bad ones are refused)
+        WorkerInfo w{"tagged", 1, build_id(), cpu_isa(), {in.str(24), in.str(24)}};
+        workers_.push_back(core_->register_worker(w, caller).worker_id);
+        return;
+      }
+      case 20: {  // the valid job, requiring tags (any text)
+        JobSpec spec = valid_job().spec;
+        spec.required_tags = {in.str(24), in.str(24)};
+        jobs_.push_back(core_->submit(spec, caller));
+        return;
+      }
       case 15: {  // a new priority, any 32-bit value
         const std::string job = job_id(in);
         core_->set_priority(job, int(int32_t(in.u32())), caller);
@@ -370,6 +392,7 @@ class Farm {
 
   // The valid job's figures agree with each other.
   void check_job0() {
+    if (job0_deleted_) return;
     JobStatus s = core_->status(job0_, kCallers[0]);
     for (const FrameStatus& f : s.frames) {
       if (f.progress.passes_merged > kPasses)
@@ -388,6 +411,7 @@ class Farm {
   int starts_ = 0;
   std::unique_ptr<Coordinator> core_;
   std::string job0_;
+  bool job0_deleted_ = false;
   std::vector<std::string> jobs_, workers_;
   std::vector<Held> leases_;
 };

@@ -21,6 +21,7 @@
 #include "engine/digest.h"
 #include "engine/render.h"
 #include "engine/scene.h"
+#include "farm/tags.h"
 #include "tests/support/test_support.h"
 
 namespace rf {
@@ -75,7 +76,8 @@ class CoreBench {
   std::string worker(const std::string& name, const Caller& caller = {}) {
     auto it = workers_.find(name);
     if (it != workers_.end()) return it->second;
-    return workers_[name] = core_->register_worker({name, 1, build_id(), "test"}, caller).worker_id;
+    return workers_[name] =
+               core_->register_worker({name, 1, build_id(), cpu_isa()}, caller).worker_id;
   }
 
   // Uploads the scene's bundle and submits a job of `passes` passes of frame 1.
@@ -88,7 +90,7 @@ class CoreBench {
     spec.files = bundle_of_scene(scene);
     for (const BundleEntry& f : spec.files)
       core_->put_blob(read_file_bytes((fs::path(scene).parent_path() / f.path).string()), caller);
-    spec.frames = "1";
+    spec.frames = frames;
     spec.overrides.width = 16;
     spec.overrides.height = 16;
     spec.overrides.passes = passes;
@@ -96,6 +98,7 @@ class CoreBench {
     spec.tile_size = 8;
     spec.build_id = pin;
     spec.request_id = request_id;
+    spec.required_tags = required_tags;
     return core_->submit(spec, caller);
   }
 
@@ -124,11 +127,13 @@ class CoreBench {
     return core_->complete({this->worker(worker), a.lease_id, a.task, result(a, value)});
   }
 
-  SampleBuffer image(const std::string& job) {
-    return decode_buffer(core_->fetch(job, 1).buffer, "fetched frame");
+  SampleBuffer image(const std::string& job, FrameNumber frame = 1) {
+    return decode_buffer(core_->fetch(job, frame).buffer, "fetched frame");
   }
 
   double now = 0;
+  std::string frames = "1";                // of the jobs submit() makes
+  std::vector<std::string> required_tags;  // and the worker tags they need
   int scene_checks = 0;  // calls of the scene checker, over every start
   JobLimits limits;  // for the next start()
   double verify_fraction = 0;
@@ -339,6 +344,122 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
   for (const char* w : {"w1", "w2", "w3"})
     EXPECT_NE(s.error.find(std::string("out of memory on ") + w), std::string::npos) << s.error;
   EXPECT_FALSE(bench.core().lease(bench.worker("w4")).task) << "a failed job hands out nothing";
+}
+
+// `retry` of a failed job: the frames named run again (a worker it failed on gets its tasks), the
+// other unfinished frames are held across a restart, and once the named frames are done the job
+// fails again naming the held ones; a second retry renders them from the passes merged before,
+// and the job completes. Refusals: a completed job, a frame it lacks, a bad range, all done.
+TEST(CoordinatorCore, RetryRunsNamedFramesAgainHoldsTheRestAndKeepsMergedPasses) {
+  CoreBench bench("core-retry");
+  bench.frames = "1-3";
+  std::string job = bench.submit(2);  // 8 tasks per frame
+  for (int i = 0; i < 4; ++i) {       // pass 0 of frame 1
+    TaskAssignment a = bench.lease("w");
+    ASSERT_EQ(a.task.frame, 1);
+    ASSERT_TRUE(bench.complete(a, 1.0f));
+  }
+  for (const char* w : {"w1", "w2", "w3"}) {
+    TaskAssignment a = bench.lease(w);
+    ASSERT_EQ(a.task.frame, 2);
+    bench.core().fail({bench.worker(w), a.lease_id, std::string("crash on ") + w, false});
+  }
+  ASSERT_EQ(bench.core().status(job).state, JobState::Failed);
+  EXPECT_EQ(refusal([&] { bench.core().retry(job, "9"); }), ErrorCode::InvalidArgument);
+  EXPECT_EQ(refusal([&] { bench.core().retry(job, "2-x"); }), ErrorCode::InvalidArgument);
+
+  bench.core().retry(job, "2");
+  JobStatus s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Running);
+  EXPECT_EQ(s.error, "");
+  EXPECT_EQ(s.held, (std::vector<FrameNumber>{1, 3})) << "frame 1 has a pass left";
+  EXPECT_NO_THROW(bench.core().retry(job, "2")) << "frame 2 runs already: nothing to do";
+  bench.start("B");  // the retry and the held frames are stored
+  s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Running);
+  EXPECT_EQ(s.held, (std::vector<FrameNumber>{1, 3}));
+  EXPECT_EQ(s.frames[0].progress.passes_merged, 1u);
+  for (int i = 0; i < 8; ++i) {  // w1 failed frame 2 before: it renders it now, alone
+    TaskAssignment a = bench.lease("w1");
+    ASSERT_EQ(a.task.frame, 2);
+    ASSERT_TRUE(bench.complete(a, 2.0f, "w1"));
+  }
+  s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Failed);
+  EXPECT_NE(s.error.find("frames 1,3 were left out of a retry"), std::string::npos) << s.error;
+
+  bench.core().retry(job, "");
+  EXPECT_TRUE(bench.core().status(job).held.empty());
+  int leased = 0;
+  for (;;) {
+    LeaseResult l = bench.core().lease(bench.worker("w2"));
+    if (!l.task) break;
+    EXPECT_NE(l.task->task.frame, 2);
+    EXPECT_TRUE(l.task->task.frame == 3 || l.task->task.pass == 1) << "frame 1's pass 0 is in";
+    ASSERT_TRUE(bench.complete(*l.task, 1.0f, "w2"));
+    ++leased;
+  }
+  EXPECT_EQ(leased, 4 + 8);
+  s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Completed);
+  for (const FrameStatus& f : s.frames) EXPECT_EQ(f.progress.passes_merged, 2u);
+  EXPECT_EQ(bench.image(job, 2).header.passes.count(), 2u);
+  EXPECT_EQ(refusal([&] { bench.core().retry(job, ""); }), ErrorCode::FailedPrecondition);
+
+  // A cancelled job runs again; a retry naming only done frames of an ended job is refused.
+  bench.frames = "1-2";
+  std::string c = bench.submit(1);
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(bench.complete(bench.lease("w"), 1.0f));  // frame 1
+  bench.core().cancel(c);
+  EXPECT_EQ(refusal([&] { bench.core().retry(c, "1"); }), ErrorCode::FailedPrecondition);
+  bench.core().retry(c, "");
+  for (int i = 0; i < 4; ++i) {
+    TaskAssignment a = bench.lease("w");
+    EXPECT_EQ(a.task.frame, 2);
+    ASSERT_TRUE(bench.complete(a, 1.0f));
+  }
+  EXPECT_EQ(bench.core().status(c).state, JobState::Completed);
+}
+
+// `delete`: an ended job goes with its folder and rows (a restart does not bring it back) and its
+// id is never given again; a running one only with force (its lease's result is then NotFound).
+// A delete a crash interrupted after its folder was renamed is finished at the next start.
+TEST(CoordinatorCore, DeleteRemovesAJobItsFolderAndRowsAndItsIdIsNotReused) {
+  CoreBench bench("core-delete");
+  const std::string a = bench.submit(1);
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(bench.complete(bench.lease("w"), 1.0f));
+  ASSERT_EQ(bench.core().status(a).state, JobState::Completed);
+  const std::string b = bench.submit(1);
+  TaskAssignment held = bench.lease("w");
+  EXPECT_EQ(refusal([&] { bench.core().delete_job(b, false); }), ErrorCode::FailedPrecondition);
+  EXPECT_NE(refusal_message([&] { bench.core().delete_job(b, false); }).find("delete --force"),
+            std::string::npos);
+  const fs::path folder = fs::path(bench.state_dir()) / "jobs" / a;
+  ASSERT_TRUE(fs::exists(folder));
+  bench.core().delete_job(a, false);
+  EXPECT_FALSE(fs::exists(folder));
+  EXPECT_EQ(refusal([&] { bench.core().status(a); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { bench.core().fetch(a, 1); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { bench.core().delete_job(a, false); }), ErrorCode::NotFound);
+  bench.core().delete_job(b, true);
+  EXPECT_EQ(refusal([&] { bench.complete(held, 1.0f); }), ErrorCode::NotFound);
+  EXPECT_FALSE(bench.core().lease(bench.worker("w")).task) << "nothing of b is left";
+  EXPECT_TRUE(bench.core().list().empty());
+  const std::string c = bench.submit(1);
+  EXPECT_TRUE(c != a && c != b) << c;
+  bench.start("B");
+  ASSERT_EQ(bench.core().list().size(), 1u) << "a restart brings no deleted job back";
+  EXPECT_EQ(bench.core().list()[0].job_id, c);
+  // Interrupted after the rename (the point of no return): the next start finishes it.
+  bench.core().cancel(c);
+  bench.stop();
+  fs::rename(fs::path(bench.state_dir()) / "jobs" / c,
+             fs::path(bench.state_dir()) / "jobs" / (".deleted-" + c));
+  bench.start("C");
+  EXPECT_TRUE(bench.core().list().empty());
+  EXPECT_FALSE(fs::exists(fs::path(bench.state_dir()) / "jobs" / (".deleted-" + c)));
+  const std::string d = bench.submit(1);
+  EXPECT_TRUE(d != a && d != b && d != c) << d;
 }
 
 // Tasks handed back by workers shutting down are queued again without counting as failures.
@@ -775,6 +896,91 @@ TEST(CoordinatorCore, AJobMergesResultsOfOneBuildOnly) {
   std::optional<TaskAssignment> t = bench.core().lease(old).task;
   ASSERT_TRUE(t);
   EXPECT_EQ(t->task.job_id, pinned);
+}
+
+// The CPU kind is pinned as the build is: the first merged result's kind (Embree's ISA and
+// RAYFARM_EMBREE_CONFIG, BufferHeader::isa) is the job's, a worker of another kind gets none of
+// its tasks, and a result of another kind leased before the pin is not merged, nor counted against
+// its worker: its task goes back to the queue. The pin and the workers' kinds outlive a restart.
+TEST(CoordinatorCore, AJobMergesResultsOfOneCpuKindOnly) {
+  CoreBench bench("core-cpu-kind");
+  const std::string job = bench.submit(1);
+  const std::string other_kind = "x86_64-avx512 embree:isa=avx512";
+  ASSERT_NE(other_kind, cpu_isa());
+  const std::string x = bench.core().register_worker({"x", 1, build_id(), other_kind}).worker_id;
+  TaskAssignment a = bench.lease("w");
+  std::optional<TaskAssignment> b = bench.core().lease(x).task;
+  ASSERT_TRUE(b) << "before the pin, any kind may lease";
+  EXPECT_TRUE(bench.complete(a, 1.0f));
+  EXPECT_EQ(bench.core().status(job).cpu_kind, cpu_isa());
+  SampleBuffer theirs = bench.result_buffer(*b, 1.0f);
+  theirs.header.isa = other_kind;
+  const std::string why = refusal_message([&] {
+    bench.core().complete({x, b->lease_id, b->task, encode_buffer(theirs)});
+  });
+  EXPECT_NE(why.find("merges results of CPU kind '" + cpu_isa() + "'"), std::string::npos) << why;
+  LeaseResult none = bench.core().lease(x);
+  EXPECT_FALSE(none.task);
+  EXPECT_TRUE(none.no_more_work) << "a job of another kind is not this worker's work";
+  for (const WorkerStatus& w : bench.core().workers())
+    EXPECT_EQ(w.failures, 0) << w.worker_id << ": another kind's result is not a fault";
+  for (int i = 0; i < 3; ++i) {
+    TaskAssignment t = bench.lease("w");
+    EXPECT_TRUE(bench.complete(t, 1.0f));
+  }
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
+  bench.start("B");
+  EXPECT_EQ(bench.core().status(job).cpu_kind, cpu_isa()) << "the pin is stored";
+  bool listed = false;
+  for (const WorkerStatus& w : bench.core().workers())
+    if (w.worker_id == x) {
+      listed = true;
+      EXPECT_EQ(w.info.isa, other_kind);
+    }
+  EXPECT_TRUE(listed) << "the registration and its kind outlive the restart";
+}
+
+// Tags and pools: a job requiring pool=gpu is leased only to a worker with that tag (stored, so
+// also after a restart); until one registers, `status` says why it waits, and the per-pool metric
+// counts its tasks under "gpu", not "any" (a paused job's under neither). Bad tags and
+// requirements are refused naming them.
+TEST(CoordinatorCore, JobsRequiringTagsGoOnlyToWorkersWithThemAndSayWhenNoneCan) {
+  CoreBench bench("core-tags");
+  bench.required_tags = {"pool=gpu", "memory_gb>=8"};
+  const std::string job = bench.submit(1);
+  EXPECT_EQ(bench.core().status(job).waiting_for, "no worker is registered");
+  LeaseResult plain = bench.core().lease(bench.worker("plain"));
+  EXPECT_FALSE(plain.task);
+  EXPECT_TRUE(plain.no_more_work) << "a job this worker cannot meet is not its work";
+  EXPECT_EQ(bench.core().status(job).waiting_for,
+            "no registered worker has what it needs: tags pool=gpu memory_gb>=8");
+  CoordinatorMetrics m = bench.core().metrics();
+  EXPECT_EQ(m.pools["gpu"].tasks_queued, 4u);
+  EXPECT_EQ(m.pools[kAnyPool].tasks_queued, 0u);
+  EXPECT_EQ(refusal([&] {
+              bench.core().register_worker({"bad", 1, build_id(), cpu_isa(), {"Pool=GPU"}});
+            }),
+            ErrorCode::InvalidArgument);
+  const std::string small =
+      bench.core()
+          .register_worker({"s", 1, build_id(), cpu_isa(), {"pool=gpu", "memory_gb=4"}})
+          .worker_id;
+  EXPECT_FALSE(bench.core().lease(small).task) << "4 GB is not 8";
+  const std::string gpu =
+      bench.core()
+          .register_worker({"g", 1, build_id(), cpu_isa(), {"pool=gpu", "memory_gb=64"}})
+          .worker_id;
+  EXPECT_EQ(bench.core().status(job).waiting_for, "");
+  bench.start("B");  // the tags are stored with the registration
+  std::optional<TaskAssignment> t = bench.core().lease(gpu).task;
+  ASSERT_TRUE(t);
+  EXPECT_EQ(t->task.job_id, job);
+  bench.core().set_paused(job, true);
+  m = bench.core().metrics();
+  EXPECT_EQ(m.pools["gpu"].tasks_queued, 0u) << "a paused job's tasks scale no pool";
+  EXPECT_EQ(m.pools["gpu"].tasks_leased, 1u);
+  bench.required_tags = {"memory_gb>=lots"};
+  EXPECT_EQ(refusal([&] { bench.submit(1); }), ErrorCode::InvalidArgument);
 }
 
 // The job list comes in pages: at most `limit` jobs after a given job, and whether more follow.

@@ -780,6 +780,101 @@ TEST(Farm, FailuresCountAcrossACoordinatorRestart) {
         << s["error"];
 }
 
+// `retry` with real processes: a job failed by fake workers runs frames 1-2 again (frame 3 held,
+// across a coordinator restart) and fails again naming frame 3; a second retry renders it, and
+// every frame equals its local render. A completed job's retry is FAILED_PRECONDITION (exit 1).
+TEST(Farm, ARetriedJobRendersItsFramesAgainAndEqualsTheLocalRender) {
+  Farm farm("farm-retry");
+  const std::string args = kCornell + " --spp 4 --passes 2 --res 32x32 --tile-size 16";
+  const std::string job = farm.submit(args + " --frames 1-3");
+  for (int w = 1; w <= 3; ++w) {
+    auto stub = pb::WorkerService::NewStub(farm.channel());
+    test::lease_and_fail(*stub, "fake-" + std::to_string(w), "driver crash");
+  }
+  ASSERT_EQ(farm.status(job)["state"], "failed");
+  test::CommandResult r = farm.client("retry " + job + " --frames 1-2");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("frames 3 held"), std::string::npos) << r.output;
+  farm.restart_coordinator();
+  nlohmann::json s = farm.status(job);
+  EXPECT_EQ(s["state"], "running");
+  EXPECT_EQ(s["held_frames"], "3");
+  EXPECT_NE(farm.client("status " + job).output.find("held 3"), std::string::npos);
+  farm.worker();
+  EXPECT_EQ(farm.client("watch " + job).exit_code, 1) << "it fails again: frame 3 is held";
+  s = farm.status(job);
+  EXPECT_NE(s["error"].get<std::string>().find("frames 3 were left out of a retry"),
+            std::string::npos)
+      << s["error"];
+  EXPECT_EQ(s["frames"][2]["passes_merged"], 0);
+  ASSERT_EQ(farm.client("retry " + job).exit_code, 0);
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  for (FrameNumber f = 1; f <= 3; ++f) expect_same_image(farm.fetched(job, f), farm.local(args, f));
+  r = farm.client("retry " + job);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("has completed; there is nothing to retry"), std::string::npos)
+      << r.output;
+}
+
+// `delete` with real processes: a queued job is refused without --force (exit 1) and deleted with
+// it; a completed job's folder goes, and neither comes back after a coordinator restart (status:
+// NOT_FOUND, exit 2).
+TEST(Farm, DeleteRemovesEndedJobsAndQueuedOnesOnlyWithForce) {
+  Farm farm("farm-delete");
+  const std::string args = kCornell + " --spp 4 --passes 1 --res 16x16";
+  const std::string done = farm.submit(args);
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + done).exit_code, 0);
+  const std::string queued = farm.submit(args);
+  test::CommandResult r = farm.client("delete " + queued);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cancel it first, or delete --force"), std::string::npos) << r.output;
+  EXPECT_EQ(farm.client("delete " + queued + " --force").exit_code, 0);
+  ASSERT_TRUE(fs::exists(farm.dir() + "/state/jobs/" + done));
+  r = farm.client("delete " + done);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(farm.dir() + "/state/jobs/" + done));
+  farm.restart_coordinator();
+  for (const std::string& job : {done, queued}) {
+    r = farm.client("status " + job);
+    EXPECT_EQ(r.exit_code, 2) << r.output;
+    EXPECT_NE(r.output.find("NOT_FOUND"), std::string::npos) << r.output;
+  }
+  EXPECT_TRUE(farm.status("").empty()) << farm.status("").dump();
+}
+
+// Pools with real processes: a job submitted with --require pool=gpu is not a plain worker's
+// work (it exits idle), `status` says what the job waits for, and a worker started with
+// --pool gpu renders it, equal to the local render; `workers` lists its tags.
+TEST(Farm, AJobRequiringAPoolWaitsForAWorkerOfItAndSaysSo) {
+  Farm farm("farm-pool");
+  const std::string args = kCornell + " --spp 4 --passes 2 --res 32x32 --tile-size 16";
+  const std::string job = farm.submit(args + " --require pool=gpu");
+  Process& plain = farm.worker();
+  EXPECT_EQ(plain.wait(60), 0) << "no work for it: it exits idle\n" << plain.log();
+  nlohmann::json s = farm.status(job);
+  EXPECT_EQ(s["state"], "queued");
+  EXPECT_EQ(s["waiting_for"], "no registered worker has what it needs: tags pool=gpu");
+  EXPECT_NE(farm.client("status " + job).output.find("WAITING: no registered worker"),
+            std::string::npos);
+  farm.worker({"--exit-when-idle", "--pool", "gpu", "--tag", "gpu"});
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 0), farm.local(args, 0));
+  test::CommandResult r = farm.client("workers --json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json workers = nlohmann::json::parse(r.output.substr(r.output.find('[')));
+  ASSERT_EQ(workers.size(), 2u);
+  std::vector<std::string> tags = workers[1]["tags"];
+  EXPECT_NE(std::find(tags.begin(), tags.end(), "pool=gpu"), tags.end()) << workers.dump();
+  EXPECT_NE(std::find(tags.begin(), tags.end(), "gpu"), tags.end()) << workers.dump();
+  EXPECT_EQ(tags[0].rfind("isa=", 0), 0u) << "the automatic tags come first";
+  r = farm.client("submit " + args + " --require Pool=GPU");
+  EXPECT_EQ(r.exit_code, 2) << r.output;  // a usage error, before anything is sent
+}
+
 // Soak (label "long", `./rayfarm test --long`): workers SIGKILLed and replaced every ~0.7 s and
 // the coordinator SIGKILLed and restarted twice while a 4-frame job renders; the images must still
 // equal the local renders and every frame must have exactly the spp asked.

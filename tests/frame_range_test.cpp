@@ -71,6 +71,20 @@ TEST(ExpandFramePattern, PadsEachRunOfHashes) {
   EXPECT_EQ(expand_frame_pattern("a%04d.json", 7), "a%04d.json");
 }
 
+// frame_range_text writes runs briefly, negative frames included, and parse_frame_range reads
+// the text back as the sorted set.
+TEST(FrameRange, TextOfASetReadsBack) {
+  EXPECT_EQ(frame_range_text({}), "");
+  EXPECT_EQ(frame_range_text({7}), "7");
+  EXPECT_EQ(frame_range_text({5, 1, 2, 3, 4, 7, 9, 10, 12, 11, 3}), "1-5,7,9-12");
+  EXPECT_EQ(frame_range_text({-1, -3, -2, 2}), "-3--1,2");
+  EXPECT_EQ(frame_range_text({INT32_MAX, INT32_MIN}), "-2147483648,2147483647");
+  for (std::vector<FrameNumber> set : {std::vector<FrameNumber>{-3, -2, -1, 2},
+                                       std::vector<FrameNumber>{1, 2, 3, 4, 5, 7, 9, 10, 11, 12},
+                                       std::vector<FrameNumber>{INT32_MIN, 0, INT32_MAX}})
+    EXPECT_EQ(parse_frame_range(frame_range_text(set)), set);
+}
+
 // Output templates (render -o): '#' runs and printf's %d and %0Nd, %% a percent sign, any other
 // '%' as written; is_frame_pattern says whether a name changes with the frame.
 TEST(ExpandFramePattern, OutputTemplatesTakePrintfFields) {

@@ -55,6 +55,9 @@ class TestStore final : public JobStore {
   std::vector<std::string> refused_workers(const std::string& j) const override {
     return inner_->refused_workers(j);
   }
+  std::vector<TaskFailure> failure_history(const std::string& j) const override {
+    return inner_->failure_history(j);
+  }
   uint64_t tasks_done(const std::string& j) const override { return inner_->tasks_done(j); }
 
   void close_gate() {
@@ -112,6 +115,7 @@ TEST(Ledger, JobTransitionsAreTheStateMachinesAndNoOthers) {
       Bench b;
       auto job = make_job("j1");
       job->state = from;
+      // (An ended job leaves only by retry(), tested below.)
       bool legal = !terminal(from) && to != JobState::Queued &&
                    (to != JobState::Running || from == JobState::Queued);
       if (legal) {
@@ -183,7 +187,7 @@ TEST(Ledger, PauseResumeAndPriorityAreStoredAndSteerLeases) {
   EXPECT_FALSE(b.ledger.lease("w2", b.now, {})) << "the paused job's tasks wait";
   EXPECT_TRUE(b.ledger.scheduler().work_left_for("w2")) << "a pause is not an end";
   // The lease in flight completes and counts.
-  b.ledger.complete(*a, first->lease_id, first->task, "w1", 1.0, "B", b.now);
+  b.ledger.complete(*a, first->lease_id, first->task, "w1", 1.0, "B", "K", b.now);
   b.flush();
   EXPECT_EQ(b.store.tasks_done("j1"), 1u);
   // Pausing again writes nothing; resuming leases j1's remaining tasks.
@@ -216,6 +220,88 @@ TEST(Ledger, PauseResumeAndPriorityAreStoredAndSteerLeases) {
   EXPECT_EQ(c->priority, 0);
 }
 
+// Retry: a failed job runs again (Failed -> Running) with its failure counts afresh (the workers
+// it failed on get its tasks again) and the old failures kept as history; its done frame stays
+// done, a frame left out is held (not leased) until a second retry releases it; a held frame
+// stays held across a restore. A cancelled job is retried too; a completed one is not.
+TEST(Ledger, RetryRunsFailedWorkAgainWithFreshCountsAndKeepsTheHistory) {
+  Bench b;
+  auto job = make_job("j1", 3, 1);  // frames 1-3, 4 tasks each
+  b.store.write(store::InsertJob{{"j1", 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*job);
+  b.ledger.set_state(*job, JobState::Running, "");
+  for (int i = 0; i < 4; ++i) {  // frame 1 done (frame affinity keeps w0 on it)
+    std::optional<Lease> l = b.ledger.lease("w0", b.now, {});
+    ASSERT_TRUE(l);
+    ASSERT_EQ(l->task.frame, 1);
+    b.ledger.complete(*job, l->lease_id, l->task, "w0", 1, "B", "K", b.now);
+  }
+  std::optional<Lease> r = b.ledger.lease("w4", b.now, {});  // a refused result counts on w4
+  ASSERT_TRUE(r);
+  b.ledger.refuse_result("w4", r->lease_id, r->task, "NaN", b.now);
+  for (const char* w : {"w1", "w2", "w3"}) {  // the same task fails on three workers
+    std::optional<Lease> l = b.ledger.lease(w, b.now, {});
+    ASSERT_TRUE(l);
+    ASSERT_EQ(l->task, r->task);
+    Journal::Ticket t = 0;
+    b.ledger.fail(l->lease_id, w, std::string("crash on ") + w, false, b.now, &t);
+  }
+  ASSERT_TRUE(b.ledger.scheduler().job_failed("j1"));
+  b.ledger.set_state(*job, JobState::Failed, b.ledger.scheduler().job_error("j1"));
+  EXPECT_THROW(b.ledger.set_state(*job, JobState::Running, ""), std::logic_error)
+      << "an ended job leaves by retry only";
+  b.flush();
+  EXPECT_EQ(b.store.failures("j1").size(), 3u);
+
+  b.ledger.retry(*job, {r->task.frame}, {3});
+  b.flush();
+  EXPECT_EQ(job->state, JobState::Running);
+  EXPECT_EQ(job->error, "");
+  EXPECT_EQ(b.store.jobs()[0].state, int(JobState::Running));
+  EXPECT_EQ(b.store.jobs()[0].held, std::vector<FrameNumber>{3});
+  EXPECT_TRUE(b.store.failures("j1").empty()) << "the counts start afresh";
+  EXPECT_TRUE(b.store.refused_workers("j1").empty());
+  std::vector<TaskFailure> history = b.store.failure_history("j1");
+  ASSERT_EQ(history.size(), 3u) << "the history is kept";
+  for (const TaskFailure& f : history) EXPECT_FALSE(f.counted);
+  // w1 failed the task before; it may take it now. Only frame 2 is leased: 1 is done, 3 held.
+  for (int i = 0; i < 4; ++i) {
+    std::optional<Lease> l = b.ledger.lease("w1", b.now, {});
+    ASSERT_TRUE(l);
+    EXPECT_EQ(l->task.frame, 2);
+  }
+  EXPECT_FALSE(b.ledger.lease("w1", b.now, {})) << "frame 3 is held";
+  // A restore of the job as stored holds frame 3 too.
+  {
+    Bench b2;
+    auto copy = make_job("j1", 3, 1);
+    copy->state = JobState::Running;
+    copy->by_number[3]->held = true;
+    b2.ledger.restore_job(*copy, {});
+    for (int i = 0; i < 8; ++i) EXPECT_NE(b2.ledger.lease("w", b2.now, {})->task.frame, 3);
+    EXPECT_FALSE(b2.ledger.lease("w", b2.now, {}));
+  }
+  // A second retry of the running job releases frame 3.
+  b.ledger.retry(*job, {3}, {});
+  b.flush();
+  EXPECT_TRUE(b.store.jobs()[0].held.empty());
+  std::optional<Lease> three = b.ledger.lease("w1", b.now, {});
+  ASSERT_TRUE(three);
+  EXPECT_EQ(three->task.frame, 3);
+
+  // Cancelled: retried; completed: refused.
+  auto c = make_job("j2");
+  b.ledger.add_job(*c);
+  b.ledger.cancel(*c, "alice");
+  b.ledger.retry(*c, {1}, {});
+  EXPECT_EQ(c->state, JobState::Running);
+  EXPECT_TRUE(
+      b.ledger.scheduler().work_left_for("w9", [](const std::string& id) { return id == "j2"; }));
+  b.ledger.set_state(*c, JobState::Completed, "");
+  EXPECT_THROW(b.ledger.retry(*c, {1}, {}), std::logic_error);
+  EXPECT_EQ(c->state, JobState::Completed);
+}
+
 // A task: leased, then done (one event, the core seconds, the build pinned once); a second
 // result needs nothing stored; refused, failed and held tasks go back to the queue (held ones to
 // another worker), a failure and a refusal are stored; a frame's stop ends its tasks.
@@ -226,11 +312,11 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   b.ledger.add_job(*job);
   std::optional<Lease> a = b.ledger.lease("w1", b.now, {});
   ASSERT_TRUE(a);
-  b.ledger.complete(*job, a->lease_id, a->task, "w1", 1.5, "build-1", b.now);
+  b.ledger.complete(*job, a->lease_id, a->task, "w1", 1.5, "build-1", "K", b.now);
   EXPECT_TRUE(b.ledger.scheduler().settled(a->task));
   EXPECT_EQ(job->build_id, "build-1");
   std::optional<Lease> c = b.ledger.lease("w1", b.now, {});
-  b.ledger.complete(*job, c->lease_id, c->task, "w1", 2.5, "build-1", b.now);
+  b.ledger.complete(*job, c->lease_id, c->task, "w1", 2.5, "build-1", "K", b.now);
   b.flush();
   EXPECT_EQ(b.store.tasks_done("j1"), 2u);
   EXPECT_EQ(b.store.jobs()[0].core_seconds, 4.0);

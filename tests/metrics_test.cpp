@@ -16,6 +16,7 @@
 #include <string>
 
 #include "coordinator/metrics.h"
+#include "farm/tags.h"
 #include "tests/support/farm.h"
 #include "tests/support/net.h"
 #include "tests/support/test_support.h"
@@ -116,6 +117,8 @@ TEST(Metrics, ASnapshotBecomesFamiliesWithJobSeriesOnlyForLiveJobs) {
   two.progress.eta_seconds = 12;
   j.frames = {one, two};
   m.jobs.push_back(j);
+  m.pools[kAnyPool] = {2, 1};
+  m.pools["gpu"] = {3, 0};
   std::map<std::string, const prometheus::MetricFamily*> by_name;
   std::vector<prometheus::MetricFamily> families = metric_families(m);
   for (const auto& f : families) by_name[f.name] = &f;
@@ -124,6 +127,13 @@ TEST(Metrics, ASnapshotBecomesFamiliesWithJobSeriesOnlyForLiveJobs) {
   EXPECT_EQ(by_name["rayfarm_tasks_leased_total"]->metric.at(0).counter.value, 7);
   EXPECT_EQ(by_name["rayfarm_tasks_queued"]->metric.at(0).gauge.value, 5);
   EXPECT_EQ(by_name["rayfarm_tasks_paused"]->metric.at(0).gauge.value, 3);
+  const auto& pools = by_name["rayfarm_pool_tasks_queued"]->metric;  // by pool name
+  ASSERT_EQ(pools.size(), 2u);
+  EXPECT_EQ(pools[0].label.at(0).value, "any");
+  EXPECT_EQ(pools[0].gauge.value, 2);
+  EXPECT_EQ(pools[1].label.at(0).value, "gpu");
+  EXPECT_EQ(pools[1].gauge.value, 3);
+  EXPECT_EQ(by_name["rayfarm_pool_tasks_in_flight"]->metric.at(0).gauge.value, 1);
   const auto& h = by_name["rayfarm_lease_duration_seconds"]->metric.at(0).histogram;
   EXPECT_EQ(h.sample_count, 3u);
   ASSERT_EQ(h.bucket.size(), std::size(CoordinatorMetrics::kLeaseBuckets) + 1);
@@ -162,8 +172,10 @@ TEST(Metrics, AScrapeDuringARealJobMovesWithItAndEndsAtTheJobsFigures) {
         "rayfarm_tasks_failed_total", "rayfarm_leases_expired_total",
         "rayfarm_results_refused_total", "rayfarm_samples_merged_total",
         "rayfarm_merged_bytes_total", "rayfarm_workers_connected", "rayfarm_lease_duration_seconds",
-        "rayfarm_job_tasks_queued", "rayfarm_frame_relmse", "rayfarm_frame_eta_seconds"})
+        "rayfarm_job_tasks_queued", "rayfarm_frame_relmse", "rayfarm_frame_eta_seconds",
+        "rayfarm_pool_tasks_queued", "rayfarm_pool_tasks_in_flight"})
     EXPECT_TRUE(idle.types.count(name)) << name << " is not served:\n" << idle.text;
+  EXPECT_EQ(idle.at("rayfarm_pool_tasks_queued{pool=\"any\"}"), 0) << idle.text;
   EXPECT_EQ(idle.types["rayfarm_tasks_leased_total"], "counter");
   EXPECT_EQ(idle.types["rayfarm_lease_duration_seconds"], "histogram");
   EXPECT_EQ(idle.at("rayfarm_tasks_queued"), 0);
@@ -178,6 +190,7 @@ TEST(Metrics, AScrapeDuringARealJobMovesWithItAndEndsAtTheJobsFigures) {
   const std::string jl = "{job=\"" + job + "\"}";
   Scrape queued = scrape(port);
   EXPECT_EQ(queued.at("rayfarm_tasks_queued"), 8);
+  EXPECT_EQ(queued.at("rayfarm_pool_tasks_queued{pool=\"any\"}"), 8) << queued.text;
   EXPECT_EQ(queued.at("rayfarm_job_tasks_queued" + jl), 8) << queued.text;
   EXPECT_EQ(queued.at("rayfarm_jobs{state=\"queued\"}"), 1);
 
@@ -189,6 +202,7 @@ TEST(Metrics, AScrapeDuringARealJobMovesWithItAndEndsAtTheJobsFigures) {
   EXPECT_EQ(mid.at("rayfarm_samples_merged_total"), 3 * 8 * 32 * 32);
   EXPECT_EQ(mid.at("rayfarm_job_tasks_queued" + jl), 5);
   EXPECT_EQ(mid.at("rayfarm_tasks_queued"), 5);
+  EXPECT_EQ(mid.at("rayfarm_pool_tasks_queued{pool=\"any\"}"), 5);
   EXPECT_EQ(mid.at("rayfarm_jobs{state=\"running\"}"), 1);
   EXPECT_EQ(mid.at("rayfarm_workers_connected"), 1) << "heard from within a lease time";
   const std::string fl = "{frame=\"0\",job=\"" + job + "\"}";

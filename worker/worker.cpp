@@ -31,6 +31,7 @@
 #include "farm/channel.h"
 #include "farm/chunking.h"
 #include "farm/convert.h"
+#include "farm/tags.h"
 #include "farm/upload.h"
 #include "proto/rayfarm.grpc.pb.h"
 
@@ -260,6 +261,8 @@ bool Worker::register_self() {
   req.set_cores(uint32_t(std::max<size_t>(1, threads)));
   req.set_build_id(build_id());
   req.set_isa(cpu_isa());
+  for (const std::string& t : automatic_tags()) req.add_tags(t);
+  for (const std::string& t : o_.tags) req.add_tags(t);
   pb::RegisterResponse resp;
   auto registered = [&] {
     heard_from_coordinator();

@@ -12,6 +12,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "farm/channel.h"
 
@@ -31,6 +32,8 @@ struct WorkerOptions {
   // loops turn, whether or not the coordinator answers: a container health check reads its age
   // (deploy/Dockerfile). Empty: none.
   std::string heartbeat_file;
+  // Tags it advertises besides the automatic ones (farm/tags.h): "gpu", "pool=lighting", ...
+  std::vector<std::string> tags;
 };
 
 // Runs until signalled (or idle with exit_when_idle). A coordinator that goes away (stopped,
