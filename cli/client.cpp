@@ -23,7 +23,9 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     std::string job, fetch_dir, fetch_frames, retry_frames, health_addr;
     bool json = false, services = false, force = false;
     StatusPage page;
-    std::optional<FrameNumber> fetch_frame;
+    std::optional<FrameNumber> fetch_frame, logs_frame;
+    std::string logs_task;
+    uint32_t logs_limit = 0;
     float fetch_exposure = 0;
     double timeout = 300;
     int priority = 0;
@@ -135,6 +137,22 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   del->add_option("job", a->job, "job id")->required();
   del->add_flag("--force", a->force, "also a queued or running job (its work in flight is lost)");
   out.push_back({del, [a, ep] { return cmd_delete(ep(), a->job, a->force); }});
+
+  auto* logs = app.add_subcommand(
+      "logs", "a job's task attempts: worker, times, outcome and the worker's log lines");
+  add_addr(logs, &a->timeout);
+  logs->add_option("job", a->job, "job id")->required();
+  auto* logs_frame = logs->add_option("--frame", a->logs_frame, "only this frame")
+                         ->check(finite_in(-2147483648.0, 2147483647.0));
+  logs->add_option("--task", a->logs_task, "only this task (JOB/FRAME/PASS/TILE)")
+      ->excludes(logs_frame);
+  logs->add_option("--limit", a->logs_limit, "the most recent attempts (default 100)")
+      ->check(finite_in(1, 10000));
+  logs->add_flag("--json", a->json, "machine-readable output");
+  out.push_back({logs, [a, ep] {
+                   return cmd_logs(ep(), a->job, a->logs_frame, a->logs_task, a->logs_limit,
+                                   a->json);
+                 }});
 
   auto* workers = app.add_subcommand("workers", "list the registered workers");
   add_addr(workers, &a->timeout);

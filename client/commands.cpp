@@ -1,5 +1,5 @@
 // The farm's client commands: submit, status, watch, fetch, cancel, pause, resume, priority, retry,
-// delete, workers, health. Each talks to one coordinator: --coordinator ADDR, else
+// delete, logs, workers, health. Each talks to one coordinator: --coordinator ADDR, else
 // $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
 #include "client/commands.h"
 
@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -607,6 +608,61 @@ int cmd_delete(const Endpoint& ep, const std::string& job, bool force) {
   if (retry.retries() > 0 && s.error_code() == grpc::StatusCode::NOT_FOUND) s = grpc::Status::OK;
   check(s, "delete", ep, &retry);
   std::fprintf(stderr, "job %s deleted\n", job.c_str());
+  return 0;
+}
+
+namespace {
+std::string local_time_text(double unix_seconds) {
+  if (unix_seconds <= 0) return "?";
+  std::time_t t = std::time_t(unix_seconds);
+  std::tm tm{};
+  localtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
+  return buf;
+}
+}  // namespace
+
+int cmd_logs(const Endpoint& ep, const std::string& job, std::optional<FrameNumber> frame,
+             const std::string& task, uint32_t limit, bool json) {
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  pb::TaskLogRequest req;
+  req.set_job_id(job);
+  if (frame) req.set_frame(*frame);
+  req.set_task_id(task);
+  req.set_limit(limit);
+  pb::TaskLogResponse resp;
+  check(retry.run(30, [&](grpc::ClientContext& ctx) { return stub->GetTaskLog(&ctx, req, &resp); }),
+        "logs", ep, &retry);
+  if (json) {
+    nlohmann::json all = nlohmann::json::array();
+    for (const pb::TaskAttempt& a : resp.attempts())
+      all.push_back({{"task_id", a.task_id()},
+                     {"worker_id", a.worker_id()},
+                     {"lease_id", a.lease_id()},
+                     {"started_unix", a.started_unix()},
+                     {"ended_unix", a.ended_unix()},
+                     {"outcome", a.outcome()},
+                     {"message", a.message()},
+                     {"log", std::vector<std::string>(a.log().begin(), a.log().end())}});
+    std::printf("%s\n", nlohmann::json{{"attempts", all}, {"more", resp.more()}}.dump(2).c_str());
+    return 0;
+  }
+  if (resp.more()) std::printf("(earlier attempts left out: --limit)\n");
+  for (const pb::TaskAttempt& a : resp.attempts()) {
+    std::string when = local_time_text(a.started_unix());
+    if (a.ended_unix() > 0) {
+      when += " -> " + local_time_text(a.ended_unix()).substr(11);
+      if (a.started_unix() > 0)
+        when += " (" + duration_text(a.ended_unix() - a.started_unix()) + ")";
+    }
+    std::printf("%-24s %-28s %s  %s%s\n", printable(a.task_id()).c_str(),
+                printable(a.worker_id()).c_str(), when.c_str(), printable(a.outcome()).c_str(),
+                a.message().empty() ? "" : (": " + printable(a.message())).c_str());
+    for (const std::string& l : a.log()) std::printf("    | %s\n", printable(l).c_str());
+  }
+  if (resp.attempts().empty()) std::fprintf(stderr, "no attempts yet\n");
   return 0;
 }
 

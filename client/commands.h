@@ -65,6 +65,10 @@ int cmd_priority(const Endpoint& ep, const std::string& job, int priority);
 int cmd_retry(const Endpoint& ep, const std::string& job, const std::string& frames);
 // Removes an ended job and its files (a queued or running one only with `force`).
 int cmd_delete(const Endpoint& ep, const std::string& job, bool force);
+// A job's task attempts (of one frame or one task when given): worker, start and end, outcome
+// and reason, and each attempt's log lines; the most recent `limit` (0: 100).
+int cmd_logs(const Endpoint& ep, const std::string& job, std::optional<FrameNumber> frame,
+             const std::string& task, uint32_t limit, bool json);
 // The registered workers: tasks, failures, last contact (--json: machine-readable).
 int cmd_workers(const Endpoint& ep, bool json);
 int cmd_health(const Endpoint& ep, bool list_services);

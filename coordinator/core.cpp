@@ -78,8 +78,9 @@ Coordinator::Coordinator(CoreOptions o)
                 ++counters_.leases_expired;  // the scheduler is driven under mu_
                 spdlog::warn("lease {} of worker {} on task {} expired: not renewed for {:g} s",
                              lease, worker, task_id_text(task), options_.lease_seconds);
+                ledger_->expired(lease, now());
               }},
-          *journal_)) {
+          *journal_, options_.clock, unix_now() - options_.clock())) {
   counters_.lease_buckets.assign(std::size(CoordinatorMetrics::kLeaseBuckets), 0);
   next_seq_ = store_->next_seq();
   for (const StoredWorker& w : store_->workers()) {
@@ -273,6 +274,53 @@ void Coordinator::storage_ok() {
   if (storage_listener_) storage_listener_("");
   ++version_;
   changed_.notify_all();
+}
+
+TaskLog Coordinator::task_log(const std::string& job_id, std::optional<FrameNumber> frame,
+                              const std::string& task_id, uint32_t limit,
+                              const Caller& caller) const {
+  std::optional<TaskRef> task;
+  if (!task_id.empty()) {
+    task = parse_task_id(task_id);
+    if (!task || task->job_id != job_id)
+      refuse(ErrorCode::InvalidArgument, "task '" + clip(task_id) + "' is not a task id of job " +
+                                             clip(job_id) + " (JOB/FRAME/PASS/TILE)");
+    if (frame && *frame != task->frame)
+      refuse(ErrorCode::InvalidArgument,
+             "task " + task_id + " is not of frame " + std::to_string(*frame));
+  }
+  limit = limit == 0 ? 100 : std::min<uint32_t>(limit, 10000);
+  TaskLog out;
+  std::vector<Scheduler::LeaseInfo> live;
+  double unix_offset = 0;
+  uint64_t ticket = 0;
+  {
+    std::lock_guard lock(mu_);
+    std::shared_ptr<JobRecord> job = find_for(job_id, caller);
+    if (frame && !job->by_number.count(*frame))
+      refuse(ErrorCode::NotFound, "job " + job->id + " has no frame " + std::to_string(*frame));
+    live = ledger_->scheduler().live_leases(job_id, task ? task->frame : frame);
+    unix_offset = unix_now() - now();
+    ticket = journal_->append({});  // the attempts ended so far, queued for the store
+  }
+  wait_stored(ticket, "the task log");
+  // The store answers on its own connection: a long history is read without the lock.
+  out.attempts = store_->attempts(job_id, frame, task, limit, &out.more);
+  for (const Scheduler::LeaseInfo& l : live) {
+    if (task && !(l.task == *task)) continue;
+    out.attempts.push_back({l.task.job_id,
+                            l.task.frame,
+                            l.task.pass,
+                            l.task.tile,
+                            l.lease_id,
+                            l.worker_id,
+                            l.leased_at < 0 ? 0 : l.leased_at + unix_offset,
+                            0,
+                            AttemptOutcome::Running,
+                            "",
+                            {}});
+  }
+  return out;
 }
 
 CoordinatorMetrics Coordinator::metrics() const {

@@ -130,11 +130,20 @@ struct TaskResult {
   std::string lease_id;
   TaskRef task;
   std::string buffer;
+  std::vector<std::string> log;  // the attempt's log lines, bounded (farm/job.h bounded_log)
 };
 
 struct TaskFailureReport {
   std::string worker_id, lease_id, message;
   bool handed_back = false;  // the worker is shutting down: not a failure
+  std::vector<std::string> log;  // the attempt's log lines (bounded here)
+};
+
+// A task's attempt as `rayfarm logs` shows it (outcome Running: a live lease).
+using TaskAttempt = StoredAttempt;
+struct TaskLog {
+  std::vector<TaskAttempt> attempts;  // in the order they began... ended; live ones last
+  bool more = false;                  // earlier attempts were left out
 };
 
 // What one job may ask for, checked at submit: a job over a limit is refused naming it
@@ -320,7 +329,13 @@ class Coordinator {
   // out of order, over the size limit, or failing their checksum): as a refused result, its lease
   // ends, the task is queued again, and the refusal counts against the worker in the job.
   void refuse_upload(const std::string& worker_id, const std::string& lease_id, const TaskRef& task,
-                     const std::string& why);
+                     const std::string& why, const std::vector<std::string>& log = {});
+
+  // `logs`: the job's task attempts (of one frame, or one task by its id, when given), the most
+  // recent `limit` (0: 100; at most 10000) ended ones in the order they were stored, then the
+  // live ones. InvalidArgument for a task id that is not one of the job's.
+  TaskLog task_log(const std::string& job_id, std::optional<FrameNumber> frame,
+                   const std::string& task_id, uint32_t limit, const Caller& caller = {}) const;
 
   // The registered workers, by id. A caller without all_tenants sees other tenants' tasks as
   // "(another tenant's task)" and no principals.

@@ -79,6 +79,30 @@ struct TaskFailure {
 
 enum class TaskEventKind : int { Failed = 0, Done = 1, ResultRefused = 2 };
 
+// How a task's attempt (one lease) ended, for `rayfarm logs`; stored as the number.
+enum class AttemptOutcome : int {
+  Done = 0,
+  Failed = 1,
+  Refused = 2,     // its result did not pass the checks
+  HandedBack = 3,  // the worker shut down, or its result was of another build or CPU kind
+  Expired = 4,     // not renewed in time
+  NotNeeded = 5,   // another result came first, or its frame or job stopped
+  Held = 6,        // kept until another worker's result agrees (verification)
+  Running = 7,     // not ended (never stored: a live lease)
+};
+const char* attempt_outcome_name(AttemptOutcome outcome);  // "done", "handed back", ...
+
+struct StoredAttempt {
+  std::string job_id;
+  FrameNumber frame = 0;
+  uint32_t pass = 0, tile = 0;
+  std::string lease_id, worker_id;
+  double started_unix = 0, ended_unix = 0;
+  AttemptOutcome outcome = AttemptOutcome::Done;
+  std::string message;           // a failure's or refusal's reason
+  std::vector<std::string> log;  // the worker's lines (farm/job.h bounds them)
+};
+
 // The writes, one struct each.
 namespace store {
 struct InsertJob {
@@ -126,6 +150,9 @@ struct TaskEvent {
   TaskEventKind kind = TaskEventKind::Done;
   std::string message;
 };
+struct Attempt {  // an attempt ended (lost in a power cut: only its log line goes)
+  StoredAttempt attempt;
+};
 struct InsertWorker {
   StoredWorker worker;
 };
@@ -147,14 +174,15 @@ struct DeleteLeases {
 };
 }  // namespace store
 
-using StoreWrite =
-    std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds, store::SetBuild,
-                 store::SetPaused, store::SetPriority, store::Retry, store::DeleteJob,
-                 store::TaskEvent, store::InsertWorker, store::RefuseWorker, store::DeleteWorker,
-                 store::AddBlobTenant, store::InsertLease, store::DeleteLeases>;
+using StoreWrite = std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds,
+                                store::SetBuild, store::SetPaused, store::SetPriority, store::Retry,
+                                store::DeleteJob, store::TaskEvent, store::Attempt,
+                                store::InsertWorker, store::RefuseWorker, store::DeleteWorker,
+                                store::AddBlobTenant, store::InsertLease, store::DeleteLeases>;
 
-// Whether losing the write in a power cut costs nothing but work: a lease's row (its holder's
-// late result is then rendered again). Batches of such writes only are not flushed to disk.
+// Whether losing the write in a power cut costs nothing but work or a log record: a lease's row
+// (its holder's late result is then rendered again), an attempt's record. Batches of such writes
+// only are not flushed to disk.
 bool lease_write(const StoreWrite& w);
 
 class JobStore {
@@ -181,6 +209,12 @@ class JobStore {
   // Every failure of the job, those a retry forgot included (counted = false), in order.
   virtual std::vector<TaskFailure> failure_history(const std::string& job_id) const = 0;
   virtual uint64_t tasks_done(const std::string& job_id) const = 0;
+  // The job's ended attempts, of one frame or one task when given: the most recent `limit`, in
+  // the order they were stored; `more` says earlier ones were left out.
+  virtual std::vector<StoredAttempt> attempts(const std::string& job_id,
+                                              std::optional<FrameNumber> frame,
+                                              const std::optional<TaskRef>& task, size_t limit,
+                                              bool* more) const = 0;
 
   std::vector<StoredLease> leases(const std::string& job_id) const;
 };

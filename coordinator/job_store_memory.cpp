@@ -80,6 +80,26 @@ class MemoryJobStore final : public JobStore {
         out.push_back(e.worker_id);
     return out;
   }
+  std::vector<StoredAttempt> attempts(const std::string& job_id, std::optional<FrameNumber> frame,
+                                      const std::optional<TaskRef>& task, size_t limit,
+                                      bool* more) const override {
+    std::lock_guard lock(mu_);
+    std::vector<StoredAttempt> out;
+    *more = false;
+    for (auto it = attempts_.rbegin(); it != attempts_.rend(); ++it) {
+      const StoredAttempt& a = *it;
+      if (a.job_id != job_id || (frame && a.frame != *frame) ||
+          (task && (a.frame != task->frame || a.pass != task->pass || a.tile != task->tile)))
+        continue;
+      if (out.size() == limit) {
+        *more = true;
+        break;
+      }
+      out.push_back(a);
+    }
+    std::reverse(out.begin(), out.end());
+    return out;
+  }
   uint64_t tasks_done(const std::string& job_id) const override {
     std::lock_guard lock(mu_);
     return uint64_t(std::count_if(events_.begin(), events_.end(), [&](const Event& e) {
@@ -117,8 +137,10 @@ class MemoryJobStore final : public JobStore {
       for (Event& e : events_)
         if (e.job_id == w.job_id && e.kind != TaskEventKind::Done) e.counted = false;
   }
+  void apply(const store::Attempt& w) { attempts_.push_back(w.attempt); }
   void apply(const store::DeleteJob& w) {
     deleted_.insert(w.job_id);
+    std::erase_if(attempts_, [&](const StoredAttempt& a) { return a.job_id == w.job_id; });
     std::erase_if(events_, [&](const Event& e) { return e.job_id == w.job_id; });
     std::erase_if(leases_, [&](const StoredLease& l) { return l.job_id == w.job_id; });
   }
@@ -143,6 +165,7 @@ class MemoryJobStore final : public JobStore {
   std::vector<StoredJob> jobs_;
   std::map<std::string, size_t> index_;
   std::set<std::string> deleted_;  // their rows stay (next_seq), unlisted
+  std::vector<StoredAttempt> attempts_;
   struct Event : store::TaskEvent {
     bool counted = true;
   };

@@ -1,6 +1,7 @@
 // The job store in SQLite (job_store.h): WAL with synchronous=FULL, one connection behind a mutex.
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <mutex>
 #include <set>
 
@@ -60,6 +61,23 @@ class Stmt {
   const std::string& path_;
 };
 
+// Lists of lines (tags, log lines: none holds a newline) in one TEXT column.
+std::string join_lines(const std::vector<std::string>& lines) {
+  std::string out;
+  for (const std::string& l : lines) out += (out.empty() ? "" : "\n") + l;
+  return out;
+}
+
+std::vector<std::string> split_lines(const std::string& text) {
+  std::vector<std::string> out;
+  for (size_t at = 0; at < text.size();) {
+    size_t end = std::min(text.find('\n', at), text.size());
+    out.push_back(text.substr(at, end - at));
+    at = end + 1;
+  }
+  return out;
+}
+
 }  // namespace
 
 namespace {
@@ -79,6 +97,9 @@ class SqliteJobStore final : public JobStore {
   std::vector<TaskFailure> failures(const std::string& job_id) const override;
   std::vector<std::string> refused_workers(const std::string& job_id) const override;
   std::vector<TaskFailure> failure_history(const std::string& job_id) const override;
+  std::vector<StoredAttempt> attempts(const std::string& job_id, std::optional<FrameNumber> frame,
+                                      const std::optional<TaskRef>& task, size_t limit,
+                                      bool* more) const override;
   uint64_t tasks_done(const std::string& job_id) const override;
 
  private:
@@ -197,6 +218,13 @@ void SqliteJobStore::open_schema() {
       "INTEGER NOT NULL, pass INTEGER NOT NULL, tile INTEGER NOT NULL, worker TEXT NOT NULL)");
   exec("DROP INDEX IF EXISTS leases_job");
   exec("CREATE INDEX IF NOT EXISTS leases_job_frame ON leases (job_id, frame)");
+  // Each ended attempt of a task (`rayfarm logs`); log: its lines joined by newlines.
+  exec(
+      "CREATE TABLE IF NOT EXISTS attempts (job_id TEXT NOT NULL, frame INTEGER NOT NULL, pass "
+      "INTEGER NOT NULL, tile INTEGER NOT NULL, lease_id TEXT NOT NULL, worker TEXT NOT NULL, "
+      "started REAL NOT NULL, ended REAL NOT NULL, outcome INTEGER NOT NULL, message TEXT NOT "
+      "NULL, log TEXT NOT NULL)");
+  exec("CREATE INDEX IF NOT EXISTS attempts_task ON attempts (job_id, frame, pass, tile)");
   exec(
       "CREATE TABLE IF NOT EXISTS blob_tenants (tenant TEXT NOT NULL, sha256 TEXT NOT NULL, "
       "PRIMARY KEY (tenant, sha256)) WITHOUT ROWID");
@@ -283,11 +311,30 @@ void SqliteJobStore::apply(const StoreWrite& write) {
                  "WHERE id = ?",
                  path_);
           s.bind(w.job_id).step();
-          for (const char* sql : {"DELETE FROM task_events WHERE job_id = ?",
-                                  "DELETE FROM leases WHERE job_id = ?"}) {
+          for (const char* sql :
+               {"DELETE FROM task_events WHERE job_id = ?", "DELETE FROM leases WHERE job_id = ?",
+                "DELETE FROM attempts WHERE job_id = ?"}) {
             Stmt d(db_, sql, path_);
             d.bind(w.job_id).step();
           }
+        } else if constexpr (std::is_same_v<W, store::Attempt>) {
+          const StoredAttempt& a = w.attempt;
+          Stmt s(db_,
+                 "INSERT INTO attempts (job_id, frame, pass, tile, lease_id, worker, started, "
+                 "ended, outcome, message, log) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+                 path_);
+          s.bind(a.job_id)
+              .bind(int64_t(a.frame))
+              .bind(int64_t(a.pass))
+              .bind(int64_t(a.tile))
+              .bind(a.lease_id)
+              .bind(a.worker_id)
+              .bind(a.started_unix)
+              .bind(a.ended_unix)
+              .bind(int64_t(a.outcome))
+              .bind(a.message)
+              .bind(join_lines(a.log))
+              .step();
         } else if constexpr (std::is_same_v<W, store::TaskEvent>) {
           // task_events.done: 1 done, 0 failed, 2 result refused (TaskEventKind).
           Stmt s(db_,
@@ -307,13 +354,11 @@ void SqliteJobStore::apply(const StoreWrite& write) {
                  "INSERT OR REPLACE INTO workers (id, principal, build, isa, tags) VALUES "
                  "(?,?,?,?,?)",
                  path_);
-          std::string tags;
-          for (const std::string& t : w.worker.tags) tags += (tags.empty() ? "" : "\n") + t;
           s.bind(w.worker.id)
               .bind(w.worker.principal)
               .bind(w.worker.build_id)
               .bind(w.worker.isa)
-              .bind(tags)
+              .bind(join_lines(w.worker.tags))
               .step();
         } else if constexpr (std::is_same_v<W, store::RefuseWorker>) {
           Stmt s(db_, "UPDATE workers SET refused = ? WHERE id = ?", path_);
@@ -384,15 +429,8 @@ std::vector<StoredWorker> SqliteJobStore::workers() const {
   std::lock_guard lock(mu_);
   Stmt s(db_, "SELECT id, principal, build, refused, isa, tags FROM workers", path_);
   std::vector<StoredWorker> out;
-  while (s.step()) {
-    out.push_back({s.text(0), s.text(1), s.text(2), s.text(3), s.text(4), {}});
-    std::string tags = s.text(5);
-    for (size_t at = 0; at < tags.size();) {
-      size_t end = std::min(tags.find('\n', at), tags.size());
-      out.back().tags.push_back(tags.substr(at, end - at));
-      at = end + 1;
-    }
-  }
+  while (s.step())
+    out.push_back({s.text(0), s.text(1), s.text(2), s.text(3), s.text(4), split_lines(s.text(5))});
   return out;
 }
 
@@ -443,6 +481,47 @@ std::vector<TaskFailure> SqliteJobStore::failure_history(const std::string& id) 
   while (s.step())
     out.push_back({FrameNumber(s.integer(0)), uint32_t(s.integer(1)), uint32_t(s.integer(2)),
                    s.text(3), s.text(4), s.integer(5) != 0});
+  return out;
+}
+
+std::vector<StoredAttempt> SqliteJobStore::attempts(const std::string& job_id,
+                                                    std::optional<FrameNumber> frame,
+                                                    const std::optional<TaskRef>& task,
+                                                    size_t limit, bool* more) const {
+  std::lock_guard lock(mu_);
+  std::string sql =
+      "SELECT frame, pass, tile, lease_id, worker, started, ended, outcome, message, log FROM "
+      "attempts WHERE job_id = ?";
+  if (task)
+    sql += " AND frame = ? AND pass = ? AND tile = ?";
+  else if (frame)
+    sql += " AND frame = ?";
+  sql += " ORDER BY rowid DESC LIMIT ?";
+  Stmt s(db_, sql.c_str(), path_);
+  s.bind(job_id);
+  if (task)
+    s.bind(int64_t(task->frame)).bind(int64_t(task->pass)).bind(int64_t(task->tile));
+  else if (frame)
+    s.bind(int64_t(*frame));
+  s.bind(int64_t(std::min<size_t>(limit, INT32_MAX)) + 1);
+  std::vector<StoredAttempt> out;
+  while (s.step()) {
+    StoredAttempt a{job_id,
+                    FrameNumber(s.integer(0)),
+                    uint32_t(s.integer(1)),
+                    uint32_t(s.integer(2)),
+                    s.text(3),
+                    s.text(4),
+                    s.real(5),
+                    s.real(6),
+                    AttemptOutcome(s.integer(7)),
+                    s.text(8),
+                    split_lines(s.text(9))};
+    out.push_back(std::move(a));
+  }
+  *more = out.size() > limit;
+  if (*more) out.pop_back();
+  std::reverse(out.begin(), out.end());
   return out;
 }
 

@@ -27,8 +27,34 @@ bool legal(JobState from, JobState to) {
 
 }  // namespace
 
-Ledger::Ledger(SchedulerOptions options, Journal& journal)
-    : scheduler_(std::move(options)), journal_(journal) {}
+Ledger::Ledger(SchedulerOptions options, Journal& journal, std::function<double()> clock,
+               double unix_offset)
+    : scheduler_(std::move(options)),
+      journal_(journal),
+      clock_(std::move(clock)),
+      unix_offset_(unix_offset) {}
+
+store::Attempt Ledger::attempt(const std::string& lease_id, const TaskRef& task,
+                               const std::string& worker_id, AttemptOutcome outcome,
+                               const std::string& message, const std::vector<std::string>& log,
+                               double now) const {
+  StoredAttempt a{task.job_id, task.frame,         task.pass, task.tile, lease_id, worker_id,
+                  0,           now + unix_offset_, outcome,   message,   log};
+  if (std::optional<Scheduler::LeaseInfo> l = scheduler_.lease_info(lease_id)) {
+    a.job_id = l->task.job_id, a.frame = l->task.frame, a.pass = l->task.pass;
+    a.tile = l->task.tile, a.worker_id = l->worker_id;
+    if (l->leased_at >= 0) a.started_unix = l->leased_at + unix_offset_;
+  }
+  return {std::move(a)};
+}
+
+void Ledger::stopped_attempts(std::vector<StoreWrite>& writes, const std::string& job_id,
+                              std::optional<FrameNumber> frame, uint32_t first_pass,
+                              const std::string& why, double now) const {
+  for (const Scheduler::LeaseInfo& l : scheduler_.live_leases(job_id, frame, first_pass))
+    writes.push_back(
+        attempt(l.lease_id, l.task, l.worker_id, AttemptOutcome::NotNeeded, why, {}, now));
+}
 
 void Ledger::add_job(const JobRecord& job) {
   scheduler_.add_job(job.id, job.frame_numbers(), uint32_t(job.tiles.size()), job.passes,
@@ -44,6 +70,8 @@ Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string&
   job.error = error;
   std::vector<StoreWrite> writes{store::SetState{job.id, int(to), error}};
   if (terminal(to)) {
+    stopped_attempts(writes, job.id, std::nullopt, 0,
+                     std::string("its job ended (") + job_state_name(to) + ")", now());
     writes.push_back(store::DeleteLeases{job.id, std::nullopt});
     scheduler_.cancel_job(job.id);  // frees its tasks and leases (a no-op once all are done)
   }
@@ -145,8 +173,9 @@ LeaseOutcome Ledger::renew(const std::string& lease_id, double now) {
 Ledger::Ticket Ledger::complete(JobRecord& job, const std::string& lease_id, const TaskRef& task,
                                 const std::string& worker_id, double core_seconds,
                                 const std::string& build_id, const std::string& cpu_kind,
-                                double now) {
+                                double now, const std::vector<std::string>& log) {
   std::vector<StoreWrite> writes;
+  writes.push_back(attempt(lease_id, task, worker_id, AttemptOutcome::Done, "", log, now));
   if (job.build_id.empty() || job.cpu_kind.empty()) {  // the first merged result pins the job
     if (job.build_id.empty()) job.build_id = build_id;
     if (job.cpu_kind.empty()) job.cpu_kind = cpu_kind;
@@ -160,27 +189,49 @@ Ledger::Ticket Ledger::complete(JobRecord& job, const std::string& lease_id, con
   return journal_.append(std::move(writes));
 }
 
-void Ledger::not_needed(const std::string& lease_id, const TaskRef& task, double now) {
+void Ledger::not_needed(const std::string& lease_id, const TaskRef& task,
+                        const std::string& worker_id, double now,
+                        const std::vector<std::string>& log) {
+  journal_.append({attempt(lease_id, task, worker_id, AttemptOutcome::NotNeeded,
+                           "another result came first, or its frame or job stopped", log, now)});
   scheduler_.complete(lease_id, task, now);  // ends the lease
 }
 
 Ledger::Ticket Ledger::refuse_result(const std::string& worker_id, const std::string& lease_id,
-                                     const TaskRef& task, const std::string& why, double now) {
+                                     const TaskRef& task, const std::string& why, double now,
+                                     const std::vector<std::string>& log) {
+  store::Attempt a = attempt(lease_id, task, worker_id, AttemptOutcome::Refused, why, log, now);
   scheduler_.refuse_result(lease_id, now);  // counted against the worker, not the job
-  return journal_.append({store::TaskEvent{task.job_id, task.frame, task.pass, task.tile, worker_id,
-                                           TaskEventKind::ResultRefused, why}});
+  return journal_.append(
+      {std::move(a), store::TaskEvent{task.job_id, task.frame, task.pass, task.tile, worker_id,
+                                      TaskEventKind::ResultRefused, why}});
 }
 
-void Ledger::hold_for_verification(const std::string& lease_id, double now) {
+void Ledger::hold_for_verification(const std::string& lease_id, double now,
+                                   const std::vector<std::string>& log) {
+  if (std::optional<Scheduler::LeaseInfo> l = scheduler_.lease_info(lease_id))
+    journal_.append({attempt(lease_id, l->task, l->worker_id, AttemptOutcome::Held,
+                             "held until another worker's result agrees", log, now)});
   scheduler_.verify_again(lease_id, now);
 }
 
+void Ledger::expired(const std::string& lease_id, double now) {
+  if (std::optional<Scheduler::LeaseInfo> l = scheduler_.lease_info(lease_id))
+    journal_.append({attempt(lease_id, l->task, l->worker_id, AttemptOutcome::Expired,
+                             "not renewed in time", {}, now)});
+}
+
 LeaseOutcome Ledger::fail(const std::string& lease_id, const std::string& worker_id,
-                          const std::string& message, bool handed_back, double now,
-                          Ticket* ticket) {
+                          const std::string& message, bool handed_back, double now, Ticket* ticket,
+                          const std::vector<std::string>& log) {
+  std::optional<Scheduler::LeaseInfo> info = scheduler_.lease_info(lease_id);
   std::optional<TaskRef> task = scheduler_.lease_task(lease_id);
   LeaseOutcome outcome = scheduler_.fail(lease_id, message, handed_back, now);
   *ticket = journal_.append({});
+  if (outcome == LeaseOutcome::Ok && info)
+    journal_.append({attempt(lease_id, info->task, info->worker_id,
+                             handed_back ? AttemptOutcome::HandedBack : AttemptOutcome::Failed,
+                             message, log, now)});
   if (outcome == LeaseOutcome::Ok && task && !handed_back)
     *ticket = journal_.append({store::TaskEvent{task->job_id, task->frame, task->pass, task->tile,
                                                 worker_id, TaskEventKind::Failed, message}});
@@ -188,10 +239,14 @@ LeaseOutcome Ledger::fail(const std::string& lease_id, const std::string& worker
 }
 
 Ledger::Ticket Ledger::frame_done(JobRecord& job, FrameRecord& frame, uint32_t passes) {
+  std::vector<StoreWrite> writes;
+  stopped_attempts(writes, job.id, frame.number, passes, "its frame needs no more passes", now());
   scheduler_.stop_frame(job.id, frame.number, passes);
-  if (frame.leases_dropped) return journal_.append({});
-  frame.leases_dropped = true;  // no late result of the frame is needed
-  return journal_.append({store::DeleteLeases{job.id, frame.number}});
+  if (!frame.leases_dropped) {
+    frame.leases_dropped = true;  // no late result of the frame is needed
+    writes.push_back(store::DeleteLeases{job.id, frame.number});
+  }
+  return journal_.append(std::move(writes));
 }
 
 }  // namespace rf

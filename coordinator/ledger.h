@@ -16,6 +16,7 @@
 // task states (scheduler.h); these methods are the only callers that change them.
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -30,7 +31,10 @@ class Ledger {
  public:
   using Ticket = Journal::Ticket;
 
-  Ledger(SchedulerOptions options, Journal& journal);
+  // clock: the scheduler's clock (the `now` the methods take), for the transitions that take
+  // none; unix_offset added to it gives Unix time (attempts' start and end).
+  Ledger(SchedulerOptions options, Journal& journal, std::function<double()> clock = {},
+         double unix_offset = 0);
 
   const Scheduler& scheduler() const { return scheduler_; }
   Journal& journal() { return journal_; }
@@ -82,31 +86,56 @@ class Ledger {
   std::optional<Lease> lease(const std::string& worker_id, double now,
                              const Scheduler::JobFilter& may);
   LeaseOutcome renew(const std::string& lease_id, double now);
+  // Every way a lease ends also stores its attempt's record (store::Attempt: worker, start and
+  // end, outcome, reason, the worker's log lines) for `rayfarm logs`.
+  //
   // A result merged: the task is done, its event and the job's core seconds stored, and the job
   // pinned to the result's build and CPU kind if it was not.
   Ticket complete(JobRecord& job, const std::string& lease_id, const TaskRef& task,
                   const std::string& worker_id, double core_seconds, const std::string& build_id,
-                  const std::string& cpu_kind, double now);
+                  const std::string& cpu_kind, double now,
+                  const std::vector<std::string>& log = {});
   // A result for a task that needs none (settled, merged already, or beyond its frame's stop):
-  // its lease ends and the task counts as done; nothing is stored.
-  void not_needed(const std::string& lease_id, const TaskRef& task, double now);
+  // its lease ends and the task counts as done; only the attempt is stored.
+  void not_needed(const std::string& lease_id, const TaskRef& task, const std::string& worker_id,
+                  double now, const std::vector<std::string>& log = {});
   // A result refused (or an upload refused on its way in): the lease ends, the task is queued
   // again, and the refusal counts against the worker in the job.
   Ticket refuse_result(const std::string& worker_id, const std::string& lease_id,
-                       const TaskRef& task, const std::string& why, double now);
+                       const TaskRef& task, const std::string& why, double now,
+                       const std::vector<std::string>& log = {});
   // A verified task's first result, held: the task goes to another worker.
-  void hold_for_verification(const std::string& lease_id, double now);
+  void hold_for_verification(const std::string& lease_id, double now,
+                             const std::vector<std::string>& log = {});
   // The worker could not render the task (or hands it back): a failure counts (the caller fails
   // the job when scheduler().job_failed() says the task failed on max_failures workers).
   LeaseOutcome fail(const std::string& lease_id, const std::string& worker_id,
-                    const std::string& message, bool handed_back, double now, Ticket* ticket);
+                    const std::string& message, bool handed_back, double now, Ticket* ticket,
+                    const std::vector<std::string>& log = {});
+  // The scheduler let the lease expire (SchedulerOptions::on_expired): its attempt's record.
+  void expired(const std::string& lease_id, double now);
   // The frame needs no more passes from `passes` on: its remaining tasks are stopped and its
   // lease rows dropped (once).
   Ticket frame_done(JobRecord& job, FrameRecord& frame, uint32_t passes);
 
  private:
+  // The record of the attempt under `lease_id` (its task and worker from the lease when known,
+  // else `task` and `worker_id`), ended now.
+  store::Attempt attempt(const std::string& lease_id, const TaskRef& task,
+                         const std::string& worker_id, AttemptOutcome outcome,
+                         const std::string& message, const std::vector<std::string>& log,
+                         double now) const;
+  // Records for the live leases that a job's end or a frame's stop is about to end.
+  void stopped_attempts(std::vector<StoreWrite>& writes, const std::string& job_id,
+                        std::optional<FrameNumber> frame, uint32_t first_pass,
+                        const std::string& why, double now) const;
+
+  double now() const { return clock_ ? clock_() : 0; }
+
   Scheduler scheduler_;
   Journal& journal_;
+  std::function<double()> clock_;
+  double unix_offset_;
 };
 
 }  // namespace rf

@@ -283,10 +283,11 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
 bool Coordinator::record_result(JobRecord& job, const TaskResult& r, const BufferHeader& h) {
   if (!pin_problem(job, h).empty()) return false;  // another kind's result was merged meanwhile
   if (ledger_->scheduler().settled(r.task)) {
-    ledger_->not_needed(r.lease_id, r.task, now());
+    ledger_->not_needed(r.lease_id, r.task, r.worker_id, now(), r.log);
     return false;  // another result came first, or the job was cancelled or failed meanwhile
   }
-  ledger_->complete(job, r.lease_id, r.task, r.worker_id, h.core_seconds, h.build_id, h.isa, now());
+  ledger_->complete(job, r.lease_id, r.task, r.worker_id, h.core_seconds, h.build_id, h.isa, now(),
+                    r.log);
   return true;
 }
 
@@ -309,12 +310,13 @@ bool Coordinator::check_upload(const std::string& worker_id, const std::string& 
 }
 
 void Coordinator::refuse_upload(const std::string& worker_id, const std::string& lease_id,
-                                const TaskRef& task, const std::string& why) {
+                                const TaskRef& task, const std::string& why,
+                                const std::vector<std::string>& log) {
   spdlog::warn("refused the result of task {} from worker {}: {}", task_id_text(task),
                clip(worker_id), why);
   std::lock_guard lock(mu_);
   ++counters_.results_refused;
-  ledger_->refuse_result(worker_id, lease_id, task, why, now());
+  ledger_->refuse_result(worker_id, lease_id, task, why, now(), bounded_log(log));
 }
 
 bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
@@ -330,7 +332,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   try {
     buffer = checked_buffer(*job, *f, r);
   } catch (const CoordinatorError& e) {
-    refuse_upload(r.worker_id, r.lease_id, r.task, e.what());
+    refuse_upload(r.worker_id, r.lease_id, r.task, e.what(), r.log);
     throw;
   }
   {
@@ -339,7 +341,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     std::lock_guard lock(mu_);
     if (std::string why = pin_problem(*job, buffer.header); !why.empty()) {
       Ledger::Ticket ticket = 0;
-      ledger_->fail(r.lease_id, r.worker_id, why, /*handed_back=*/true, now(), &ticket);
+      ledger_->fail(r.lease_id, r.worker_id, why, /*handed_back=*/true, now(), &ticket, r.log);
       spdlog::info("result of task {} from worker {} not merged: {}", task_id_text(r.task),
                    r.worker_id, why);
       refuse(ErrorCode::FailedPrecondition, why);
@@ -361,7 +363,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   }
   if (!f->acc->task_needed(buffer.rect, r.task.pass)) {  // merged already, or beyond the stop
     std::lock_guard lock(mu_);
-    ledger_->not_needed(r.lease_id, r.task, now());
+    ledger_->not_needed(r.lease_id, r.task, r.worker_id, now(), r.log);
     return false;
   }
   if (verified(r.task)) {
@@ -446,7 +448,7 @@ bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer
   }
   spdlog::info("task {}: result of {} held until another worker's agrees", task_id_text(r.task),
                r.worker_id);
-  ledger_->hold_for_verification(r.lease_id, now());
+  ledger_->hold_for_verification(r.lease_id, now(), r.log);
   return false;
 }
 
@@ -459,7 +461,7 @@ void Coordinator::fail(const TaskFailureReport& report, const Caller& caller) {
     std::optional<TaskRef> task = ledger_->scheduler().lease_task(report.lease_id);
     std::string message = printable(report.message.substr(0, 4096));  // part of the job's error
     switch (ledger_->fail(report.lease_id, report.worker_id, message, report.handed_back, now(),
-                          &ticket)) {
+                          &ticket, bounded_log(report.log))) {
       case LeaseOutcome::NotFound:
         refuse(ErrorCode::NotFound, "no lease '" + clip(report.lease_id) + "'");
       case LeaseOutcome::Ended:

@@ -263,7 +263,7 @@ std::optional<Lease> Scheduler::lease(const std::string& worker_id, double now,
     TaskRef ref{j->id, f.frame, uint32_t(best_number / j->tiles), uint32_t(best_number % j->tiles)};
     j->worker_frame[worker_id] = f.frame;
     std::string id = options_.lease_prefix + std::to_string(++next_lease_);
-    leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true};
+    leases_[id] = LeaseState{ref, worker_id, now + options_.lease_seconds, true, now};
     count_live(ref, +1);
     expiry_.insert({now + options_.lease_seconds, id});
     tasks_[ref].leases.insert(id);
@@ -416,6 +416,24 @@ bool Scheduler::count_failure(const TaskRef& ref, const std::string& worker_id,
   for (const std::string& m : t.messages) j->error += "\n  " + m;
   drop_job_tasks(*j);
   return true;
+}
+
+std::optional<Scheduler::LeaseInfo> Scheduler::lease_info(const std::string& lease_id) const {
+  auto it = leases_.find(lease_id);
+  if (it == leases_.end()) return std::nullopt;
+  const LeaseState& l = it->second;
+  return LeaseInfo{lease_id, l.task, l.worker_id, l.leased_at, l.live};
+}
+
+std::vector<Scheduler::LeaseInfo> Scheduler::live_leases(const std::string& job_id,
+                                                         std::optional<FrameNumber> frame,
+                                                         uint32_t first_pass) const {
+  std::vector<LeaseInfo> out;
+  for (const auto& [id, l] : leases_)
+    if (l.live && l.task.job_id == job_id &&
+        (!frame || (l.task.frame == *frame && l.task.pass >= first_pass)))
+      out.push_back({id, l.task, l.worker_id, l.leased_at, true});
+  return out;
 }
 
 std::string Scheduler::lease_worker(const std::string& lease_id) const {

@@ -105,6 +105,19 @@ class Scheduler {
   bool retired(const std::string& lease_id) const;
   std::optional<TaskRef> lease_task(const std::string& lease_id) const;
   std::string lease_worker(const std::string& lease_id) const;  // "" for an unknown lease
+  // A lease as handed out (live or ended, while its record is kept), for its attempt's record.
+  struct LeaseInfo {
+    std::string lease_id;
+    TaskRef task;
+    std::string worker_id;
+    double leased_at = -1;  // on the scheduler's clock; < 0: before a restart
+    bool live = false;
+  };
+  std::optional<LeaseInfo> lease_info(const std::string& lease_id) const;
+  // The live leases of a job (of one frame from pass `first_pass` on, when given).
+  std::vector<LeaseInfo> live_leases(const std::string& job_id,
+                                     std::optional<FrameNumber> frame = std::nullopt,
+                                     uint32_t first_pass = 0) const;
   // Restoring from the job store: a lease handed out before a restart, ended (its task is
   // queued again), so that its holder's late result is recognised.
   void restore_lease(const std::string& lease_id, const TaskRef& task,
@@ -185,6 +198,7 @@ class Scheduler {
     std::string worker_id;
     double expires_at;
     bool live;
+    double leased_at = -1;  // < 0: unknown (restored from before a restart)
   };
 
   void expire(double now);

@@ -458,6 +458,26 @@ class JobServiceImpl final : public pb::JobService::Service {
     return guarded(g_, ctx, Access::Client, "DeleteJob",
                    [&](const Caller& caller) { c_.delete_job(r->job_id(), r->force(), caller); });
   }
+  Status GetTaskLog(ServerContext* ctx, const pb::TaskLogRequest* r,
+                    pb::TaskLogResponse* o) override {
+    return guarded(g_, ctx, Access::Client, "GetTaskLog", [&](const Caller& caller) {
+      std::optional<FrameNumber> frame;
+      if (r->has_frame()) frame = r->frame();
+      TaskLog log = c_.task_log(r->job_id(), frame, r->task_id(), r->limit(), caller);
+      for (const TaskAttempt& a : log.attempts) {
+        pb::TaskAttempt* p = o->add_attempts();
+        p->set_task_id(task_id_text({a.job_id, a.frame, a.pass, a.tile}));
+        p->set_worker_id(a.worker_id);
+        p->set_lease_id(a.lease_id);
+        p->set_started_unix(a.started_unix);
+        p->set_ended_unix(a.ended_unix);
+        p->set_outcome(attempt_outcome_name(a.outcome));
+        p->set_message(a.message);
+        for (const std::string& l : a.log) p->add_log(l);
+      }
+      o->set_more(log.more);
+    });
+  }
   Status ListWorkers(ServerContext* ctx, const pb::ListWorkersRequest*,
                      pb::ListWorkersResponse* o) override {
     return guarded(g_, ctx, Access::Client, "ListWorkers", [&](const Caller& caller) {
@@ -560,16 +580,24 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
         }
         check_chunks(chunks.finish(), "sample buffer", chunks);
       } catch (const CoordinatorError& e) {
-        c_.refuse_upload(header.worker_id(), header.lease_id(), *task, e.what());
+        c_.refuse_upload(header.worker_id(), header.lease_id(), *task, e.what(),
+                         {header.log().begin(), header.log().end()});
         throw;
       }
-      o->set_accepted(c_.complete(
-          {header.worker_id(), header.lease_id(), std::move(*task), chunks.take()}, caller));
+      o->set_accepted(
+          c_.complete({header.worker_id(), header.lease_id(), std::move(*task), chunks.take(),
+                       bounded_log({header.log().begin(), header.log().end()})},
+                      caller));
     });
   }
   Status FailTask(ServerContext* ctx, const pb::FailRequest* r, pb::FailResponse*) override {
     return guarded(g_, ctx, Access::Worker, "FailTask", [&](const Caller& caller) {
-      c_.fail({r->worker_id(), r->lease_id(), r->message(), r->handed_back()}, caller);
+      c_.fail({r->worker_id(),
+               r->lease_id(),
+               r->message(),
+               r->handed_back(),
+               {r->log().begin(), r->log().end()}},
+              caller);
     });
   }
 

@@ -66,6 +66,23 @@ std::string printable(std::string_view text) {
   return out;
 }
 
+std::vector<std::string> bounded_log(const std::vector<std::string>& lines) {
+  constexpr size_t kHead = 8;  // the first lines; the rest of the room for the last ones
+  std::vector<std::string> out;
+  auto add = [&](const std::string& l) {
+    out.push_back(printable(std::string_view(l).substr(0, kAttemptLogLineBytes)));
+  };
+  if (lines.size() <= kAttemptLogLines) {
+    for (const std::string& l : lines) add(l);
+    return out;
+  }
+  const size_t tail = kAttemptLogLines - kHead - 1;
+  for (size_t i = 0; i < kHead; ++i) add(lines[i]);
+  out.push_back("... " + std::to_string(lines.size() - kHead - tail) + " lines left out ...");
+  for (size_t i = lines.size() - tail; i < lines.size(); ++i) add(lines[i]);
+  return out;
+}
+
 std::string task_id_text(const TaskRef& t) {
   return t.job_id + "/" + std::to_string(t.frame) + "/" + std::to_string(t.pass) + "/" +
          std::to_string(t.tile);

@@ -50,6 +50,12 @@ std::string text_problem(std::string_view text);
 // in a terminal or a log line, whatever a client sent.
 std::string printable(std::string_view text);
 
+// A task attempt's log lines (`rayfarm logs`): a worker sends at most kAttemptLogLines lines of
+// at most kAttemptLogLineBytes; bounded_log cuts what is beyond (keeping the first lines and the
+// last, with a line saying how many went between) and makes every line printable.
+inline constexpr size_t kAttemptLogLines = 64, kAttemptLogLineBytes = 512;
+std::vector<std::string> bounded_log(const std::vector<std::string>& lines);
+
 // "job/frame/pass/tile": a task's id on the wire and in logs.
 std::string task_id_text(const TaskRef& task);
 // The task an id names; nothing for text that is not such an id.

@@ -7,7 +7,8 @@ namespace rf {
 
 UploadAnswer upload_result(rayfarm::v1::WorkerService::Stub& stub, const std::string& worker_id,
                            const rayfarm::v1::Task& task, const std::string& buffer,
-                           double core_seconds, double seconds, bool wait_for_ready) {
+                           double core_seconds, double seconds, bool wait_for_ready,
+                           const std::vector<std::string>& log) {
   grpc::ClientContext ctx;
   set_deadline(ctx, seconds, wait_for_ready);
   rayfarm::v1::CompleteResponse resp;
@@ -17,6 +18,7 @@ UploadAnswer upload_result(rayfarm::v1::WorkerService::Stub& stub, const std::st
   h.set_lease_id(task.lease_id());
   h.set_task_id(task.task_id());
   h.set_core_seconds(core_seconds);
+  for (const std::string& l : log) h.add_log(l);
   write_result(*w, h, buffer);
   UploadAnswer out;
   out.status = w->Finish();

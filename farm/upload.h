@@ -20,6 +20,7 @@ struct UploadAnswer {
 // deadline is `seconds`; with wait_for_ready it waits for a coordinator that is away.
 UploadAnswer upload_result(rayfarm::v1::WorkerService::Stub& stub, const std::string& worker_id,
                            const rayfarm::v1::Task& task, const std::string& buffer,
-                           double core_seconds, double seconds, bool wait_for_ready);
+                           double core_seconds, double seconds, bool wait_for_ready,
+                           const std::vector<std::string>& log = {});
 
 }  // namespace rf

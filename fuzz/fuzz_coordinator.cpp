@@ -9,7 +9,7 @@
 // by the service's own conversion), upload a blob, register, lease, renew, upload a result (a
 // valid buffer, one with flipped bytes, or any bytes; the upload's header checked first, as the
 // service does), fail, cancel, pause/resume, priority, retry, delete, workers, status/list/watch,
-// fetch, missing blobs, workers with tags and jobs requiring them, a
+// fetch, missing blobs, workers with tags and jobs requiring them, task logs, a
 // clock jump (leases expire) and a restart of the coordinator on the same state directory.
 //
 // Findings, beyond what the sanitizers see:
@@ -132,7 +132,7 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
-constexpr int kRequests = 21;  // the operations of Farm::request
+constexpr int kRequests = 22;  // the operations of Farm::request
 
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
@@ -335,6 +335,16 @@ class Farm {
       case 19: {  // register with tags (any text: bad ones are refused)
         WorkerInfo w{"tagged", 1, build_id(), cpu_isa(), {in.str(24), in.str(24)}};
         workers_.push_back(core_->register_worker(w, caller).worker_id);
+        return;
+      }
+      case 21: {  // logs: of a frame, of a task (a held lease's, or any text), any limit
+        const std::string job = job_id(in);
+        const uint8_t what = in.byte();
+        std::optional<FrameNumber> frame;
+        if (what & 1) frame = FrameNumber(int32_t(in.u32()));
+        const Held* h = what & 2 ? pick(leases_, in) : nullptr;
+        std::string task = h ? task_id_text(h->task.task) : (what & 4 ? in.str(48) : "");
+        core_->task_log(job, frame, task, in.u32(), caller);
         return;
       }
       case 20: {  // the valid job, requiring tags (any text)

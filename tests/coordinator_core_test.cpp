@@ -983,6 +983,38 @@ TEST(CoordinatorCore, JobsRequiringTagsGoOnlyToWorkersWithThemAndSayWhenNoneCan)
   EXPECT_EQ(refusal([&] { bench.submit(1); }), ErrorCode::InvalidArgument);
 }
 
+// `logs`: an expired lease's attempt (expired, with its start and end 11 s apart on the
+// coordinator's clock), the live one (running), a handed-back one; one task's attempts only when
+// asked; another tenant's job is NotFound; a task id of another job is InvalidArgument.
+TEST(CoordinatorCore, TaskLogsListEndedAndLiveAttempts) {
+  CoreBench bench("core-logs");
+  const Caller alice{"alice", "shot1", false}, bob{"bob", "shot2", false};
+  const std::string job = bench.submit(1, alice);
+  TaskAssignment first = bench.lease("w1");
+  bench.now += 11;  // past the 10 s lease: it expires at the next call
+  TaskAssignment second = bench.lease("w2");
+  EXPECT_EQ(second.task, first.task) << "the expired task comes first again";
+  TaskAssignment third = bench.lease("w2");
+  bench.core().fail({bench.worker("w2"), third.lease_id, "shutting down", true, {"info: bye"}});
+  TaskLog log = bench.core().task_log(job, std::nullopt, "", 0, alice);
+  ASSERT_EQ(log.attempts.size(), 3u);
+  EXPECT_EQ(log.attempts[0].outcome, AttemptOutcome::Expired);
+  EXPECT_EQ(log.attempts[0].worker_id, bench.worker("w1"));
+  EXPECT_NEAR(log.attempts[0].ended_unix - log.attempts[0].started_unix, 11, 1e-6);
+  EXPECT_EQ(log.attempts[1].outcome, AttemptOutcome::HandedBack);
+  EXPECT_EQ(log.attempts[1].log, std::vector<std::string>{"info: bye"});
+  EXPECT_EQ(log.attempts[2].outcome, AttemptOutcome::Running);
+  EXPECT_EQ(log.attempts[2].lease_id, second.lease_id);
+  log = bench.core().task_log(job, std::nullopt, task_id_text(third.task), 0, alice);
+  ASSERT_EQ(log.attempts.size(), 1u);
+  EXPECT_EQ(log.attempts[0].outcome, AttemptOutcome::HandedBack);
+  EXPECT_EQ(refusal([&] { bench.core().task_log(job, std::nullopt, "", 0, bob); }),
+            ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { bench.core().task_log(job, std::nullopt, "j9/1/0/0", 0, alice); }),
+            ErrorCode::InvalidArgument);
+  EXPECT_EQ(refusal([&] { bench.core().task_log(job, 7, "", 0, alice); }), ErrorCode::NotFound);
+}
+
 // The job list comes in pages: at most `limit` jobs after a given job, and whether more follow.
 TEST(CoordinatorCore, TheJobListComesInPages) {
   CoreBench bench("core-pages");

@@ -875,6 +875,57 @@ TEST(Farm, AJobRequiringAPoolWaitsForAWorkerOfItAndSaysSo) {
   EXPECT_EQ(r.exit_code, 2) << r.output;  // a usage error, before anything is sent
 }
 
+// `logs` with real processes: a task's failed attempt (a fake worker's FailTask with its log
+// lines) and its done attempt by a real worker (whose log lines came with its result), with
+// workers, times and outcomes, kept across a coordinator restart; one line per attempt.
+TEST(Farm, LogsShowEveryAttemptWithItsWorkerOutcomeAndLogLines) {
+  Farm farm("farm-logs");
+  const std::string args = kCornell + " --spp 4 --passes 1 --res 32x32 --tile-size 16";
+  const std::string job = farm.submit(args);
+  {
+    auto stub = pb::WorkerService::NewStub(farm.channel());
+    test::lease_and_fail(*stub, "fake-1", "driver crash",
+                         {"warning: texture wood.png: short read", "error: segfault in shader"});
+  }
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  farm.restart_coordinator();
+  const std::string task = job + "/0/0/0";  // the one fake-1 leased first
+  test::CommandResult r = farm.client("logs " + job + " --task " + task + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json log = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  ASSERT_EQ(log["attempts"].size(), 2u) << log.dump(2);
+  const nlohmann::json& failed = log["attempts"][0];
+  EXPECT_EQ(failed["outcome"], "failed");
+  EXPECT_EQ(failed["message"], "driver crash");
+  EXPECT_NE(failed["worker_id"].get<std::string>().find("fake-1"), std::string::npos);
+  EXPECT_EQ(failed["log"],
+            nlohmann::json({"warning: texture wood.png: short read", "error: segfault in shader"}));
+  EXPECT_GT(failed["started_unix"].get<double>(), 1.7e9);
+  EXPECT_GE(failed["ended_unix"].get<double>(), failed["started_unix"].get<double>());
+  const nlohmann::json& done = log["attempts"][1];
+  EXPECT_EQ(done["outcome"], "done");
+  bool rendered = false;
+  for (const auto& line : done["log"])
+    rendered |= line.get<std::string>().find("rendered in") != std::string::npos;
+  EXPECT_TRUE(rendered) << done.dump(2);
+  r = farm.client("logs " + job + " --json --limit 1000");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  log = nlohmann::json::parse(r.output.substr(r.output.find('{')));
+  EXPECT_EQ(log["attempts"].size(), 4u + 1) << "4 tasks, one failed once";
+  EXPECT_EQ(log["more"], false);
+  r = farm.client("logs " + job + " --limit 2");
+  EXPECT_NE(r.output.find("earlier attempts left out"), std::string::npos) << r.output;
+  r = farm.client("logs " + job + " --task " + task);
+  EXPECT_NE(r.output.find("failed: driver crash\n    | warning: texture wood.png: short read"),
+            std::string::npos)
+      << "the plain listing shows each attempt's lines\n"
+      << r.output;
+  r = farm.client("logs " + job + " --task j999999/0/0/0");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("INVALID_ARGUMENT"), std::string::npos) << r.output;
+}
+
 // Soak (label "long", `./rayfarm test --long`): workers SIGKILLed and replaced every ~0.7 s and
 // the coordinator SIGKILLed and restarted twice while a 4-frame job renders; the images must still
 // equal the local renders and every frame must have exactly the spp asked.

@@ -58,6 +58,11 @@ class TestStore final : public JobStore {
   std::vector<TaskFailure> failure_history(const std::string& j) const override {
     return inner_->failure_history(j);
   }
+  std::vector<StoredAttempt> attempts(const std::string& j, std::optional<FrameNumber> f,
+                                      const std::optional<TaskRef>& t, size_t limit,
+                                      bool* more) const override {
+    return inner_->attempts(j, f, t, limit, more);
+  }
   uint64_t tasks_done(const std::string& j) const override { return inner_->tasks_done(j); }
 
   void close_gate() {
@@ -303,8 +308,10 @@ TEST(Ledger, RetryRunsFailedWorkAgainWithFreshCountsAndKeepsTheHistory) {
 }
 
 // A task: leased, then done (one event, the core seconds, the build pinned once); a second
-// result needs nothing stored; refused, failed and held tasks go back to the queue (held ones to
-// another worker), a failure and a refusal are stored; a frame's stop ends its tasks.
+// result needs nothing stored but its attempt; refused, failed and held tasks go back to the queue
+// (held ones to another worker), a failure and a refusal are stored; a frame's stop ends its
+// tasks. Every lease that ends leaves its attempt's record (worker, times, outcome, reason, log)
+// in that order, a lease a frame's stop ended included.
 TEST(Ledger, TaskTransitionsAndTheirRows) {
   Bench b;
   auto job = make_job("j1", 1, 2);  // 8 tasks
@@ -312,7 +319,9 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   b.ledger.add_job(*job);
   std::optional<Lease> a = b.ledger.lease("w1", b.now, {});
   ASSERT_TRUE(a);
-  b.ledger.complete(*job, a->lease_id, a->task, "w1", 1.5, "build-1", "K", b.now);
+  b.now = 5;
+  b.ledger.complete(*job, a->lease_id, a->task, "w1", 1.5, "build-1", "K", b.now,
+                    {"info: rendered"});
   EXPECT_TRUE(b.ledger.scheduler().settled(a->task));
   EXPECT_EQ(job->build_id, "build-1");
   std::optional<Lease> c = b.ledger.lease("w1", b.now, {});
@@ -331,8 +340,9 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   EXPECT_EQ(again->task, r->task);
   // Failed: queued again; its event stored under the worker.
   Journal::Ticket t = 0;
-  EXPECT_EQ(b.ledger.fail(again->lease_id, "w3", "out of memory", false, b.now, &t),
-            LeaseOutcome::Ok);
+  EXPECT_EQ(
+      b.ledger.fail(again->lease_id, "w3", "out of memory", false, b.now, &t, {"error: bad_alloc"}),
+      LeaseOutcome::Ok);
   EXPECT_EQ(b.ledger.fail(again->lease_id, "w3", "twice", false, b.now, &t), LeaseOutcome::Ended);
   // Held for verification: it goes to another worker than w4.
   std::optional<Lease> h = b.ledger.lease("w4", b.now, {});
@@ -342,8 +352,8 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   ASSERT_TRUE(other);
   EXPECT_FALSE(other->task == r->task) << "w4 may not verify its own result";
   // Not needed (its result merged already, or beyond its frame's stop): the lease ends and the
-  // task counts as done, with nothing stored.
-  b.ledger.not_needed(other->lease_id, other->task, b.now);
+  // task counts as done, with only its attempt stored.
+  b.ledger.not_needed(other->lease_id, other->task, "w4", b.now);
   EXPECT_EQ(b.ledger.renew(other->lease_id, b.now), LeaseOutcome::Ended);
   EXPECT_TRUE(b.ledger.scheduler().settled(other->task));
   b.flush();
@@ -353,12 +363,42 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   EXPECT_EQ(b.store.tasks_done("j1"), 2u);
 
   // The frame needs no pass from 0 on: every task stopped, the lease rows dropped once.
+  std::optional<Lease> live = b.ledger.lease("w5", b.now, {});
+  ASSERT_TRUE(live);
   b.ledger.frame_done(*job, *job->frames[0], 0);
   EXPECT_TRUE(job->frames[0]->leases_dropped);
   b.flush();
   EXPECT_TRUE(b.store.leases("j1").empty());
   EXPECT_FALSE(b.ledger.lease("w9", b.now, {}));
   EXPECT_TRUE(b.ledger.scheduler().settled(other->task));
+
+  bool more = true;
+  std::vector<StoredAttempt> log = b.store.attempts("j1", std::nullopt, std::nullopt, 100, &more);
+  EXPECT_FALSE(more);
+  std::vector<std::pair<AttemptOutcome, std::string>> want{
+      {AttemptOutcome::Done, "w1"},     {AttemptOutcome::Done, "w1"},
+      {AttemptOutcome::Refused, "w2"},  {AttemptOutcome::Failed, "w3"},
+      {AttemptOutcome::Held, "w4"},     {AttemptOutcome::NotNeeded, "w4"},
+      {AttemptOutcome::NotNeeded, "w5"}};
+  ASSERT_EQ(log.size(), want.size());
+  for (size_t i = 0; i < want.size(); ++i) {
+    EXPECT_EQ(log[i].outcome, want[i].first) << i << ": " << attempt_outcome_name(log[i].outcome);
+    EXPECT_EQ(log[i].worker_id, want[i].second) << i;
+  }
+  EXPECT_EQ(log[0].log, std::vector<std::string>{"info: rendered"});
+  EXPECT_EQ(log[0].started_unix, 0) << "leased at 0 on a clock whose Unix offset is 0";
+  EXPECT_EQ(log[0].ended_unix, 5);
+  EXPECT_EQ(log[2].message, "NaN");
+  EXPECT_EQ(log[3].message, "out of memory");
+  EXPECT_EQ(log[3].log, std::vector<std::string>{"error: bad_alloc"});
+  EXPECT_EQ(log[6].message, "its frame needs no more passes");
+  // One task's, the most recent first cut by the limit.
+  log = b.store.attempts("j1", std::nullopt, r->task, 2, &more);
+  EXPECT_TRUE(more) << "four attempts of the task: refused, failed, held, stopped (w5's)";
+  ASSERT_EQ(log.size(), 2u);
+  EXPECT_EQ(log[0].outcome, AttemptOutcome::Held);
+  EXPECT_EQ(log[1].outcome, AttemptOutcome::NotNeeded);
+  EXPECT_EQ(log[1].worker_id, "w5");
 }
 
 // Restoring: an ended job's tasks are not queued; a running job's trail counts as before.

@@ -104,6 +104,12 @@ std::map<std::string, grpc::StatusCode> call_every_method(std::shared_ptr<grpc::
     pb::DeleteResponse r;
     return jobs->DeleteJob(&c, req, &r);
   });
+  unary("GetTaskLog", [&](grpc::ClientContext& c) {
+    pb::TaskLogRequest req;
+    req.set_job_id("j999999");
+    pb::TaskLogResponse r;
+    return jobs->GetTaskLog(&c, req, &r);
+  });
   unary("ListWorkers", [&](grpc::ClientContext& c) {
     pb::ListWorkersResponse r;
     return jobs->ListWorkers(&c, pb::ListWorkersRequest{}, &r);
@@ -248,12 +254,14 @@ TEST(Security, TokensRolesAndTenantsAreCheckedOnEveryMethod) {
   EXPECT_NE(as(shot2, "watch " + job).exit_code, 0);
   // Another tenant's job operations are NOT_FOUND too (exit 2, as an unknown job id); the
   // owner's on an ended job are FAILED_PRECONDITION (exit 1).
-  for (const std::string& op : {"pause " + job, "resume " + job, "cancel " + job,
-                                "priority " + job + " 5", "retry " + job, "delete " + job}) {
+  for (const std::string& op :
+       {"pause " + job, "resume " + job, "cancel " + job, "priority " + job + " 5", "retry " + job,
+        "delete " + job, "logs " + job}) {
     test::CommandResult r = as(shot2, op);
     EXPECT_EQ(r.exit_code, 2) << op << ": " << r.output;
     EXPECT_NE(r.output.find("NOT_FOUND"), std::string::npos) << op << ": " << r.output;
-    if (op.rfind("cancel", 0) == 0 || op.rfind("delete", 0) == 0) continue;  // the owner may
+    if (op.rfind("cancel", 0) == 0 || op.rfind("delete", 0) == 0 || op.rfind("logs", 0) == 0)
+      continue;  // the owner may
     r = as(shot1, op);
     EXPECT_EQ(r.exit_code, 1) << op << ": " << r.output;
     EXPECT_NE(r.output.find("FAILED_PRECONDITION"), std::string::npos) << op << ": " << r.output;

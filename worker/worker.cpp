@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
+#include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
@@ -86,6 +87,46 @@ bool coordinator_away(const grpc::Status& s) {
   }
 }
 
+// The log lines of the task being rendered (`rayfarm logs`): a sink on the default logger that
+// keeps what is logged, from any thread, between begin() and take(), bounded as bounded_log
+// bounds them (the first lines and the last, with a line counting those left out between).
+class AttemptLogSink final : public spdlog::sinks::base_sink<std::mutex> {
+ public:
+  void begin() {
+    std::lock_guard lock(mutex_);
+    head_.clear(), tail_.clear(), skipped_ = 0, on_ = true;
+  }
+  std::vector<std::string> take() {
+    std::lock_guard lock(mutex_);
+    on_ = false;
+    std::vector<std::string> out = std::move(head_);
+    if (skipped_ > 0) out.push_back("... " + std::to_string(skipped_) + " lines left out ...");
+    out.insert(out.end(), tail_.begin(), tail_.end());
+    head_.clear(), tail_.clear();
+    return bounded_log(out);
+  }
+
+ protected:
+  void sink_it_(const spdlog::details::log_msg& msg) override {
+    if (!on_) return;
+    std::string line(spdlog::level::to_string_view(msg.level).data(),
+                     spdlog::level::to_string_view(msg.level).size());
+    line += ": ";
+    line.append(msg.payload.data(), std::min(msg.payload.size(), kAttemptLogLineBytes));
+    if (head_.size() < kHead) return head_.push_back(std::move(line));
+    tail_.push_back(std::move(line));
+    if (tail_.size() > kAttemptLogLines - kHead - 1) tail_.pop_front(), ++skipped_;
+  }
+  void flush_() override {}
+
+ private:
+  static constexpr size_t kHead = 8;
+  bool on_ = false;
+  std::vector<std::string> head_;
+  std::deque<std::string> tail_;
+  size_t skipped_ = 0;
+};
+
 }  // namespace
 
 class Worker {
@@ -94,7 +135,14 @@ class Worker {
       : o_(o),
         cache_dir_(o.cache_dir.empty() ? default_cache_dir() : o.cache_dir),
         blobs_(cache_dir_ + "/blobs"),
-        rng_(std::random_device{}()) {}
+        rng_(std::random_device{}()),
+        attempt_log_(std::make_shared<AttemptLogSink>()) {
+    spdlog::default_logger()->sinks().push_back(attempt_log_);  // before any other thread logs
+  }
+  ~Worker() {
+    auto& sinks = spdlog::default_logger()->sinks();
+    sinks.erase(std::remove(sinks.begin(), sinks.end(), attempt_log_), sinks.end());
+  }
 
   int run();
 
@@ -106,8 +154,11 @@ class Worker {
   void run_task(const pb::Task& task);
   Renderer& prepare(const pb::Task& task);
   void fetch_blob(const std::string& sha256);
-  void upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds);
-  void fail_task(const pb::Task& task, const std::string& message, bool handed_back);
+  void upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds,
+              const std::vector<std::string>& log);
+  // Reports the task failed (or handed back) with the attempt's log lines so far.
+  void fail_task(const pb::Task& task, const std::string& message, bool handed_back,
+                 const std::vector<std::string>& log);
   // Sleeps with exponential, jittered backoff (capped); false if a stop was requested.
   bool backoff(int attempt);
   bool sleep_unless_stopped(double seconds);
@@ -153,6 +204,7 @@ class Worker {
   std::string worker_id_;
   double lease_seconds_ = 30, keepalive_seconds_ = 10;
   std::mt19937 rng_;
+  std::shared_ptr<AttemptLogSink> attempt_log_;  // on the default logger while this lives
 
   std::atomic<bool> stop_{false};
   std::atomic<int64_t> last_contact_ns_{Clock::now().time_since_epoch().count()};
@@ -171,7 +223,8 @@ class Worker {
   // The previous task's upload runs while the next task renders, hiding the round trip and the
   // coordinator's durable write. At most one upload is in flight.
   std::thread uploader_;
-  void start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds);
+  void start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds,
+                    std::vector<std::string> log);
   void finish_upload() {
     if (uploader_.joinable()) uploader_.join();
   }
@@ -379,8 +432,10 @@ Renderer& Worker::prepare(const pb::Task& task) {
   return *scenes_.front().renderer;
 }
 
-void Worker::fail_task(const pb::Task& task, const std::string& message, bool handed_back) {
+void Worker::fail_task(const pb::Task& task, const std::string& message, bool handed_back,
+                       const std::vector<std::string>& log) {
   pb::FailRequest req;
+  for (const std::string& l : log) req.add_log(l);
   req.set_worker_id(worker_id_);
   req.set_lease_id(task.lease_id());
   req.set_task_id(task.task_id());
@@ -395,11 +450,12 @@ void Worker::fail_task(const pb::Task& task, const std::string& message, bool ha
                  handed_back ? "the hand-back" : "the failure", s.error_message());
 }
 
-void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds) {
+void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds,
+                    const std::vector<std::string>& log) {
   std::string bytes = encode_buffer(buffer);
   for (int attempt = 0;; ++attempt) {
     UploadAnswer answer =
-        upload_result(*stub_, worker_id_, task, bytes, core_seconds, 600, kWaitForReady);
+        upload_result(*stub_, worker_id_, task, bytes, core_seconds, 600, kWaitForReady, log);
     const grpc::Status& s = answer.status;
     if (s.ok()) {
       heard_from_coordinator();
@@ -424,12 +480,13 @@ void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double cor
 void Worker::run_task(const pb::Task& task) {
   auto t0 = Clock::now();
   double cpu0 = cpu_seconds();
+  attempt_log_->begin();
   const Renderer* renderer = nullptr;
   try {
     renderer = &prepare(task);
   } catch (const TaskFailure& e) {
     spdlog::error("task {}: {}", task.task_id(), e.what());
-    fail_task(task, e.what(), false);
+    fail_task(task, e.what(), false, attempt_log_->take());
     return;
   }
   Rect rect = from_wire(task.rect());
@@ -463,7 +520,7 @@ void Worker::run_task(const pb::Task& task) {
       lock.unlock();
       spdlog::info("task {}: not finished within the drain time; handing it back", task.task_id());
       finish_upload();  // the previous task's result still counts
-      fail_task(task, "worker shutting down", true);
+      fail_task(task, "worker shutting down", true, attempt_log_->take());
       // Exit with the render still running (it cannot be interrupted, and its stack frame must
       // outlive it); the coordinator re-queues the task without counting a failure.
       spdlog::shutdown();
@@ -494,26 +551,28 @@ void Worker::run_task(const pb::Task& task) {
   render.join();
   if (!render_error.empty()) {
     spdlog::error("task {}: {}", task.task_id(), render_error);
-    fail_task(task, render_error, false);
+    fail_task(task, render_error, false, attempt_log_->take());
     return;
   }
   double core_seconds = cpu_seconds() - cpu0;
   result.header.core_seconds = core_seconds;
   spdlog::info("task {}: rendered in {:.2f} s ({:.1f} core-s)", task.task_id(),
                std::chrono::duration<double>(Clock::now() - t0).count(), core_seconds);
-  start_upload(task, std::move(result), core_seconds);
+  start_upload(task, std::move(result), core_seconds, attempt_log_->take());
 }
 
-void Worker::start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds) {
+void Worker::start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds,
+                          std::vector<std::string> log) {
   finish_upload();
-  uploader_ = std::thread([this, task, buffer = std::move(buffer), core_seconds] {
-    try {
-      upload(task, buffer, core_seconds);
-    } catch (const TaskFailure& e) {
-      spdlog::error("task {}: {}", task.task_id(), e.what());
-      if (!stopping()) fail_task(task, e.what(), false);
-    }
-  });
+  uploader_ =
+      std::thread([this, task, buffer = std::move(buffer), core_seconds, log = std::move(log)] {
+        try {
+          upload(task, buffer, core_seconds, log);
+        } catch (const TaskFailure& e) {
+          spdlog::error("task {}: {}", task.task_id(), e.what());
+          if (!stopping()) fail_task(task, e.what(), false, log);
+        }
+      });
 }
 
 int Worker::run() {

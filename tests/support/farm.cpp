@@ -197,7 +197,7 @@ std::optional<pb::Task> lease_task(pb::WorkerService::Stub& stub, const std::str
 }
 
 void lease_and_fail(pb::WorkerService::Stub& stub, const std::string& hostname,
-                    const std::string& message) {
+                    const std::string& message, const std::vector<std::string>& log) {
   std::string id = register_worker(stub, hostname);
   std::optional<pb::Task> task = lease_task(stub, id);
   ASSERT_TRUE(task);
@@ -207,6 +207,7 @@ void lease_and_fail(pb::WorkerService::Stub& stub, const std::string& hostname,
   fr.set_lease_id(task->lease_id());
   fr.set_task_id(task->task_id());
   fr.set_message(message);
+  for (const std::string& l : log) fr.add_log(l);
   pb::FailResponse fresp;
   ASSERT_TRUE(stub.FailTask(&ctx, fr, &fresp).ok());
 }

@@ -103,9 +103,10 @@ std::string register_worker(rayfarm::v1::WorkerService::Stub& stub, const std::s
 // Leases a task for a registered worker; nothing (and a test failure) when none is given.
 std::optional<rayfarm::v1::Task> lease_task(rayfarm::v1::WorkerService::Stub& stub,
                                             const std::string& worker_id);
-// Registers as `hostname`, leases a task and reports it failed with `message`.
+// Registers as `hostname`, leases a task and reports it failed with `message` (and these log
+// lines of the attempt).
 void lease_and_fail(rayfarm::v1::WorkerService::Stub& stub, const std::string& hostname,
-                    const std::string& message);
+                    const std::string& message, const std::vector<std::string>& log = {});
 // CompleteTask with a header naming worker_id and the task's lease, then these chunks.
 grpc::Status complete_with(rayfarm::v1::WorkerService::Stub& stub, const std::string& worker_id,
                            const rayfarm::v1::Task& task,
