@@ -307,6 +307,35 @@ TEST(Ledger, RetryRunsFailedWorkAgainWithFreshCountsAndKeepsTheHistory) {
   EXPECT_EQ(c->state, JobState::Completed);
 }
 
+// Delete, from any state: the scheduler forgets the job (its leases are retired: renewing one
+// answers Ended), its events, attempts and lease rows go, and its row stays unlisted so that the
+// next sequence number passes it.
+TEST(Ledger, DeleteForgetsTheJobAndItsRowsButNotItsId) {
+  Bench b;
+  auto job = make_job("j1");
+  b.store.write(store::InsertJob{{"j1", 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*job);
+  std::optional<Lease> l = b.ledger.lease("w1", b.now, {});
+  ASSERT_TRUE(l);
+  Journal::Ticket t = 0;
+  b.ledger.fail(l->lease_id, "w1", "crash", false, b.now, &t);
+  std::optional<Lease> live = b.ledger.lease("w2", b.now, {});
+  ASSERT_TRUE(live);
+  b.flush();
+  bool more = false;
+  ASSERT_EQ(b.store.attempts("j1", std::nullopt, std::nullopt, 10, &more).size(), 1u);
+  b.ledger.delete_job(*job);
+  b.flush();
+  EXPECT_FALSE(b.ledger.lease("w3", b.now, {})) << "nothing of it is leased";
+  EXPECT_EQ(b.ledger.renew(live->lease_id, b.now), LeaseOutcome::Ended);
+  EXPECT_TRUE(b.store.jobs().empty());
+  EXPECT_EQ(b.store.next_seq(), 2u) << "its id is not given again";
+  EXPECT_TRUE(b.store.failure_history("j1").empty());
+  EXPECT_TRUE(b.store.leases("j1").empty());
+  EXPECT_TRUE(b.store.attempts("j1", std::nullopt, std::nullopt, 10, &more).empty());
+  EXPECT_FALSE(b.ledger.scheduler().work_left_for("w3"));
+}
+
 // A task: leased, then done (one event, the core seconds, the build pinned once); a second
 // result needs nothing stored but its attempt; refused, failed and held tasks go back to the queue
 // (held ones to another worker), a failure and a refusal are stored; a frame's stop ends its
