@@ -10,7 +10,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <ctime>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -23,6 +22,7 @@
 #include "engine/digest.h"
 #include "engine/image_io.h"
 #include "engine/progress.h"
+#include "farm/auth.h"  // format_utc_time
 #include "farm/blob_store.h"
 #include "farm/channel.h"
 #include "farm/chunking.h"
@@ -611,18 +611,6 @@ int cmd_delete(const Endpoint& ep, const std::string& job, bool force) {
   return 0;
 }
 
-namespace {
-std::string local_time_text(double unix_seconds) {
-  if (unix_seconds <= 0) return "?";
-  std::time_t t = std::time_t(unix_seconds);
-  std::tm tm{};
-  localtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M:%S", &tm);
-  return buf;
-}
-}  // namespace
-
 int cmd_logs(const Endpoint& ep, const std::string& job, std::optional<FrameNumber> frame,
              const std::string& task, uint32_t limit, bool json) {
   auto stub = job_stub(ep);
@@ -651,9 +639,10 @@ int cmd_logs(const Endpoint& ep, const std::string& job, std::optional<FrameNumb
   }
   if (resp.more()) std::printf("(earlier attempts left out: --limit)\n");
   for (const pb::TaskAttempt& a : resp.attempts()) {
-    std::string when = local_time_text(a.started_unix());
+    // UTC, as the coordinator's and workers' machines may not share a time zone.
+    std::string when = a.started_unix() > 0 ? format_utc_time(int64_t(a.started_unix())) : "?";
     if (a.ended_unix() > 0) {
-      when += " -> " + local_time_text(a.ended_unix()).substr(11);
+      when += " -> " + format_utc_time(int64_t(a.ended_unix())).substr(11);
       if (a.started_unix() > 0)
         when += " (" + duration_text(a.ended_unix() - a.started_unix()) + ")";
     }
