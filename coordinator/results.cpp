@@ -174,6 +174,7 @@ void Coordinator::retry(const std::string& id, const std::string& frames, const 
   Ledger::Ticket ticket = 0;
   {
     std::lock_guard lock(mu_);
+    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(id) + "'");
     bool same = job->state == was;
     for (FrameRecord* f : reopen) same &= terminal(was) || f->held;
     if (!same) return;  // another retry (or a cancel) came between: it stands
