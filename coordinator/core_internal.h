@@ -69,6 +69,7 @@ struct JobRecord {
   std::string tenant;
   std::string build_id;        // results of this build only; empty: the first merged result's
   std::string cpu_kind;        // and of this CPU kind only (BufferHeader::isa), the same way
+  bool pin_pending = false;    // build_id / cpu_kind taken by a result, not yet stored
   std::string bundle_problem;  // restored without its bundle (its blobs are gone): why
   bool paused = false;         // no new leases (`pause`); leases in flight finish and merge
   int priority = 0;            // the spec's, or what `priority JOB N` set since

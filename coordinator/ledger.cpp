@@ -176,9 +176,12 @@ Ledger::Ticket Ledger::complete(JobRecord& job, const std::string& lease_id, con
                                 double now, const std::vector<std::string>& log) {
   std::vector<StoreWrite> writes;
   writes.push_back(attempt(lease_id, task, worker_id, AttemptOutcome::Done, "", log, now));
-  if (job.build_id.empty() || job.cpu_kind.empty()) {  // the first merged result pins the job
+  // The first merged result pins the job (the coordinator may have taken the pin already, under
+  // its lock before the result was stored: pin_pending).
+  if (job.pin_pending || job.build_id.empty() || job.cpu_kind.empty()) {
     if (job.build_id.empty()) job.build_id = build_id;
     if (job.cpu_kind.empty()) job.cpu_kind = cpu_kind;
+    job.pin_pending = false;
     writes.push_back(store::SetBuild{job.id, job.build_id, job.cpu_kind});
   }
   writes.push_back(store::TaskEvent{job.id, task.frame, task.pass, task.tile, worker_id,

@@ -144,7 +144,12 @@ void Coordinator::recover_folders() {
         "job {}: missing from the job database (lost: truncated, or its WAL removed); "
         "recovered from its folder with the passes its checkpoints hold",
         id);
-    journal_->write_ahead({store::InsertJob{stored}});
+    // The row as a submit makes it, then what the folder records beside it.
+    std::vector<StoreWrite> rows{store::InsertJob{stored},
+                                 store::SetPaused{stored.id, stored.paused},
+                                 store::Retry{stored.id, stored.held, false}};
+    if (stored.priority) rows.push_back(store::SetPriority{stored.id, *stored.priority});
+    journal_->write_ahead(std::move(rows));
     restore(stored);
     lost.push_back(id);
   }

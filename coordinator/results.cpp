@@ -72,10 +72,12 @@ void Coordinator::cancel(const std::string& id, const Caller& caller) {
     ticket = set_state(*job, JobState::Cancelled, "cancelled by " + caller.principal);
   }
   wait_stored(ticket, "the cancellation");
-  // Its merged passes are in the checkpoints (fetch reads them there): the accumulators go.
+  // Its merged passes are in the checkpoints (fetch reads them there): the accumulators go,
+  // unless a retry came meanwhile and made the frames its own again.
   for (auto& f : job->frames) {
     std::lock_guard frame_lock(f->m);
-    f->acc.reset();
+    std::lock_guard lock(mu_);
+    if (job->state == JobState::Cancelled) f->acc.reset();
   }
 }
 
@@ -317,6 +319,7 @@ void Coordinator::refuse_upload(const std::string& worker_id, const std::string&
                clip(worker_id), why);
   std::lock_guard lock(mu_);
   ++counters_.results_refused;
+  if (!find(task.job_id)) return;  // deleted meanwhile: nothing of it is recorded any more
   ledger_->refuse_result(worker_id, lease_id, task, why, now(), bounded_log(log));
 }
 
@@ -336,10 +339,17 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     refuse_upload(r.worker_id, r.lease_id, r.task, e.what(), r.log);
     throw;
   }
+  std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
   {
-    // Another build's or CPU kind's result (the job was pinned while the task was out) is not
-    // the worker's fault: the task goes back to the queue for a worker of the pin, uncounted.
     std::lock_guard lock(mu_);
+    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
+    // A worker registered by an earlier build has no kind on record: its result says it.
+    if (auto w = workers_.find(r.worker_id); w != workers_.end() && w->second.isa.empty())
+      w->second.isa = w->second.info.isa = buffer.header.isa;
+    // The pin is checked, and taken by a job not yet pinned, here: under mu_ and before the
+    // result is stored, so results of two kinds racing on two frames are never both kept.
+    // Another build's or kind's result (the job was pinned while the task was out) is not the
+    // worker's fault: its task goes back to the queue for a worker of the pin, uncounted.
     if (std::string why = pin_problem(*job, buffer.header); !why.empty()) {
       Ledger::Ticket ticket = 0;
       ledger_->fail(r.lease_id, r.worker_id, why, /*handed_back=*/true, now(), &ticket, r.log);
@@ -347,11 +357,11 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
                    r.worker_id, why);
       refuse(ErrorCode::FailedPrecondition, why);
     }
-  }
-  std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
-  {
-    std::lock_guard lock(mu_);
-    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
+    if (job->build_id.empty() || job->cpu_kind.empty()) {
+      if (job->build_id.empty()) job->build_id = buffer.header.build_id;
+      if (job->cpu_kind.empty()) job->cpu_kind = buffer.header.isa;
+      job->pin_pending = true;  // stored with the first merged result (Ledger::complete)
+    }
   }
   if (!f->acc) {
     {

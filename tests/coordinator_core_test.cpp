@@ -929,6 +929,22 @@ TEST(CoordinatorCore, AJobMergesResultsOfOneCpuKindOnly) {
     EXPECT_TRUE(bench.complete(t, 1.0f));
   }
   EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
+  // A worker registered by an earlier build has no kind on record: it may lease a pinned job's
+  // task; its result tells its kind, and the task goes back, uncounted, for the pin's workers.
+  bench.frames = "1";
+  const std::string second = bench.submit(1);
+  TaskAssignment first = bench.lease("w");
+  ASSERT_TRUE(bench.complete(first, 1.0f));
+  const std::string old = bench.core().register_worker({"old", 1, build_id(), ""}).worker_id;
+  std::optional<TaskAssignment> o = bench.core().lease(old).task;
+  ASSERT_TRUE(o) << "an unknown kind may lease";
+  SampleBuffer olds = bench.result_buffer(*o, 1.0f);
+  olds.header.isa = other_kind;
+  EXPECT_EQ(refusal([&] {
+              bench.core().complete({old, o->lease_id, o->task, encode_buffer(olds)});
+            }),
+            ErrorCode::FailedPrecondition);
+  EXPECT_FALSE(bench.core().lease(old).task) << "its kind is known now";
   bench.start("B");
   EXPECT_EQ(bench.core().status(job).cpu_kind, cpu_isa()) << "the pin is stored";
   bool listed = false;
@@ -1051,10 +1067,16 @@ TEST(CoordinatorCore, JobsTheDatabaseLostAreRecoveredFromTheirFolders) {
     EXPECT_TRUE(bench.complete(a, 1.0f));
   }
   SampleBuffer before = bench.image(done);
+  bench.core().set_paused(running, true);  // a setting in the folder's record too
+  bench.core().set_priority(running, 7);
   bench.stop();
   for (const char* f : {"/jobs.sqlite", "/jobs.sqlite-wal", "/jobs.sqlite-shm"})
     std::filesystem::remove(bench.state_dir() + f);
   bench.start("B");
+  bench.start("C");  // the recovered rows hold the settings: a second start keeps them
+  EXPECT_TRUE(bench.core().status(running).paused);
+  EXPECT_EQ(bench.core().status(running).priority, 7);
+  bench.core().set_paused(running, false);
   EXPECT_EQ(bench.core().status(done).state, JobState::Completed);
   EXPECT_EQ(bench.core().status(cancelled).state, JobState::Cancelled);
   JobStatus r = bench.core().status(running);

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
+#include <spdlog/details/os.h>
 #include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
@@ -92,6 +93,8 @@ bool coordinator_away(const grpc::Status& s) {
 // bounds them (the first lines and the last, with a line counting those left out between).
 class AttemptLogSink final : public spdlog::sinks::base_sink<std::mutex> {
  public:
+  // Lines of the calling thread are left out from now on: the previous task's upload thread.
+  void skip_this_thread() { skipped_thread_ = spdlog::details::os::thread_id(); }
   void begin() {
     std::lock_guard lock(mutex_);
     head_.clear(), tail_.clear(), skipped_ = 0, on_ = true;
@@ -108,7 +111,7 @@ class AttemptLogSink final : public spdlog::sinks::base_sink<std::mutex> {
 
  protected:
   void sink_it_(const spdlog::details::log_msg& msg) override {
-    if (!on_) return;
+    if (!on_ || msg.thread_id == skipped_thread_) return;
     std::string line(spdlog::level::to_string_view(msg.level).data(),
                      spdlog::level::to_string_view(msg.level).size());
     line += ": ";
@@ -122,6 +125,7 @@ class AttemptLogSink final : public spdlog::sinks::base_sink<std::mutex> {
  private:
   static constexpr size_t kHead = 8;
   bool on_ = false;
+  std::atomic<size_t> skipped_thread_{0};
   std::vector<std::string> head_;
   std::deque<std::string> tail_;
   size_t skipped_ = 0;
@@ -137,11 +141,9 @@ class Worker {
         blobs_(cache_dir_ + "/blobs"),
         rng_(std::random_device{}()),
         attempt_log_(std::make_shared<AttemptLogSink>()) {
-    spdlog::default_logger()->sinks().push_back(attempt_log_);  // before any other thread logs
-  }
-  ~Worker() {
-    auto& sinks = spdlog::default_logger()->sinks();
-    sinks.erase(std::remove(sinks.begin(), sinks.end(), attempt_log_), sinks.end());
+    // Before any other thread logs; it stays for the process's life (threads that outlive the
+    // worker may still log).
+    spdlog::default_logger()->sinks().push_back(attempt_log_);
   }
 
   int run();
@@ -566,6 +568,7 @@ void Worker::start_upload(const pb::Task& task, SampleBuffer&& buffer, double co
   finish_upload();
   uploader_ =
       std::thread([this, task, buffer = std::move(buffer), core_seconds, log = std::move(log)] {
+        attempt_log_->skip_this_thread();  // its lines are the previous task's
         try {
           upload(task, buffer, core_seconds, log);
         } catch (const TaskFailure& e) {
