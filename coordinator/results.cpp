@@ -284,7 +284,6 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
 // The ledger's verdict on a durable result: the task done (its rows to the journal), or, when it
 // is settled already, its lease ended.
 bool Coordinator::record_result(JobRecord& job, const TaskResult& r, const BufferHeader& h) {
-  if (!pin_problem(job, h).empty()) return false;  // another kind's result was merged meanwhile
   if (ledger_->scheduler().settled(r.task)) {
     ledger_->not_needed(r.lease_id, r.task, r.worker_id, now(), r.log);
     return false;  // another result came first, or the job was cancelled or failed meanwhile

@@ -422,7 +422,7 @@ std::optional<Scheduler::LeaseInfo> Scheduler::lease_info(const std::string& lea
   auto it = leases_.find(lease_id);
   if (it == leases_.end()) return std::nullopt;
   const LeaseState& l = it->second;
-  return LeaseInfo{lease_id, l.task, l.worker_id, l.leased_at, l.live};
+  return LeaseInfo{lease_id, l.task, l.worker_id, l.leased_at};
 }
 
 std::vector<Scheduler::LeaseInfo> Scheduler::live_leases(const std::string& job_id,
@@ -432,7 +432,7 @@ std::vector<Scheduler::LeaseInfo> Scheduler::live_leases(const std::string& job_
   for (const auto& [id, l] : leases_)
     if (l.live && l.task.job_id == job_id &&
         (!frame || (l.task.frame == *frame && l.task.pass >= first_pass)))
-      out.push_back({id, l.task, l.worker_id, l.leased_at, true});
+      out.push_back({id, l.task, l.worker_id, l.leased_at});
   return out;
 }
 

@@ -111,7 +111,6 @@ class Scheduler {
     TaskRef task;
     std::string worker_id;
     double leased_at = -1;  // on the scheduler's clock; < 0: before a restart
-    bool live = false;
   };
   std::optional<LeaseInfo> lease_info(const std::string& lease_id) const;
   // The live leases of a job (of one frame from pass `first_pass` on, when given).
