@@ -20,7 +20,7 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   struct Args {
     OverrideArgs overrides;
     SubmitArgs submit;
-    std::string job, fetch_dir, fetch_frames, retry_frames, health_addr;
+    std::string job, fetch_dir, fetch_frames, retry_frames, requeue_scene, health_addr;
     bool json = false, services = false, force = false;
     StatusPage page;
     std::optional<FrameNumber> fetch_frame, logs_frame;
@@ -130,6 +130,21 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                     "only these frames (1-24, 1-24:2, 1,5,9); the job's other unfinished frames "
                     "are held until a later retry");
   out.push_back({retry, [a, ep] { return cmd_retry(ep(), a->job, a->retry_frames); }});
+
+  auto* requeue = app.add_subcommand(
+      "requeue",
+      "render a job's frames again from scratch (after fixing the scene: --scene), with its seed "
+      "and settings; an ended job runs again");
+  add_addr(requeue, &a->timeout);
+  requeue->add_option("job", a->job, "job id")->required();
+  requeue->add_option("--frames", a->retry_frames, "the frames (3, 1-24, 1-24:2, 1,5,9)")
+      ->required();
+  requeue->add_option("--scene", a->requeue_scene,
+                      "the fixed scene (a file, or a per-frame pattern such as shot.####.json): "
+                      "its bundle is uploaded and becomes the job's next scene version for these "
+                      "frames; it must keep the job's resolution and passes");
+  out.push_back(
+      {requeue, [a, ep] { return cmd_requeue(ep(), a->job, a->retry_frames, a->requeue_scene); }});
 
   auto* del =
       app.add_subcommand("delete", "remove an ended job and its files (its scene blobs stay)");

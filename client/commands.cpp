@@ -172,17 +172,20 @@ const char* state_name(pb::JobState s) {
 
 namespace {
 
-// The job a submit describes. Its bundle: every distinct scene file the frames name, and every
-// asset they use, by path relative to the scene's directory. Parsing here also refuses a bad
-// scene before upload.
-JobSpec job_spec(const SubmitArgs& a) {
-  fs::path scene(a.scene);
+// A scene's bundle for `frames` (a range; empty: the scene's frame): every distinct scene file
+// the frames name, and every asset they use, by path relative to the scene's directory. Parsing
+// here also refuses a bad scene before upload.
+struct SceneBundle {
+  std::string pattern;  // the scene file's name in the bundle
+  std::vector<BundleEntry> files;
+};
+SceneBundle scene_bundle(const fs::path& scene, const std::string& frame_range) {
   fs::path dir = scene.parent_path();
   std::string pattern = scene.filename().string();
   std::vector<FrameNumber> frames;
-  if (!a.frames.empty()) {
+  if (!frame_range.empty()) {
     try {
-      frames = parse_frame_range(a.frames);
+      frames = parse_frame_range(frame_range);
     } catch (const FrameRangeError& e) {
       throw FarmError(std::string("--frames: ") + e.what(), 2);
     }
@@ -197,13 +200,23 @@ JobSpec job_spec(const SubmitArgs& a) {
     if (!fs::exists(dir / name)) throw FarmError((dir / name).string() + ": no such scene file", 2);
     for (const BundleEntry& e : bundle_of_scene((dir / name).string())) files[e.path] = e.sha256;
   }
+  SceneBundle out{pattern, {}};
+  for (const auto& [path, digest] : files) out.files.push_back({path, digest});
+  return out;
+}
+
+// The job a submit describes.
+JobSpec job_spec(const SubmitArgs& a) {
+  fs::path scene(a.scene);
+  fs::path dir = scene.parent_path();
+  SceneBundle bundle = scene_bundle(scene, a.frames);
   JobSpec spec;
   // Default name: the scene's stem, or its directory's name for the usual "scene.json".
   std::string stem = scene.stem().string();
   if (stem == "scene" && !dir.filename().empty()) stem = dir.filename().string();
   spec.name = a.name.empty() ? stem : a.name;
-  spec.scene_path = pattern;
-  for (const auto& [path, digest] : files) spec.files.push_back({path, digest});
+  spec.scene_path = bundle.pattern;
+  spec.files = std::move(bundle.files);
   spec.frames = a.frames;
   spec.overrides = a.overrides;
   spec.priority = a.priority;
@@ -283,7 +296,9 @@ nlohmann::json to_json(const pb::JobStatus& j) {
                       {"rel_mse", f.rel_mse()},
                       {"eta_seconds", f.eta_seconds()},
                       {"done", f.done()},
-                      {"stopped_on_target", f.stopped_on_target()}});
+                      {"stopped_on_target", f.stopped_on_target()},
+                      {"scene_version", f.scene_version()},
+                      {"run", f.run()}});
   return {{"job_id", j.job_id()},
           {"name", j.name()},
           {"tenant", j.tenant()},
@@ -593,6 +608,79 @@ int cmd_retry(const Endpoint& ep, const std::string& job, const std::string& fra
                    ? ""
                    : ("; frames " + printable(status.held_frames()) + " held").c_str());
   return 0;
+}
+
+// Retried as a whole while the coordinator is unavailable, as submit is; the request id makes a
+// retry whose first attempt got through change nothing.
+int cmd_requeue(const Endpoint& ep, const std::string& job, const std::string& frames,
+                const std::string& scene) {
+  if (frames.empty())
+    throw FarmError("requeue: --frames is required (a range such as 3 or 1-10)", 2);
+  pb::RequeueRequest req;
+  req.set_job_id(job);
+  req.set_frames(frames);
+  req.set_request_id(new_request_id());
+  std::vector<BundleEntry> files;
+  if (!scene.empty()) {
+    SceneBundle bundle = scene_bundle(scene, frames);
+    req.set_scene_path(bundle.pattern);
+    for (const BundleEntry& f : bundle.files) {
+      pb::BundleFile* w = req.add_files();
+      w->set_path(f.path);
+      w->set_sha256(f.sha256);
+    }
+    files = std::move(bundle.files);
+  }
+  pb::MissingBlobsRequest missing_req;
+  for (const BundleEntry& f : files) missing_req.add_sha256(f.sha256);
+  auto stub = job_stub(ep);
+  Retry retry(ep);
+  for (int attempt = 0;; ++attempt) {
+    std::set<std::string> missing;
+    if (!files.empty()) {
+      pb::MissingBlobsResponse m;
+      check(retry.run(30,
+                      [&](grpc::ClientContext& ctx) {
+                        return stub->MissingBlobs(&ctx, missing_req, &m);
+                      }),
+            "requeue", ep, &retry);
+      missing.insert(m.sha256().begin(), m.sha256().end());
+    }
+    grpc::ClientContext ctx;
+    set_deadline(ctx, std::max(0.001, std::min(3600.0, retry.left())));
+    pb::JobStatus status;
+    auto w = stub->RequeueJob(&ctx, &status);
+    pb::RequeueMessage first;
+    *first.mutable_request() = req;
+    bool ok = w->Write(first);
+    const fs::path dir = fs::path(scene).parent_path();
+    for (const BundleEntry& f : files) {
+      if (!ok || !missing.count(f.sha256)) continue;
+      missing.erase(f.sha256);
+      std::string bytes = read_file_bytes((dir / f.path).string());
+      for_each_chunk(bytes, [&](pb::Chunk&& c) {
+        if (!ok) return;
+        pb::RequeueMessage m;
+        *m.mutable_blob_chunk() = std::move(c);
+        ok = w->Write(m);
+      });
+    }
+    if (ok) w->WritesDone();
+    grpc::Status s = w->Finish();
+    if (s.ok()) {
+      uint32_t version = 0;  // the newest, which this requeue added
+      for (const pb::FrameStatus& f : status.frames())
+        version = std::max(version, f.scene_version());
+      std::fprintf(stderr, "job %s %s; frames %s render again%s%s\n", job.c_str(),
+                   state_name(status.state()), frames.c_str(),
+                   scene.empty() ? "" : (" from scene version " + std::to_string(version)).c_str(),
+                   status.held_frames().empty()
+                       ? ""
+                       : ("; frames " + printable(status.held_frames()) + " held").c_str());
+      return 0;
+    }
+    if (!retry.retry_after(s, attempt)) check(s, "requeue", ep, &retry);
+  }
 }
 
 int cmd_delete(const Endpoint& ep, const std::string& job, bool force) {

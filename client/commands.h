@@ -63,6 +63,11 @@ int cmd_priority(const Endpoint& ep, const std::string& job, int priority);
 // Failed or cancelled work runs again: the frames in `frames` (a range; empty: all unfinished);
 // the others unfinished are held until a later retry. Idempotent.
 int cmd_retry(const Endpoint& ep, const std::string& job, const std::string& frames);
+// The frames in `frames` (a range; required) render again from scratch, with the job's seed and
+// settings; with `scene` (a file or a per-frame pattern), from that scene, uploaded as a submit
+// uploads its bundle, as the job's next scene version. An ended job runs again.
+int cmd_requeue(const Endpoint& ep, const std::string& job, const std::string& frames,
+                const std::string& scene);
 // Removes an ended job and its files (a queued or running one only with `force`).
 int cmd_delete(const Endpoint& ep, const std::string& job, bool force);
 // A job's task attempts (of one frame or one task when given): worker, start and end, outcome

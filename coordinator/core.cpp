@@ -140,7 +140,7 @@ std::shared_ptr<JobRecord> Coordinator::find_for(const std::string& id,
 
 // The last merge's figures, with the ETA from this frame's time per pass in this run so far.
 FrameStatus Coordinator::frame_status(const JobRecord& job, const FrameRecord& f) const {
-  FrameStatus s{f.number, f.progress};
+  FrameStatus s{f.number, f.progress, f.version, f.run};
   FrameProgress& p = s.progress;
   double seconds = f.first_lease_at < 0 ? -1 : now() - f.first_lease_at;
   p.eta_seconds =

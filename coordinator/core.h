@@ -30,6 +30,7 @@
 #include "coordinator/scene_check.h"
 #include "coordinator/scheduler.h"
 #include "coordinator/state_dir.h"
+#include "coordinator/versions.h"
 #include "engine/frame.h"
 #include "engine/frame_accumulator.h"
 #include "engine/progress.h"
@@ -57,6 +58,8 @@ struct Caller {
 struct FrameStatus {
   FrameNumber frame = 0;
   FrameProgress progress;  // engine/progress.h: passes, spp, relMSE, ETA
+  uint32_t scene_version = 0;  // the job's scene version it renders (0: the submitted one)
+  uint32_t run = 0;            // how many times it was requeued
 };
 
 struct JobStatus {
@@ -297,6 +300,19 @@ class Coordinator {
   // end; their results are answered NotFound). Its scene blobs stay (other jobs may share them).
   // A delete interrupted by a crash is finished at the next start.
   void delete_job(const std::string& job_id, bool force, const Caller& caller = {});
+  // `requeue`: the job's frames in `frames` (a frame range; required) render again from scratch,
+  // with the seed and settings they had: their merged passes go, leases of theirs in flight end
+  // (their results are answered not needed and counted against no one), and the job's failure
+  // counts start afresh. With `scene` (its bundle uploaded as a submit's, checked as a submit's
+  // is, with the job's resolution and passes), they render it as the job's next scene version;
+  // without, each its own. A completed, failed or cancelled job runs again (Running), its other
+  // unfinished frames held as a retry holds them. The build and CPU kind pin stays unless no
+  // merged result is left and the spec named no build. A repeat of the job's latest
+  // `request_id` changes nothing. InvalidArgument for a bad range, a frame the job lacks or a
+  // scene that does not fit; FailedPrecondition for a job that cannot run (its bundle is gone).
+  void requeue(const std::string& job_id, const std::string& frames,
+               const std::optional<SceneVersion>& scene, const std::string& request_id = "",
+               const Caller& caller = {});
   FrameImage fetch(const std::string& job_id, FrameNumber frame, const Caller& caller = {}) const;
 
   // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal
@@ -363,9 +379,24 @@ class Coordinator {
   double now() const { return options_.clock(); }
   std::shared_ptr<JobRecord> build_job(const std::string& id, uint64_t seq, const JobSpec& spec,
                                        const Caller& caller = {}, bool restoring = false);
-  std::map<std::string, SceneSummary> scene_summaries(const JobRecord& job,
+  std::map<std::string, SceneSummary> scene_summaries(const JobRecord& job, const JobSpec& spec,
                                                       const std::string& bundle_dir,
+                                                      const std::string& cache,
+                                                      const std::string& bundle_problem,
                                                       bool restoring) const;
+  // A requeue's scene version of the job: its bundle laid out (jobs/ID/bundle-vK) and checked as
+  // a submit's is, each of its frames split as the job's are (InvalidArgument when they differ
+  // in resolution, passes or the like).
+  struct FrameScene {
+    std::string scene_path;
+    BufferHeader base;
+  };
+  std::map<FrameNumber, FrameScene> version_scenes(const JobRecord& job, uint32_t version,
+                                                   const SceneVersion& scene, const Caller& caller,
+                                                   bool restoring) const;
+  // The job's requeued frames as the store or its folder records them: their scene versions
+  // and checkpoint folders (restoring).
+  void apply_versions(JobRecord& job, JobVersions versions);
   bool blob_visible(const std::string& sha256, const Caller& caller) const;
   void add_frames(JobRecord& job, const std::string& bundle_dir, bool restoring);
   void restore(const StoredJob& stored);
@@ -375,6 +406,10 @@ class Coordinator {
   // beside its checkpoints, so a job the database lost is recovered from its folder.
   void write_folder_record(const StoredJob& job) const;
   void write_folder_state(const JobRecord& job) const;
+  void write_folder_versions(const JobRecord& job) const;  // versions.json, once requeued
+  // Folders of runs and scene versions the job no longer names (a requeue replaced them, or one
+  // a crash interrupted before the store recorded it).
+  void remove_stale_folders(const JobRecord& job) const;
   // Jobs with a folder but no row (the database lost them): recovered; folders of submits that
   // never finished: removed. Job ids are never reused: next_seq_ passes every folder's.
   void recover_folders();
@@ -404,7 +439,8 @@ class Coordinator {
   // published. Under mu_ (and the frame's lock, or no merge can reach it).
   void adopt_frame(JobRecord& job, FrameRecord& f, LoadedFrame loaded);
   void resume_frame(JobRecord& job, FrameRecord& f) { adopt_frame(job, f, load_frame(job, f)); }
-  SampleBuffer checked_buffer(const JobRecord& job, const FrameRecord& f,
+  // The result decoded and checked against its task and the frame's header `base`.
+  SampleBuffer checked_buffer(const JobRecord& job, const BufferHeader& base,
                               const TaskResult& r) const;
   bool record_result(JobRecord& job, const TaskResult& r,  // under mu_
                      const BufferHeader& header);
@@ -447,6 +483,7 @@ class Coordinator {
   std::unique_ptr<Journal> journal_;  // the store's writes, in order, off mu_ (journal.h)
   std::unique_ptr<Ledger> ledger_;    // the only code that changes task and job state
   mutable std::mutex mu_;
+  std::mutex requeue_mu_;  // before any frame's lock and mu_: one requeue at a time
   mutable std::condition_variable changed_;
   uint64_t version_ = 1;  // bumped at every change a watcher may want to see
   bool closing_ = false;

@@ -12,6 +12,7 @@
 
 #include "coordinator/checkpoint.h"
 #include "coordinator/core.h"
+#include "coordinator/versions.h"
 #include "engine/frame.h"
 #include "engine/frame_accumulator.h"
 
@@ -56,6 +57,8 @@ struct FrameRecord {
   double first_lease_at = -1;
   bool leases_dropped = false;  // its lease rows were deleted when it was done
   bool held = false;            // unfinished and left out of a `retry --frames`: not queued
+  uint32_t version = 0;         // the scene version it renders (versions.h)
+  uint32_t run = 0;             // requeued this many times: its checkpoint's folder
 };
 
 struct JobRecord {
@@ -74,6 +77,7 @@ struct JobRecord {
   bool paused = false;         // no new leases (`pause`); leases in flight finish and merge
   int priority = 0;            // the spec's, or what `priority JOB N` set since
   bool deleted = false;        // `delete`: gone from the coordinator; a merge in flight stops
+  JobVersions versions;        // scene versions and requeued frames (`requeue`)
   std::vector<Rect> tiles;
   bool splats = false;
   uint32_t passes = 0;
@@ -82,6 +86,10 @@ struct JobRecord {
   std::vector<std::unique_ptr<FrameRecord>> frames;
   std::map<FrameNumber, FrameRecord*> by_number;
 
+  // The bundle of scene version v (0: the spec's).
+  const std::vector<BundleEntry>& files_of(uint32_t v) const {
+    return v == 0 ? spec.files : versions.added.at(v - 1).files;
+  }
   ProgressiveOptions merge_options() const { return {0, passes, noise_target}; }
   std::vector<FrameNumber> frame_numbers() const {
     std::vector<FrameNumber> out;

@@ -164,20 +164,20 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   return job;
 }
 
-// The summary of each scene file of the job: from the scene check (a child process, never this
-// one), or when restoring from the job folder's copy of its answer if this build wrote it.
-std::map<std::string, SceneSummary> Coordinator::scene_summaries(const JobRecord& job,
-                                                                 const std::string& bundle_dir,
-                                                                 bool restoring) const {
-  std::vector<std::string> paths = job_scene_paths(job.spec);
+// The summary of each scene file of `spec` (a job's, or a requeue's scene version): from the
+// scene check (a child process, never this one), or when restoring from the job folder's copy of
+// its answer (`cache`) if this build wrote it.
+std::map<std::string, SceneSummary> Coordinator::scene_summaries(
+    const JobRecord& job, const JobSpec& spec, const std::string& bundle_dir,
+    const std::string& cache, const std::string& bundle_problem, bool restoring) const {
+  std::vector<std::string> paths = job_scene_paths(spec);
   for (const std::string& path : paths) {
     bool in_bundle = false;
-    for (const BundleEntry& e : job.spec.files) in_bundle |= e.path == path;
+    for (const BundleEntry& e : spec.files) in_bundle |= e.path == path;
     if (!in_bundle)
       refuse(ErrorCode::InvalidArgument,
              "scene file '" + clip(path) + "' is not in the submitted bundle");
   }
-  const std::string cache = options_.state_dir + "/jobs/" + job.id + "/scenes.json";
   std::vector<SceneSummary> summaries;
   if (restoring && fs::exists(cache)) {
     try {
@@ -190,8 +190,8 @@ std::map<std::string, SceneSummary> Coordinator::scene_summaries(const JobRecord
     }
   }
   if (summaries.empty()) {
-    if (!job.bundle_problem.empty()) refuse(ErrorCode::InvalidArgument, job.bundle_problem);
-    summaries = options_.scene_checker(bundle_dir, job.spec);
+    if (!bundle_problem.empty()) refuse(ErrorCode::InvalidArgument, bundle_problem);
+    summaries = options_.scene_checker(bundle_dir, spec);
     if (summaries.size() != paths.size())
       refuse(ErrorCode::Internal, "the scene check answered " + std::to_string(summaries.size()) +
                                       " scenes for " + std::to_string(paths.size()));
@@ -207,6 +207,43 @@ std::map<std::string, SceneSummary> Coordinator::scene_summaries(const JobRecord
   for (size_t i = 0; i < paths.size(); ++i) out.emplace(paths[i], summaries[i]);
   return out;
 }
+
+namespace {
+
+// Frame `number` of a job of `frame_count` frames split as the spec says, refused when over a
+// limit.
+FramePlan checked_plan(const SceneSummary& scene, FrameNumber number, int tile_size,
+                       size_t frame_count, const JobLimits& limits) {
+  uint64_t pixels = uint64_t(scene.width) * uint64_t(scene.height);
+  if (pixels > limits.pixels_per_frame)
+    refuse(ErrorCode::ResourceExhausted,
+           "frame " + std::to_string(number) + ": " + std::to_string(scene.width) + "x" +
+               std::to_string(scene.height) + " is " + std::to_string(pixels) +
+               " pixels; the limit pixels_per_frame is " + std::to_string(limits.pixels_per_frame));
+  if (scene.spp > limits.spp)
+    refuse(ErrorCode::ResourceExhausted,
+           "spp " + std::to_string(scene.spp) +
+               " is over the limit spp = " + std::to_string(limits.spp));
+  FramePlan plan = plan_frame(scene, number, tile_size);
+  if (plan.tiles.size() > limits.tiles_per_frame)
+    refuse(ErrorCode::ResourceExhausted,
+           "frame " + std::to_string(number) + ": " + std::to_string(plan.tiles.size()) +
+               " tiles of " + std::to_string(tile_size) + " pixels; the limit tiles_per_frame is " +
+               std::to_string(limits.tiles_per_frame) + " (use a larger --tile-size)");
+  uint64_t tasks = uint64_t(frame_count) * plan.passes * plan.tiles.size();
+  if (tasks > limits.tasks_per_job)
+    refuse(ErrorCode::ResourceExhausted,
+           std::to_string(frame_count) + " frames x " + std::to_string(plan.passes) + " passes x " +
+               std::to_string(plan.tiles.size()) + " tiles = " + std::to_string(tasks) +
+               " tasks; the limit tasks_per_job is " + std::to_string(limits.tasks_per_job));
+  return plan;
+}
+
+int tile_size_of(const JobSpec& spec) {
+  return spec.tile_size ? int(spec.tile_size) : kDefaultTileSize;
+}
+
+}  // namespace
 
 // Splits every frame of the job; all must agree on resolution and passes.
 void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir, bool restoring) {
@@ -224,42 +261,20 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir, bool
     refuse(ErrorCode::ResourceExhausted, "frames: " + std::to_string(frames.size()) +
                                              " frames; the limit frames_per_job is " +
                                              std::to_string(limits.frames_per_job));
-  int tile_size = spec.tile_size ? int(spec.tile_size) : kDefaultTileSize;
+  int tile_size = tile_size_of(spec);
   if (tile_size < 8 || tile_size > 4096)
     refuse(ErrorCode::InvalidArgument,
            "tile_size: " + std::to_string(tile_size) + " is outside 8..4096");
   if (frames.empty()) frames.push_back(0);  // a job without a frame range renders frame 0
-  std::map<std::string, SceneSummary> scene_of = scene_summaries(job, bundle_dir, restoring);
+  std::map<std::string, SceneSummary> scene_of = scene_summaries(
+      job, spec, bundle_dir, options_.state_dir + "/jobs/" + job.id + "/scenes.json",
+      job.bundle_problem, restoring);
   for (FrameNumber number : frames) {
     auto f = std::make_unique<FrameRecord>();
     f->number = number;
     f->scene_path = expand_frame_pattern(spec.scene_path, number);
-    const SceneSummary& scene = scene_of.at(f->scene_path);
-    uint64_t pixels = uint64_t(scene.width) * uint64_t(scene.height);
-    if (pixels > limits.pixels_per_frame)
-      refuse(ErrorCode::ResourceExhausted,
-             "frame " + std::to_string(number) + ": " + std::to_string(scene.width) + "x" +
-                 std::to_string(scene.height) + " is " + std::to_string(pixels) +
-                 " pixels; the limit pixels_per_frame is " +
-                 std::to_string(limits.pixels_per_frame));
-    if (scene.spp > limits.spp)
-      refuse(ErrorCode::ResourceExhausted,
-             "spp " + std::to_string(scene.spp) +
-                 " is over the limit spp = " + std::to_string(limits.spp));
-    FramePlan plan = plan_frame(scene, number, tile_size);
-    if (plan.tiles.size() > limits.tiles_per_frame)
-      refuse(ErrorCode::ResourceExhausted,
-             "frame " + std::to_string(number) + ": " + std::to_string(plan.tiles.size()) +
-                 " tiles of " + std::to_string(tile_size) +
-                 " pixels; the limit tiles_per_frame is " + std::to_string(limits.tiles_per_frame) +
-                 " (use a larger --tile-size)");
-    uint64_t tasks = uint64_t(frames.size()) * plan.passes * plan.tiles.size();
-    if (tasks > limits.tasks_per_job)
-      refuse(ErrorCode::ResourceExhausted,
-             std::to_string(frames.size()) + " frames x " + std::to_string(plan.passes) +
-                 " passes x " + std::to_string(plan.tiles.size()) +
-                 " tiles = " + std::to_string(tasks) + " tasks; the limit tasks_per_job is " +
-                 std::to_string(limits.tasks_per_job));
+    FramePlan plan =
+        checked_plan(scene_of.at(f->scene_path), number, tile_size, frames.size(), limits);
     f->base = plan.base;
     if (job.frames.empty()) {
       job.tiles = plan.tiles;
@@ -274,11 +289,61 @@ void Coordinator::add_frames(JobRecord& job, const std::string& bundle_dir, bool
                  "frames of one size and pass count");
     }
     f->progress.passes_total = job.passes;
-    f->checkpoint = std::make_unique<FrameCheckpoint>(options_.state_dir + "/jobs/" + job.id +
-                                                      "/frame-" + std::to_string(number));
+    f->checkpoint = std::make_unique<FrameCheckpoint>(options_.state_dir + "/jobs/" + job.id + "/" +
+                                                      frame_folder(number, 0));
     job.by_number[number] = f.get();
     job.frames.push_back(std::move(f));
   }
+}
+
+std::map<FrameNumber, Coordinator::FrameScene> Coordinator::version_scenes(
+    const JobRecord& job, uint32_t version, const SceneVersion& scene, const Caller& caller,
+    bool restoring) const {
+  JobSpec spec = job.spec;
+  spec.scene_path = scene.scene_path;
+  spec.files = scene.files;
+  spec.frames = scene.frames;
+  if (spec.scene_path.empty()) refuse(ErrorCode::InvalidArgument, "scene_path is empty");
+  check_limits(spec);
+  std::vector<FrameNumber> frames;
+  try {
+    frames = parse_frame_range(spec.frames);
+  } catch (const FrameRangeError& e) {
+    refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
+  }
+  const std::string dir = options_.state_dir + "/jobs/" + job.id + "/";
+  const std::string bundle_dir = dir + bundle_folder(version);
+  if (!restoring) {
+    std::error_code ec;  // a requeue a crash interrupted may have left it
+    fs::remove_all(bundle_dir, ec);
+  }
+  check_bundle(
+      spec, [&](const std::string& d) { return blob_visible(d, caller); }, restoring);
+  try {
+    blobs_.materialize(spec.files, bundle_dir);
+  } catch (const BlobError& e) {
+    refuse(ErrorCode::InvalidArgument, e.what());
+  } catch (const fs::filesystem_error& e) {
+    refuse(ErrorCode::Unavailable, "cannot lay out the bundle: " + e.code().message());
+  }
+  std::map<std::string, SceneSummary> scene_of = scene_summaries(
+      job, spec, bundle_dir, dir + "scenes-v" + std::to_string(version) + ".json", "", restoring);
+  std::map<FrameNumber, FrameScene> out;
+  for (FrameNumber number : frames) {
+    FrameScene fs_{expand_frame_pattern(spec.scene_path, number), {}};
+    FramePlan plan = checked_plan(scene_of.at(fs_.scene_path), number, tile_size_of(spec),
+                                  job.frames.size(), options_.limits);
+    if (plan.tiles != job.tiles || plan.passes != job.passes || plan.splats != job.splats ||
+        plan.spp_per_pass != job.spp_per_pass || plan.noise_target != job.noise_target)
+      refuse(ErrorCode::InvalidArgument,
+             "frame " + std::to_string(number) + " (" + clip(fs_.scene_path) +
+                 ") of the new scene differs from the job in resolution, passes, samples per "
+                 "pass, noise target or integrator kind; a requeued scene keeps the job's (submit "
+                 "a new job to change them)");
+    fs_.base = plan.base;
+    out.emplace(number, std::move(fs_));
+  }
+  return out;
 }
 
 void Coordinator::check_limits(const JobSpec& spec) const {

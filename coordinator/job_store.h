@@ -52,6 +52,9 @@ struct StoredJob {
   std::optional<int> priority;  // set after submit (`priority JOB N`); the spec's when absent
   std::vector<FrameNumber> held;  // unfinished frames a `retry --frames` left out, sorted
   std::string cpu_kind;  // the CPU kind (BufferHeader::isa) of its first merged result, or ''
+  // Its scene versions and requeued frames (`requeue`), as the coordinator encodes them
+  // (coordinator/versions.h); '' for a job never requeued.
+  std::string versions;
 };
 
 // A lease as handed out, kept so that its holder's late result is accepted after a restart.
@@ -137,6 +140,11 @@ struct Retry {
   std::vector<FrameNumber> held;
   bool forget_failures = false;
 };
+// The job's frames were requeued (`requeue`): its scene versions and which version and run each
+// requeued frame has now (coordinator/versions.h's text).
+struct SetVersions {
+  std::string job_id, versions;
+};
 // The job is deleted: its events and leases go, and its row is reduced to its id and sequence
 // number (so that no later job gets its id); jobs() no longer lists it.
 struct DeleteJob {
@@ -174,11 +182,12 @@ struct DeleteLeases {
 };
 }  // namespace store
 
-using StoreWrite = std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds,
-                                store::SetBuild, store::SetPaused, store::SetPriority, store::Retry,
-                                store::DeleteJob, store::TaskEvent, store::Attempt,
-                                store::InsertWorker, store::RefuseWorker, store::DeleteWorker,
-                                store::AddBlobTenant, store::InsertLease, store::DeleteLeases>;
+using StoreWrite =
+    std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds, store::SetBuild,
+                 store::SetPaused, store::SetPriority, store::Retry, store::SetVersions,
+                 store::DeleteJob, store::TaskEvent, store::Attempt, store::InsertWorker,
+                 store::RefuseWorker, store::DeleteWorker, store::AddBlobTenant, store::InsertLease,
+                 store::DeleteLeases>;
 
 // Whether losing the write in a power cut costs nothing but work or a log record: a lease's row
 // (its holder's late result is then rendered again), an attempt's record. Batches of such writes

@@ -137,6 +137,9 @@ class MemoryJobStore final : public JobStore {
       for (Event& e : events_)
         if (e.job_id == w.job_id && e.kind != TaskEventKind::Done) e.counted = false;
   }
+  void apply(const store::SetVersions& w) {
+    if (StoredJob* j = job(w.job_id)) j->versions = w.versions;
+  }
   void apply(const store::Attempt& w) { attempts_.push_back(w.attempt); }
   void apply(const store::DeleteJob& w) {
     deleted_.insert(w.job_id);

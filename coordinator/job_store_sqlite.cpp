@@ -192,6 +192,9 @@ void SqliteJobStore::open_schema() {
     exec("ALTER TABLE jobs ADD COLUMN deleted INTEGER NOT NULL DEFAULT 0");
   // Frames a retry left out, in the range syntax (farm/frame_range.h).
   if (!columns.count("held")) exec("ALTER TABLE jobs ADD COLUMN held TEXT NOT NULL DEFAULT ''");
+  // Its scene versions and requeued frames (coordinator/versions.h), '' until a requeue.
+  if (!columns.count("versions"))
+    exec("ALTER TABLE jobs ADD COLUMN versions TEXT NOT NULL DEFAULT ''");
   columns.clear();
   {
     Stmt s(db_, "SELECT name FROM pragma_table_info('task_events')", path_);
@@ -305,10 +308,13 @@ void SqliteJobStore::apply(const StoreWrite& write) {
             Stmt f(db_, "UPDATE task_events SET counted = 0 WHERE job_id = ? AND done != 1", path_);
             f.bind(w.job_id).step();
           }
+        } else if constexpr (std::is_same_v<W, store::SetVersions>) {
+          Stmt s(db_, "UPDATE jobs SET versions = ? WHERE id = ?", path_);
+          s.bind(w.versions).bind(w.job_id).step();
         } else if constexpr (std::is_same_v<W, store::DeleteJob>) {
           Stmt s(db_,
-                 "UPDATE jobs SET deleted = 1, spec = x'', error = '', build = '', held = '' "
-                 "WHERE id = ?",
+                 "UPDATE jobs SET deleted = 1, spec = x'', error = '', build = '', held = '', "
+                 "versions = '' WHERE id = ?",
                  path_);
           s.bind(w.job_id).step();
           for (const char* sql :
@@ -405,7 +411,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
   std::lock_guard lock(mu_);
   Stmt s(db_,
          "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant, build, paused, "
-         "priority, held, cpu_kind FROM jobs WHERE deleted = 0 ORDER BY seq",
+         "priority, held, cpu_kind, versions FROM jobs WHERE deleted = 0 ORDER BY seq",
          path_);
   std::vector<StoredJob> out;
   while (s.step()) {
@@ -414,6 +420,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
                    std::nullopt});
     if (!s.null(10)) out.back().priority = int(s.integer(10));
     out.back().cpu_kind = s.text(12);
+    out.back().versions = s.text(13);
     if (std::string held = s.text(11); !held.empty()) {
       try {
         out.back().held = parse_frame_range(held);

@@ -9,8 +9,7 @@ namespace {
 
 // The job state machine (ledger.h): which transitions exist.
 bool legal(JobState from, JobState to) {
-  if (to == JobState::Running && (from == JobState::Failed || from == JobState::Cancelled))
-    return true;  // retry
+  if (to == JobState::Running && terminal(from)) return true;  // retry (not Completed), requeue
   if (terminal(from)) return false;
   switch (to) {
     case JobState::Queued:
@@ -108,7 +107,7 @@ Ledger::Ticket Ledger::retry(JobRecord& job, const std::vector<FrameNumber>& reo
   const bool ended = terminal(job.state);
   std::vector<StoreWrite> writes;
   if (ended) {
-    if (!legal(job.state, JobState::Running))
+    if (job.state == JobState::Completed)
       throw std::logic_error(std::string("job ") + job.id + ": no retry once " +
                              job_state_name(job.state));
     job.state = JobState::Running;
@@ -122,6 +121,37 @@ Ledger::Ticket Ledger::retry(JobRecord& job, const std::vector<FrameNumber>& reo
     for (FrameNumber f : reopen) scheduler_.reopen_frame(job.id, f);
   }
   writes.push_back(store::Retry{job.id, held, ended});
+  return journal_.append(std::move(writes));
+}
+
+Ledger::Ticket Ledger::requeue(JobRecord& job, const std::vector<FrameNumber>& frames,
+                               const std::vector<FrameNumber>& held, const std::string& versions,
+                               bool release_pin) {
+  std::vector<StoreWrite> writes;
+  const std::set<FrameNumber> again(frames.begin(), frames.end());
+  if (terminal(job.state)) {
+    job.state = JobState::Running;
+    job.error.clear();
+    writes.push_back(store::SetState{job.id, int(JobState::Running), ""});
+    scheduler_.reopen_job(job.id);
+    for (FrameNumber f : job.frame_numbers())
+      if (!again.count(f)) scheduler_.stop_frame(job.id, f, 0);
+  } else {
+    const double t = now();
+    for (FrameNumber f : frames) {
+      stopped_attempts(writes, job.id, f, 0, "its frame was requeued", t);
+      writes.push_back(store::DeleteLeases{job.id, f});
+    }
+    scheduler_.forget_failures(job.id);
+    for (FrameNumber f : frames) scheduler_.reopen_frame(job.id, f);
+  }
+  writes.push_back(store::Retry{job.id, held, true});
+  writes.push_back(store::SetVersions{job.id, versions});
+  if (release_pin) {
+    job.build_id.clear();
+    job.cpu_kind.clear();
+    writes.push_back(store::SetBuild{job.id, "", ""});
+  }
   return journal_.append(std::move(writes));
 }
 

@@ -7,12 +7,12 @@
 // A job: Queued -> Running (its first lease) -> Completed (every frame done); Queued or Running ->
 // Failed (a task failed on max_failures workers, a verification with no two results agreeing, a
 // stored job that cannot be restored, frames left out of a retry when the others are done) or
-// Cancelled (a client); Failed or Cancelled -> Running (`retry`). Completed is final. Any other
-// transition is refused (std::logic_error: a bug, not a request). A Queued or Running job may be
-// paused and resumed and given another priority; neither changes its state.
-// A task: waiting -> leased -> done; leased -> waiting (lease expired, failed, handed back, result
-// refused, result held for verification); waiting or leased -> stopped (its frame needs no more
-// passes, its job ended); failed on max_failures workers -> its job fails. Scheduler holds the
+// Cancelled (a client); Failed or Cancelled -> Running (`retry`); Completed, Failed or Cancelled
+// -> Running (`requeue`). Any other transition is refused (std::logic_error: a bug, not a request).
+// A Queued or Running job may be paused and resumed and given another priority; neither changes its
+// state. A task: waiting -> leased -> done; leased -> waiting (lease expired, failed, handed back,
+// result refused, result held for verification); waiting or leased -> stopped (its frame needs no
+// more passes, its job ended); failed on max_failures workers -> its job fails. Scheduler holds the
 // task states (scheduler.h); these methods are the only callers that change them.
 #pragma once
 
@@ -62,6 +62,16 @@ class Ledger {
   // Throws std::logic_error for a completed job.
   Ticket retry(JobRecord& job, const std::vector<FrameNumber>& reopen,
                const std::vector<FrameNumber>& held);
+
+  // `requeue`: the frames render again from scratch (the caller gives them their new run and
+  // scene version, `versions` as stored): their tasks are queued afresh and their leases in
+  // flight end (recorded as not needed; their late results are answered so); the job's failure
+  // counts start afresh (the store keeps the old ones as history). An ended job runs again
+  // (-> Running) with its other frames done or, `held`, waiting for a retry. With release_pin
+  // the build and CPU kind pin goes (no merged result is left).
+  Ticket requeue(JobRecord& job, const std::vector<FrameNumber>& frames,
+                 const std::vector<FrameNumber>& held, const std::string& versions,
+                 bool release_pin);
 
   // `delete`: the job is forgotten (its tasks and leases) and its store rows go (store::DeleteJob).
   Ticket delete_job(const JobRecord& job);

@@ -133,6 +133,12 @@ void Coordinator::recover_folders() {
         if (st.contains("priority")) stored.priority = st.at("priority").get<int>();
         if (st.contains("held")) stored.held = st.at("held").get<std::vector<FrameNumber>>();
       }
+      if (fs::exists(entry.path() / "versions.json")) {
+        stored.versions = read_file_bytes((entry.path() / "versions.json").string());
+        while (!stored.versions.empty() && stored.versions.back() == '\n')
+          stored.versions.pop_back();
+        decode_versions(stored.versions);  // throws for a damaged record
+      }
     } catch (const std::exception& e) {
       spdlog::error(
           "job {}: not in the job database, and its folder record is unreadable ({}); "
@@ -147,7 +153,8 @@ void Coordinator::recover_folders() {
     // The row as a submit makes it, then what the folder records beside it.
     std::vector<StoreWrite> rows{store::InsertJob{stored},
                                  store::SetPaused{stored.id, stored.paused},
-                                 store::Retry{stored.id, stored.held, false}};
+                                 store::Retry{stored.id, stored.held, false},
+                                 store::SetVersions{stored.id, stored.versions}};
     if (stored.priority) rows.push_back(store::SetPriority{stored.id, *stored.priority});
     journal_->write_ahead(std::move(rows));
     restore(stored);
@@ -206,6 +213,15 @@ void Coordinator::restore(const StoredJob& stored) {
   std::shared_ptr<JobRecord> job;
   try {
     job = build_job(stored.id, stored.seq, *spec, Caller{}, true);
+    // Requeued frames: their scene versions and runs, as the store has them (the commit point);
+    // the folder's copy is made to agree, and folders of replaced runs go.
+    if (!stored.versions.empty()) apply_versions(*job, decode_versions(stored.versions));
+    try {
+      write_folder_versions(*job);
+    } catch (const std::exception& e) {
+      spdlog::warn("job {}: {}", job->id, e.what());
+    }
+    remove_stale_folders(*job);
     job->state = JobState(stored.state);
     job->error = stored.error;
     job->submitted_unix = stored.submitted_unix;

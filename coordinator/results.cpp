@@ -255,7 +255,7 @@ void Coordinator::delete_job(const std::string& id, bool force, const Caller& ca
 
 // Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
 // frame's header (scene digest, seed, frame, integrator, settings, resolution).
-SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord& f,
+SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const BufferHeader& base,
                                          const TaskResult& r) const {
   std::string task_id = task_id_text(r.task);
   SampleBuffer buffer;
@@ -274,7 +274,7 @@ SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const FrameRecord
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": buffer holds passes " +
                                            buffer.header.passes.to_string() + ", not pass " +
                                            std::to_string(r.task.pass));
-  if (std::string why = merge_incompatibility(f.base, buffer.header); !why.empty())
+  if (std::string why = merge_incompatibility(base, buffer.header); !why.empty())
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
   if (std::string why = task_buffer_problem(buffer, job.spp_per_pass); !why.empty())
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
@@ -326,15 +326,23 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   if (!check_upload(r.worker_id, r.lease_id, r.task, caller)) return false;  // not needed
   std::shared_ptr<JobRecord> job;
   FrameRecord* f = nullptr;
+  BufferHeader base;  // the frame's, taken under mu_: a requeue may change it
+  uint32_t run = 0;
   {
     std::lock_guard lock(mu_);
     job = find_or_throw(r.task.job_id);
     f = job->by_number.at(r.task.frame);
+    base = f->base;
+    run = f->run;
   }
   SampleBuffer buffer;
   try {
-    buffer = checked_buffer(*job, *f, r);
+    buffer = checked_buffer(*job, base, r);
   } catch (const CoordinatorError& e) {
+    {
+      std::lock_guard lock(mu_);  // its frame was requeued since check_upload: not needed
+      if (ledger_->scheduler().retired(r.lease_id)) return false;
+    }
     refuse_upload(r.worker_id, r.lease_id, r.task, e.what(), r.log);
     throw;
   }
@@ -342,6 +350,8 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   {
     std::lock_guard lock(mu_);
     if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
+    // Requeued while this result was checked: it is of the frame's old run, whose lease ended.
+    if (f->run != run) return false;
     // A worker registered by an earlier build has no kind on record: its result says it.
     if (auto w = workers_.find(r.worker_id); w != workers_.end() && w->second.isa.empty())
       w->second.isa = w->second.info.isa = buffer.header.isa;

@@ -1,6 +1,7 @@
 #include "coordinator/scheduler.h"
 
 #include <algorithm>
+#include <limits>
 #include <tuple>
 
 namespace rf {
@@ -174,6 +175,20 @@ void Scheduler::reopen_frame(const std::string& job_id, FrameNumber frame) {
   if (!f) return;
   forget_tasks_from(*j, frame, 0);
   *f = FrameState{frame, j->passes, uint64_t(j->tiles) * j->passes, 0, 0, {}, {}};
+}
+
+void Scheduler::forget_failures(const std::string& job_id) {
+  JobState* j = job(job_id);
+  if (!j) return;
+  j->worker_failures.clear();
+  auto it = tasks_.lower_bound(TaskRef{job_id, std::numeric_limits<FrameNumber>::min(), 0, 0});
+  while (it != tasks_.end() && it->first.job_id == job_id) {
+    it->second.failed_workers.clear();
+    it->second.messages.clear();
+    const TaskState& t = it->second;
+    it = t.leases.empty() && t.ended.empty() && t.excluded.empty() ? tasks_.erase(it)
+                                                                   : std::next(it);
+  }
 }
 
 void Scheduler::set_paused(const std::string& job_id, bool paused) {

@@ -79,6 +79,9 @@ class Scheduler {
   // A frame that was stopped (stop_frame) needs all its tasks again; the caller marks the done
   // ones. Its task records and their leases go.
   void reopen_frame(const std::string& job_id, FrameNumber frame);
+  // The job's failure counts (per task and per worker) start afresh (`requeue`); its tasks,
+  // leases and ended leases stay.
+  void forget_failures(const std::string& job_id);
   // A paused job gets no new leases; its leases in flight run on, and their results are taken.
   // Its tasks still count as work left (work_left_for): a pause is not an end.
   void set_paused(const std::string& job_id, bool paused);

@@ -293,6 +293,8 @@ pb::FrameStatus to_wire(const FrameStatus& s) {
   out.set_eta_seconds(s.progress.eta_seconds);
   out.set_done(s.progress.done);
   out.set_stopped_on_target(s.progress.stopped_on_target);
+  out.set_scene_version(s.scene_version);
+  out.set_run(s.run);
   return out;
 }
 
@@ -336,8 +338,10 @@ void to_wire(const TaskAssignment& a, pb::Task* t) {
   t->set_scene_digest(a.scene_digest);
 }
 
-// Submit's stream after the spec: blobs as chunk runs, each starting at offset 0.
-void receive_blobs(Coordinator& core, grpc::ServerReaderInterface<pb::SubmitRequest>* reader,
+// Submit's (and RequeueJob's) stream after its first message: blobs as chunk runs, each starting
+// at offset 0.
+template <class Message>
+void receive_blobs(Coordinator& core, grpc::ServerReaderInterface<Message>* reader,
                    const CoordinatorOptions& o, const Caller& caller) {
   std::optional<ChunkAssembler> blob;
   uint64_t bundle_bytes = 0;
@@ -353,9 +357,9 @@ void receive_blobs(Coordinator& core, grpc::ServerReaderInterface<pb::SubmitRequ
     core.put_blob(bytes, caller);
     blob.reset();
   };
-  pb::SubmitRequest msg;
+  Message msg;
   while (reader->Read(&msg)) {
-    if (!msg.has_blob_chunk()) bad_request("only blob chunks may follow the job spec");
+    if (!msg.has_blob_chunk()) bad_request("only blob chunks may follow the first message");
     if (msg.blob_chunk().offset() == 0) {
       finish_blob();
       blob.emplace(o.max_blob_bytes);
@@ -452,6 +456,25 @@ class JobServiceImpl final : public pb::JobService::Service {
     return guarded(g_, ctx, Access::Client, "RetryJob", [&](const Caller& caller) {
       c_.retry(r->job_id(), r->frames(), caller);
       *o = to_wire(c_.status(r->job_id(), caller));
+    });
+  }
+  Status RequeueJob(ServerContext* ctx, grpc::ServerReader<pb::RequeueMessage>* r,
+                    pb::JobStatus* o) override {
+    return guarded(g_, ctx, Access::Client, "RequeueJob", [&](const Caller& caller) {
+      pb::RequeueMessage first;
+      if (!r->Read(&first) || !first.has_request())
+        bad_request("the first message of RequeueJob must be the request");
+      const pb::RequeueRequest& q = first.request();
+      // The job is checked before any blob is stored: no upload for another tenant's job.
+      (void)c_.status(q.job_id(), caller);
+      receive_blobs(c_, r, o_, caller);
+      std::optional<SceneVersion> scene;
+      if (!q.scene_path().empty())
+        scene = SceneVersion{q.scene_path(), from_wire(q.files()), ""};
+      else if (q.files_size() > 0)
+        bad_request("files without a scene_path: name the scene file in the bundle");
+      c_.requeue(q.job_id(), q.frames(), scene, q.request_id(), caller);
+      *o = to_wire(c_.status(q.job_id(), caller));
     });
   }
   Status DeleteJob(ServerContext* ctx, const pb::DeleteRequest* r, pb::DeleteResponse*) override {

@@ -185,9 +185,13 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
   FrameRecord* f = job->by_number.at(l->task.frame);
   if (f->first_lease_at < 0) f->first_lease_at = now();
   if (job->state == JobState::Queued) set_state(*job, JobState::Running, "");
-  out.task =
-      TaskAssignment{l->task,         l->lease_id,         job->tiles[l->task.tile], f->scene_path,
-                     job->spec.files, job->spec.overrides, f->base.scene_digest};
+  out.task = TaskAssignment{l->task,
+                            l->lease_id,
+                            job->tiles[l->task.tile],
+                            f->scene_path,
+                            job->files_of(f->version),
+                            job->spec.overrides,
+                            f->base.scene_digest};
   return out;
 }
 
@@ -223,7 +227,8 @@ std::string Coordinator::blob(const std::string& sha256, const Caller& caller) c
          })) {
       std::shared_ptr<JobRecord> job = find(id);
       if (!job) continue;
-      for (const BundleEntry& f : job->spec.files) leased |= f.sha256 == sha256;
+      for (uint32_t v = 0; v <= job->versions.added.size(); ++v)
+        for (const BundleEntry& f : job->files_of(v)) leased |= f.sha256 == sha256;
     }
     // The same answer as for a blob the store lacks: a digest query reveals nothing.
     if (!leased)

@@ -132,7 +132,7 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
-constexpr int kRequests = 22;  // the operations of Farm::request
+constexpr int kRequests = 23;  // the operations of Farm::request
 
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
@@ -351,6 +351,18 @@ class Farm {
         JobSpec spec = valid_job().spec;
         spec.required_tags = {in.str(24), in.str(24)};
         jobs_.push_back(core_->submit(spec, caller));
+        return;
+      }
+      case 22: {  // requeue: a range (any text); the valid scene again, any bundle, or none
+        const std::string job = job_id(in);
+        const uint8_t how = in.byte();
+        const std::string frames = how & 1 ? in.str(16) : "1";
+        std::optional<SceneVersion> scene;
+        if (how & 2)
+          scene = SceneVersion{valid_job().spec.scene_path, valid_job().spec.files, ""};
+        else if (how & 4)
+          scene = SceneVersion{in.str(), {{in.str(32), in.str(64)}}, ""};
+        core_->requeue(job, frames, scene, how & 8 ? in.str(16) : "", caller);
         return;
       }
       case 15: {  // a new priority, any 32-bit value

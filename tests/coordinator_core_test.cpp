@@ -137,11 +137,29 @@ class CoreBench {
   int scene_checks = 0;  // calls of the scene checker, over every start
   JobLimits limits;  // for the next start()
   double verify_fraction = 0;
+  std::string scene_file;  // the scene results are rendered from ("": the submitted one)
+
+  // A copy of the submitted scene with `from` replaced by `to` in its scene file, its bundle
+  // uploaded: a requeue's new scene version.
+  SceneVersion changed_scene(const std::string& tag, const std::string& from,
+                             const std::string& to) {
+    const std::string dir = test::make_temp_dir(tag);
+    fs::copy(fs::path(test::source_dir() + "/" + kScene).parent_path(), dir,
+             fs::copy_options::recursive);
+    std::string text = read_file_bytes(dir + "/scene.json");
+    EXPECT_NE(text.find(from), std::string::npos) << from;
+    text.replace(text.find(from), from.size(), to);
+    test::write_text(dir + "/scene.json", text);
+    SceneVersion v{"scene.json", bundle_of_scene(dir + "/scene.json"), ""};
+    for (const BundleEntry& f : v.files) core_->put_blob(read_file_bytes(dir + "/" + f.path));
+    return v;
+  }
 
  private:
   // The header a worker's renderer puts on the task's buffer (the engine's calls in one place).
   BufferHeader header(const TaskAssignment& a) {
-    Scene scene = load_scene(test::source_dir() + "/" + kScene, a.overrides);
+    Scene scene = load_scene(scene_file.empty() ? test::source_dir() + "/" + kScene : scene_file,
+                             a.overrides);
     return frame_header(scene, a.task.frame, PassSet::range(a.task.pass, a.task.pass + 1));
   }
 
@@ -344,6 +362,90 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
   for (const char* w : {"w1", "w2", "w3"})
     EXPECT_NE(s.error.find(std::string("out of memory on ") + w), std::string::npos) << s.error;
   EXPECT_FALSE(bench.core().lease(bench.worker("w4")).task) << "a failed job hands out nothing";
+}
+
+// `requeue`: frame 2 of a running job renders again from a new scene version; a lease of its old
+// run in flight is answered not needed and counts against no one; frame 1 keeps its result. The
+// completed job runs again for frame 1 (its own scene), the versions and runs survive a restart,
+// and the replaced checkpoint folders go. A repeated request changes nothing; a scene that does
+// not fit the job, a bad range and a frame the job lacks are refused.
+TEST(CoordinatorCore, RequeueRendersFramesAgainFromANewSceneVersion) {
+  CoreBench bench("core-requeue");
+  bench.frames = "1-2";
+  std::string job = bench.submit(1);  // 4 tasks per frame
+  TaskAssignment in_flight;
+  for (int i = 0; i < 8; ++i) {
+    TaskAssignment a = bench.lease("w");
+    if (a.task.frame == 2 && in_flight.lease_id.empty()) {
+      in_flight = a;  // held across the requeue
+      continue;
+    }
+    ASSERT_TRUE(bench.complete(a, 1.0f));
+  }
+  const std::string old_digest = bench.image(job, 1).header.scene_digest;
+  SceneVersion blue =
+      bench.changed_scene("core-requeue-blue", "[0.63, 0.065, 0.05]", "[0.05, 0.065, 0.63]");
+  EXPECT_EQ(refusal([&] { bench.core().requeue(job, "", blue); }), ErrorCode::InvalidArgument);
+  EXPECT_EQ(refusal([&] { bench.core().requeue(job, "9", blue); }), ErrorCode::InvalidArgument);
+  EXPECT_EQ(refusal([&] { bench.core().requeue(job, "2-x", blue); }), ErrorCode::InvalidArgument);
+  SceneVersion splatting =
+      bench.changed_scene("core-requeue-light", "\"type\": \"path\"", "\"type\": \"light\"");
+  std::string why = refusal_message([&] { bench.core().requeue(job, "2", splatting); });
+  EXPECT_NE(why.find("differs from the job"), std::string::npos) << why;
+  SceneVersion missing = blue;
+  missing.files[0].sha256 = std::string(64, 'a');
+  EXPECT_EQ(refusal([&] { bench.core().requeue(job, "2", missing); }), ErrorCode::InvalidArgument);
+
+  bench.core().requeue(job, "2", blue, "request-1");
+  JobStatus s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Running);
+  EXPECT_EQ(s.frames[1].scene_version, 1u);
+  EXPECT_EQ(s.frames[1].run, 1u);
+  EXPECT_EQ(s.frames[1].progress.passes_merged, 0u);
+  EXPECT_EQ(s.frames[0].progress.passes_merged, 1u) << "frame 1 keeps its result";
+  EXPECT_FALSE(bench.complete(in_flight, 1.0f)) << "a result of the old run is not needed";
+  EXPECT_EQ(bench.core().workers()[0].failures, 0) << "and counts against no one";
+  bench.core().requeue(job, "2", blue, "request-1");  // a repeat: nothing changes
+  EXPECT_EQ(bench.core().status(job).frames[1].run, 1u);
+  bench.scene_file = bench.state_dir() + "/jobs/" + job + "/bundle-v1/scene.json";
+  for (int i = 0; i < 4; ++i) {
+    TaskAssignment a = bench.lease("w");
+    ASSERT_EQ(a.task.frame, 2);
+    EXPECT_EQ(a.files, blue.files);
+    ASSERT_TRUE(bench.complete(a, 2.0f));
+  }
+  s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Completed);
+  const std::string blue_digest = bench.image(job, 2).header.scene_digest;
+  EXPECT_NE(blue_digest, old_digest);
+  EXPECT_EQ(bench.image(job, 1).header.scene_digest, old_digest);
+
+  // Completed -> Running: frame 1 again from its own scene; frame 2 keeps version 1.
+  bench.core().requeue(job, "1", std::nullopt);
+  s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Running);
+  EXPECT_EQ(s.frames[0].scene_version, 0u);
+  EXPECT_EQ(s.frames[0].run, 1u);
+  EXPECT_TRUE(s.frames[1].progress.done);
+  const std::string jobs = bench.state_dir() + "/jobs/" + job + "/";
+  EXPECT_FALSE(fs::exists(jobs + "frame-1")) << "the replaced run's checkpoint is removed";
+  EXPECT_FALSE(fs::exists(jobs + "frame-2"));
+  EXPECT_TRUE(fs::exists(jobs + "frame-2.r1/prefix.rfb"));
+  bench.start("B");
+  s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Running);
+  EXPECT_EQ(s.frames[0].run, 1u);
+  EXPECT_EQ(s.frames[1].scene_version, 1u);
+  EXPECT_TRUE(s.frames[1].progress.done);
+  EXPECT_EQ(bench.image(job, 2).header.scene_digest, blue_digest);
+  bench.scene_file = "";
+  for (int i = 0; i < 4; ++i) {
+    TaskAssignment a = bench.lease("w");
+    ASSERT_EQ(a.task.frame, 1);
+    ASSERT_TRUE(bench.complete(a, 3.0f));
+  }
+  EXPECT_EQ(bench.core().status(job).state, JobState::Completed);
+  EXPECT_EQ(bench.image(job, 1).header.scene_digest, old_digest);
 }
 
 // `retry` of a failed job: the frames named run again (a worker it failed on gets its tasks), the

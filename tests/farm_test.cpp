@@ -818,6 +818,53 @@ TEST(Farm, ARetriedJobRendersItsFramesAgainAndEqualsTheLocalRender) {
       << r.output;
 }
 
+// `requeue` with real processes: a completed job's frame 2 renders again from a fixed scene (its
+// bundle uploaded by the CLI), across a coordinator restart; the fetched frames equal the local
+// renders of the scene each was rendered from, with the job's settings and seed. A frame the job
+// lacks and a scene that does not fit the job are refused (exit 2).
+TEST(Farm, ARequeuedFrameEqualsTheLocalRenderOfTheNewScene) {
+  Farm farm("farm-requeue");
+  const std::string settings = " --spp 4 --passes 2 --res 32x32 --tile-size 16";
+  const std::string job = farm.submit(kCornell + settings + " --frames 1-2");
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  // The fixed scene: the left wall blue instead of red.
+  const std::string blue = farm.dir() + "/blue";
+  fs::copy(fs::path(test::source_dir() + "/" + kCornell).parent_path(), blue,
+           fs::copy_options::recursive);
+  std::string text = read_file_bytes(blue + "/scene.json");
+  ASSERT_NE(text.find("[0.63, 0.065, 0.05]"), std::string::npos);
+  text.replace(text.find("[0.63, 0.065, 0.05]"), 19, "[0.05, 0.065, 0.63]");
+  test::write_text(blue + "/scene.json", text);
+  std::string light = text;
+  light.replace(light.find("\"type\": \"path\""), 14, "\"type\": \"light\"");
+  test::write_text(blue + "/light.json", light);
+
+  test::CommandResult r =
+      farm.client("requeue " + job + " --frames 7 --scene " + blue + "/scene.json");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("has no frame 7"), std::string::npos) << r.output;
+  r = farm.client("requeue " + job + " --frames 2 --scene " + blue + "/light.json");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("differs from the job"), std::string::npos) << r.output;
+  r = farm.client("requeue " + job + " --frames 2 --scene " + blue + "/scene.json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("running; frames 2 render again from scene version 1"), std::string::npos)
+      << r.output;
+  farm.restart_coordinator();
+  nlohmann::json s = farm.status(job);
+  EXPECT_EQ(s["state"], "running");
+  EXPECT_EQ(s["frames"][1]["scene_version"], 1);
+  EXPECT_EQ(s["frames"][1]["run"], 1);
+  EXPECT_EQ(s["frames"][1]["passes_merged"], 0);
+  EXPECT_EQ(s["frames"][0]["passes_merged"], 2);
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 1), farm.local(kCornell + settings, 1));
+  expect_same_image(farm.fetched(job, 2), farm.local(blue + "/scene.json" + settings, 2));
+}
+
 // `delete` with real processes: a queued job is refused without --force (exit 1) and deleted with
 // it; a completed job's folder goes, and neither comes back after a coordinator restart (status:
 // NOT_FOUND, exit 2).

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <filesystem>
 #include <future>
+#include <set>
 #include <thread>
 
 #include "coordinator/journal.h"
@@ -305,6 +306,96 @@ TEST(Ledger, RetryRunsFailedWorkAgainWithFreshCountsAndKeepsTheHistory) {
   b.ledger.set_state(*c, JobState::Completed, "");
   EXPECT_THROW(b.ledger.retry(*c, {1}, {}), std::logic_error);
   EXPECT_EQ(c->state, JobState::Completed);
+}
+
+// Requeue: a running job's frame renders again from scratch: its leases in flight end (their
+// attempts "not needed", their renewals Ended, their rows gone), its tasks are queued afresh, and
+// the job's failure counts start afresh (history kept). A completed job runs again with its other
+// frames done; a failed one with its other unfinished frames held. The versions text and a
+// released pin are stored.
+TEST(Ledger, RequeueRendersFramesAgainFromScratch) {
+  Bench b;
+  auto job = make_job("j1", 2, 1);  // frames 1-2, 4 tasks each
+  b.store.write(store::InsertJob{{"j1", 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*job);
+  b.ledger.set_state(*job, JobState::Running, "");
+  std::vector<Lease> frame1;
+  for (int i = 0; i < 4; ++i) {
+    std::optional<Lease> l = b.ledger.lease("w0", b.now, {});
+    ASSERT_TRUE(l);
+    ASSERT_EQ(l->task.frame, 1);
+    frame1.push_back(*l);
+  }
+  b.ledger.complete(*job, frame1[0].lease_id, frame1[0].task, "w0", 1, "B", "K", b.now);
+  std::optional<Lease> f = b.ledger.lease("w1", b.now, {});  // frame 2: fails on w1
+  ASSERT_TRUE(f);
+  Journal::Ticket t = 0;
+  b.ledger.fail(f->lease_id, "w1", "crash", false, b.now, &t);
+  b.flush();
+  ASSERT_EQ(b.store.failures("j1").size(), 1u);
+
+  b.ledger.requeue(*job, {1}, {}, "V1", false);
+  b.flush();
+  EXPECT_EQ(job->state, JobState::Running);
+  for (size_t i = 1; i < 4; ++i)
+    EXPECT_EQ(b.ledger.renew(frame1[i].lease_id, b.now), LeaseOutcome::Ended) << "it ended";
+  EXPECT_TRUE(b.store.leases("j1").size() <= 1u) << "frame 1's lease rows are gone";
+  for (const StoredLease& l : b.store.leases("j1")) EXPECT_NE(l.frame, 1);
+  bool more = false;
+  int not_needed = 0;
+  for (const StoredAttempt& a : b.store.attempts("j1", 1, std::nullopt, 100, &more))
+    not_needed += a.outcome == AttemptOutcome::NotNeeded && a.message == "its frame was requeued";
+  EXPECT_EQ(not_needed, 3);
+  EXPECT_TRUE(b.store.failures("j1").empty()) << "the counts start afresh";
+  EXPECT_EQ(b.store.failure_history("j1").size(), 1u) << "the history is kept";
+  EXPECT_EQ(b.store.jobs()[0].versions, "V1");
+  std::set<uint32_t> tiles;  // all four of frame 1's pass-0 tasks again, the done one included
+  for (int i = 0; i < 4; ++i) {
+    std::optional<Lease> l = b.ledger.lease("w0", b.now, {});
+    ASSERT_TRUE(l);
+    ASSERT_EQ(l->task.frame, 1);
+    tiles.insert(l->task.tile);
+    b.ledger.complete(*job, l->lease_id, l->task, "w0", 1, "B", "K", b.now);
+  }
+  EXPECT_EQ(tiles.size(), 4u);
+  for (int i = 0; i < 4; ++i) {  // frame 2
+    std::optional<Lease> l = b.ledger.lease("w0", b.now, {});
+    ASSERT_TRUE(l);
+    b.ledger.complete(*job, l->lease_id, l->task, "w0", 1, "B", "K", b.now);
+  }
+  b.ledger.set_state(*job, JobState::Completed, "");
+
+  // Completed -> Running: only the named frame is leased; the pin goes when asked.
+  b.ledger.requeue(*job, {2}, {}, "V2", true);
+  b.flush();
+  EXPECT_EQ(job->state, JobState::Running);
+  EXPECT_EQ(job->build_id, "");
+  EXPECT_EQ(b.store.jobs()[0].state, int(JobState::Running));
+  EXPECT_EQ(b.store.jobs()[0].build_id, "");
+  EXPECT_EQ(b.store.jobs()[0].versions, "V2");
+  for (int i = 0; i < 4; ++i) {
+    std::optional<Lease> l = b.ledger.lease("w5", b.now, {});
+    ASSERT_TRUE(l);
+    EXPECT_EQ(l->task.frame, 2);
+  }
+  EXPECT_FALSE(b.ledger.lease("w5", b.now, {})) << "frame 1 stays done";
+
+  // Failed -> Running, the other unfinished frame held.
+  auto g = make_job("j2", 2, 1);
+  b.ledger.add_job(*g);
+  b.ledger.set_state(*g, JobState::Failed, "broken scene");
+  b.ledger.requeue(*g, {2}, {1}, "", false);
+  b.flush();
+  EXPECT_EQ(g->state, JobState::Running);
+  EXPECT_EQ(g->error, "");
+  for (int i = 0; i < 4; ++i) {
+    std::optional<Lease> l =
+        b.ledger.lease("w6", b.now, [](const std::string& id) { return id == "j2"; });
+    ASSERT_TRUE(l);
+    EXPECT_EQ(l->task.frame, 2);
+  }
+  EXPECT_FALSE(b.ledger.lease("w6", b.now, [](const std::string& id) { return id == "j2"; }))
+      << "frame 1 is held";
 }
 
 // Delete, from any state: the scheduler forgets the job (its leases are retired: renewing one

@@ -98,6 +98,16 @@ std::map<std::string, grpc::StatusCode> call_every_method(std::shared_ptr<grpc::
     pb::JobStatus r;
     return jobs->RetryJob(&c, req, &r);
   });
+  unary("RequeueJob", [&](grpc::ClientContext& c) {
+    pb::JobStatus r;
+    auto w = jobs->RequeueJob(&c, &r);
+    pb::RequeueMessage m;
+    m.mutable_request()->set_job_id("j999999");
+    m.mutable_request()->set_frames("0");
+    w->Write(m);
+    w->WritesDone();
+    return w->Finish();
+  });
   unary("DeleteJob", [&](grpc::ClientContext& c) {
     pb::DeleteRequest req;
     req.set_job_id("j999999");
@@ -256,11 +266,12 @@ TEST(Security, TokensRolesAndTenantsAreCheckedOnEveryMethod) {
   // owner's on an ended job are FAILED_PRECONDITION (exit 1).
   for (const std::string& op :
        {"pause " + job, "resume " + job, "cancel " + job, "priority " + job + " 5", "retry " + job,
-        "delete " + job, "logs " + job}) {
+        "delete " + job, "logs " + job, "requeue " + job + " --frames 1"}) {
     test::CommandResult r = as(shot2, op);
     EXPECT_EQ(r.exit_code, 2) << op << ": " << r.output;
     EXPECT_NE(r.output.find("NOT_FOUND"), std::string::npos) << op << ": " << r.output;
-    if (op.rfind("cancel", 0) == 0 || op.rfind("delete", 0) == 0 || op.rfind("logs", 0) == 0)
+    if (op.rfind("cancel", 0) == 0 || op.rfind("delete", 0) == 0 || op.rfind("logs", 0) == 0 ||
+        op.rfind("requeue", 0) == 0)
       continue;  // the owner may
     r = as(shot1, op);
     EXPECT_EQ(r.exit_code, 1) << op << ": " << r.output;
