@@ -398,6 +398,10 @@ class Coordinator {
   // and checkpoint folders (restoring).
   void apply_versions(JobRecord& job, JobVersions versions);
   bool blob_visible(const std::string& sha256, const Caller& caller) const;
+  // The spec's bundle checked (paths, digests uploaded by the caller's tenant) and laid out as
+  // files in `bundle_dir`.
+  void lay_out_bundle(const JobSpec& spec, const std::string& bundle_dir, const Caller& caller,
+                      bool restoring) const;
   void add_frames(JobRecord& job, const std::string& bundle_dir, bool restoring);
   void restore(const StoredJob& stored);
   // A stored job that cannot be restored: kept, failed with the reason, with no frames.

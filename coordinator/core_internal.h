@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -97,5 +98,13 @@ struct JobRecord {
     return out;
   }
 };
+
+namespace core_detail {
+
+// The job's frames a client's range names (InvalidArgument for a bad range or a frame the job
+// lacks); every frame of the job for an empty range.
+std::set<FrameNumber> named_frames(const JobRecord& job, const std::string& frames);
+
+}  // namespace core_detail
 
 }  // namespace rf

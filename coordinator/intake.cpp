@@ -130,6 +130,19 @@ std::vector<std::string> JobLimits::names() {
   return out;
 }
 
+void Coordinator::lay_out_bundle(const JobSpec& spec, const std::string& bundle_dir,
+                                 const Caller& caller, bool restoring) const {
+  check_bundle(
+      spec, [&](const std::string& d) { return blob_visible(d, caller); }, restoring);
+  try {
+    blobs_.materialize(spec.files, bundle_dir);
+  } catch (const BlobError& e) {
+    refuse(ErrorCode::InvalidArgument, e.what());
+  } catch (const fs::filesystem_error& e) {  // its message would name the state directory
+    refuse(ErrorCode::Unavailable, "cannot lay out the bundle: " + e.code().message());
+  }
+}
+
 // Validates a spec against the stored blobs and makes the job's record.
 std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_t seq,
                                                   const JobSpec& spec, const Caller& caller,
@@ -144,15 +157,7 @@ std::shared_ptr<JobRecord> Coordinator::build_job(const std::string& id, uint64_
   job->priority = spec.priority;
   std::string bundle_dir = options_.state_dir + "/jobs/" + id + "/bundle";
   try {
-    check_bundle(
-        spec, [&](const std::string& d) { return blob_visible(d, caller); }, restoring);
-    try {
-      blobs_.materialize(spec.files, bundle_dir);
-    } catch (const BlobError& e) {
-      refuse(ErrorCode::InvalidArgument, e.what());
-    } catch (const fs::filesystem_error& e) {  // its message would name the state directory
-      refuse(ErrorCode::Unavailable, "cannot lay out the bundle: " + e.code().message());
-    }
+    lay_out_bundle(spec, bundle_dir, caller, restoring);
   } catch (const CoordinatorError& e) {
     // A stored job whose blobs are gone (the blob store deleted or damaged under a stopped
     // coordinator) keeps its frames when its scene summaries are in its folder: restore() fails
@@ -317,15 +322,7 @@ std::map<FrameNumber, Coordinator::FrameScene> Coordinator::version_scenes(
     std::error_code ec;  // a requeue a crash interrupted may have left it
     fs::remove_all(bundle_dir, ec);
   }
-  check_bundle(
-      spec, [&](const std::string& d) { return blob_visible(d, caller); }, restoring);
-  try {
-    blobs_.materialize(spec.files, bundle_dir);
-  } catch (const BlobError& e) {
-    refuse(ErrorCode::InvalidArgument, e.what());
-  } catch (const fs::filesystem_error& e) {
-    refuse(ErrorCode::Unavailable, "cannot lay out the bundle: " + e.code().message());
-  }
+  lay_out_bundle(spec, bundle_dir, caller, restoring);
   std::map<std::string, SceneSummary> scene_of = scene_summaries(
       job, spec, bundle_dir, dir + "scenes-v" + std::to_string(version) + ".json", "", restoring);
   std::map<FrameNumber, FrameScene> out;

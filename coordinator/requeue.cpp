@@ -93,16 +93,7 @@ void Coordinator::requeue(const std::string& id, const std::string& frames,
     if (frames.empty())
       refuse(ErrorCode::InvalidArgument,
              "frames: name the frames to render again (a range such as 3 or 1-10)");
-    try {
-      for (FrameNumber n : parse_frame_range(frames)) {
-        if (!job->by_number.count(n))
-          refuse(ErrorCode::InvalidArgument,
-                 "frames: job " + id + " has no frame " + std::to_string(n));
-        named.insert(n);
-      }
-    } catch (const FrameRangeError& e) {
-      refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
-    }
+    named = core_detail::named_frames(*job, frames);
     if (job->frames.empty() || !job->bundle_problem.empty())
       refuse(ErrorCode::FailedPrecondition,
              "job " + id + " cannot run again: " +

@@ -20,6 +20,25 @@ using core_detail::ended_verb;
 using core_detail::refuse;
 using core_detail::unix_now;
 
+std::set<FrameNumber> core_detail::named_frames(const JobRecord& job, const std::string& frames) {
+  std::set<FrameNumber> named;
+  if (frames.empty()) {
+    for (FrameNumber n : job.frame_numbers()) named.insert(n);
+    return named;
+  }
+  try {
+    for (FrameNumber n : parse_frame_range(frames)) {
+      if (!job.by_number.count(n))
+        refuse(ErrorCode::InvalidArgument,
+               "frames: job " + job.id + " has no frame " + std::to_string(n));
+      named.insert(n);
+    }
+  } catch (const FrameRangeError& e) {
+    refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
+  }
+  return named;
+}
+
 // After a merge or a restore: the frame's figures, the scheduler's stop, the job's completion.
 void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
   if (f.acc)
@@ -135,21 +154,7 @@ void Coordinator::retry(const std::string& id, const std::string& frames, const 
       refuse(ErrorCode::FailedPrecondition,
              "job " + id + " cannot run again: " +
                  (job->bundle_problem.empty() ? job->error : job->bundle_problem));
-    std::set<FrameNumber> named;
-    if (frames.empty()) {
-      for (FrameNumber n : job->frame_numbers()) named.insert(n);
-    } else {
-      try {
-        for (FrameNumber n : parse_frame_range(frames)) {
-          if (!job->by_number.count(n))
-            refuse(ErrorCode::InvalidArgument,
-                   "frames: job " + id + " has no frame " + std::to_string(n));
-          named.insert(n);
-        }
-      } catch (const FrameRangeError& e) {
-        refuse(ErrorCode::InvalidArgument, std::string("frames: ") + e.what());
-      }
-    }
+    const std::set<FrameNumber> named = core_detail::named_frames(*job, frames);
     const bool ended = terminal(was);
     for (const auto& f : job->frames) {
       if (f->progress.done || !(ended || f->held)) continue;  // done, or running already
