@@ -8,6 +8,7 @@
 #include "worker/worker.h"
 
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 
@@ -36,6 +37,32 @@ CLI::Validator listen_address() {
 
 }  // namespace
 
+namespace {
+
+// A duration option: a number of seconds with a unit (s, m, h, d; none: seconds), or "never"
+// (<= 0) where `never_ok`.
+double duration_option(const std::string& name, const std::string& v, bool never_ok) {
+  if (never_ok && v == "never") return 0;
+  size_t end = 0;
+  double n = -1;
+  try {
+    n = std::stod(v, &end);
+  } catch (const std::exception&) {
+  }
+  const std::string unit = v.substr(std::min(end, v.size()));
+  const double scale = unit.empty() || unit == "s" ? 1
+                       : unit == "m"               ? 60
+                       : unit == "h"               ? 3600
+                       : unit == "d"               ? 86400
+                                                   : -1;
+  if (!(n > 0) || scale < 0 || !std::isfinite(n * scale) || n * scale > 1e10)
+    throw CLI::ValidationError(
+        name, "'" + v + "' is not a duration (90s, 30m, 12h, 7d" + (never_ok ? ", never)" : ")"));
+  return n * scale;
+}
+
+}  // namespace
+
 void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
   auto co = std::make_shared<CoordinatorOptions>();
   auto* coord = app.add_subcommand("coordinator", "serve jobs to workers (gRPC)");
@@ -45,6 +72,25 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       ->required();
   coord->add_option("--lease-seconds", co->lease_seconds, "lease time of a task")
       ->check(finite_in(0.1, 86400));
+  coord
+      ->add_option_function<std::string>(
+          "--keep-finished",
+          [co](const std::string& v) {
+            co->keep_finished_seconds = duration_option("--keep-finished", v, true);
+          },
+          "how long finished jobs (completed, failed, cancelled) are kept after they end before "
+          "their images, checkpoints and records are removed: 90s, 30m, 12h, 7d, or never "
+          "(default 7d)")
+      ->default_str("7d");
+  coord
+      ->add_option_function<std::string>(
+          "--blob-grace",
+          [co](const std::string& v) {
+            co->blob_grace_seconds = duration_option("--blob-grace", v, false);
+          },
+          "how long an uploaded scene file that no job uses is kept after it was last uploaded "
+          "or asked for (default 1h)")
+      ->default_str("1h");
   coord->add_option("--window", co->window_frames, "frames open at once per job")
       ->check(finite_in(1, 10000));
   coord

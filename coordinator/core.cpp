@@ -133,8 +133,11 @@ std::shared_ptr<JobRecord> Coordinator::find_for(const std::string& id,
                                                  const Caller& caller) const {
   std::shared_ptr<JobRecord> job = find(id);
   // Another tenant's job is refused as a missing one: the answer tells no tenant which ids exist.
-  if (!job || (!caller.all_tenants && job->tenant != caller.tenant))
+  if (!job || (!caller.all_tenants && job->tenant != caller.tenant)) {
+    if (std::string expired = job ? "" : expired_message(id, caller); !expired.empty())
+      refuse(ErrorCode::NotFound, expired);
     refuse(ErrorCode::NotFound, "no job '" + clip(id) + "'");
+  }
   return job;
 }
 

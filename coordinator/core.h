@@ -240,6 +240,10 @@ struct CoreOptions {
   // Parses and summarises a submitted job's scenes (scene_check.h). Required: the server runs
   // them in bounded child processes (child_scene_checker); tests may parse in-process.
   SceneChecker scene_checker;
+  // Retention (Coordinator::collect): finished jobs are kept this long after they end (<= 0:
+  // for ever), and a blob no job references this long after it was last stored or asked for.
+  double keep_finished_seconds = 7 * 86400.0;
+  double blob_grace_seconds = 3600;
   // The job store (job_store.h); empty: SQLite at STATE/jobs.sqlite. The core's tests and the
   // fuzzer give a memory store, kept across their restarts.
   std::shared_ptr<JobStore> store;
@@ -300,6 +304,17 @@ class Coordinator {
   // end; their results are answered NotFound). Its scene blobs stay (other jobs may share them).
   // A delete interrupted by a crash is finished at the next start.
   void delete_job(const std::string& job_id, bool force, const Caller& caller = {});
+
+  // ---- Retention (run every so often; `unix_now` is the time it takes as now). Finished jobs
+  // (Completed, Failed, Cancelled) whose end is keep_finished_seconds past expire: removed as a
+  // delete removes them, their id answering "expired at T" from then on (to their tenant). Ended
+  // jobs release their frame accumulators. Blobs that no job references and that were not
+  // stored or asked for (missing_blobs, put_blob) within blob_grace_seconds are removed.
+  struct Collected {
+    size_t jobs_expired = 0, blobs_removed = 0, accumulators_released = 0;
+    uint64_t blob_bytes_removed = 0;
+  };
+  Collected collect(double unix_now);
   // `requeue`: the job's frames in `frames` (a frame range; required) render again from scratch,
   // with the seed and settings they had: their merged passes go, leases of theirs in flight end
   // (their results are answered not needed and counted against no one), and the job's failure
@@ -420,6 +435,13 @@ class Coordinator {
   // Deletes whose folder was renamed to jobs/.deleted-ID (the point of no return) but that a
   // crash interrupted: their rows are deleted and the folders removed. Before any job is restored.
   void finish_deletes();
+  // The job's removal (delete, expiry) under its frame locks: `check` (under mu_) may refuse it;
+  // expired_unix > 0 marks an expiry (its id then answers so). Logs "job J (STATE) " + why.
+  void remove_job(const std::shared_ptr<JobRecord>& job,
+                  const std::function<void(const JobRecord&)>& check, int64_t expired_unix,
+                  const std::string& why);
+  // For an id that retention expired and the caller may see: what to answer; else "".
+  std::string expired_message(const std::string& id, const Caller& caller) const;
   void check_limits(const JobSpec& spec) const;
   bool verified(const TaskRef& task) const;
   // A verified task's result: true when it agrees with another worker's (merge it now); false

@@ -78,6 +78,7 @@ struct JobRecord {
   bool paused = false;         // no new leases (`pause`); leases in flight finish and merge
   int priority = 0;            // the spec's, or what `priority JOB N` set since
   bool deleted = false;        // `delete`: gone from the coordinator; a merge in flight stops
+  int64_t ended_unix = 0;      // when it last ended (retention counts --keep-finished from it)
   JobVersions versions;        // scene versions and requeued frames (`requeue`)
   std::vector<Rect> tiles;
   bool splats = false;

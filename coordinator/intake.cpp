@@ -398,7 +398,10 @@ std::vector<std::string> Coordinator::missing_blobs(const std::vector<std::strin
   for (const std::string& d : sha256) {
     if (!is_sha256_hex(d))
       refuse(ErrorCode::InvalidArgument, "'" + d + "' is not a SHA-256 (64 lower-case hex)");
-    if (!blob_visible(d, caller)) missing.push_back(d);
+    if (!blob_visible(d, caller))
+      missing.push_back(d);
+    else
+      blobs_.touch(d);  // a submit naming it may follow: its grace period starts now
   }
   return missing;
 }

@@ -55,6 +55,13 @@ struct StoredJob {
   // Its scene versions and requeued frames (`requeue`), as the coordinator encodes them
   // (coordinator/versions.h); '' for a job never requeued.
   std::string versions;
+  int64_t ended_unix = 0;  // when it last ended (Completed, Failed, Cancelled); 0 while not
+};
+
+// What is left of a job that retention expired (`--keep-finished`): its id answers "expired".
+struct Tombstone {
+  int64_t expired_unix = 0;
+  std::string tenant;
 };
 
 // A lease as handed out, kept so that its holder's late result is accepted after a restart.
@@ -115,6 +122,7 @@ struct SetState {
   std::string job_id;
   int state = 0;
   std::string error;
+  int64_t ended_unix = 0;  // when an ended state began (0 for Queued and Running)
 };
 struct AddCoreSeconds {
   std::string job_id;
@@ -149,6 +157,11 @@ struct SetVersions {
 // number (so that no later job gets its id); jobs() no longer lists it.
 struct DeleteJob {
   std::string job_id;
+  int64_t expired_unix = 0;  // retention expired it then (0: a client's delete)
+};
+// A blob retention collected: no tenant has it any more.
+struct ForgetBlob {
+  std::string sha256;
 };
 struct TaskEvent {
   std::string job_id;
@@ -186,8 +199,8 @@ using StoreWrite =
     std::variant<store::InsertJob, store::SetState, store::AddCoreSeconds, store::SetBuild,
                  store::SetPaused, store::SetPriority, store::Retry, store::SetVersions,
                  store::DeleteJob, store::TaskEvent, store::Attempt, store::InsertWorker,
-                 store::RefuseWorker, store::DeleteWorker, store::AddBlobTenant, store::InsertLease,
-                 store::DeleteLeases>;
+                 store::RefuseWorker, store::DeleteWorker, store::AddBlobTenant, store::ForgetBlob,
+                 store::InsertLease, store::DeleteLeases>;
 
 // Whether losing the write in a power cut costs nothing but work or a log record: a lease's row
 // (its holder's late result is then rendered again), an attempt's record. Batches of such writes
@@ -209,6 +222,8 @@ class JobStore {
   virtual std::vector<StoredWorker> workers() const = 0;
   // Which tenants uploaded a blob: a client sees a blob as present only once its tenant did.
   virtual bool blob_tenant(const std::string& tenant, const std::string& sha256) const = 0;
+  // A job retention expired: when, and whose it was; nothing for any other id.
+  virtual std::optional<Tombstone> tombstone(const std::string& job_id) const = 0;
   // The job's lease rows in the order written, one at a time (a large job may have many).
   virtual void for_each_lease(const std::string& job_id,
                               const std::function<void(const StoredLease&)>& f) const = 0;

@@ -100,6 +100,12 @@ class MemoryJobStore final : public JobStore {
     std::reverse(out.begin(), out.end());
     return out;
   }
+  std::optional<Tombstone> tombstone(const std::string& job_id) const override {
+    std::lock_guard lock(mu_);
+    auto it = tombstones_.find(job_id);
+    if (it == tombstones_.end()) return std::nullopt;
+    return it->second;
+  }
   uint64_t tasks_done(const std::string& job_id) const override {
     std::lock_guard lock(mu_);
     return uint64_t(std::count_if(events_.begin(), events_.end(), [&](const Event& e) {
@@ -117,7 +123,8 @@ class MemoryJobStore final : public JobStore {
     jobs_.push_back(w.job);
   }
   void apply(const store::SetState& w) {
-    if (StoredJob* j = job(w.job_id)) j->state = w.state, j->error = w.error;
+    if (StoredJob* j = job(w.job_id))
+      j->state = w.state, j->error = w.error, j->ended_unix = w.ended_unix;
   }
   void apply(const store::AddCoreSeconds& w) {
     if (StoredJob* j = job(w.job_id)) j->core_seconds += w.seconds;
@@ -143,6 +150,8 @@ class MemoryJobStore final : public JobStore {
   void apply(const store::Attempt& w) { attempts_.push_back(w.attempt); }
   void apply(const store::DeleteJob& w) {
     deleted_.insert(w.job_id);
+    if (StoredJob* j = job(w.job_id); j && w.expired_unix > 0)
+      tombstones_[w.job_id] = {w.expired_unix, j->tenant};
     std::erase_if(attempts_, [&](const StoredAttempt& a) { return a.job_id == w.job_id; });
     std::erase_if(events_, [&](const Event& e) { return e.job_id == w.job_id; });
     std::erase_if(leases_, [&](const StoredLease& l) { return l.job_id == w.job_id; });
@@ -154,6 +163,9 @@ class MemoryJobStore final : public JobStore {
   }
   void apply(const store::DeleteWorker& w) { workers_.erase(w.worker_id); }
   void apply(const store::AddBlobTenant& w) { blob_tenants_.insert({w.tenant, w.sha256}); }
+  void apply(const store::ForgetBlob& w) {
+    std::erase_if(blob_tenants_, [&](const auto& t) { return t.second == w.sha256; });
+  }
   void apply(const store::InsertLease& w) {
     std::erase_if(leases_, [&](const StoredLease& l) { return l.lease_id == w.lease.lease_id; });
     leases_.push_back(w.lease);
@@ -168,6 +180,7 @@ class MemoryJobStore final : public JobStore {
   std::vector<StoredJob> jobs_;
   std::map<std::string, size_t> index_;
   std::set<std::string> deleted_;  // their rows stay (next_seq), unlisted
+  std::map<std::string, Tombstone> tombstones_;  // of those, the ones retention expired
   std::vector<StoredAttempt> attempts_;
   struct Event : store::TaskEvent {
     bool counted = true;

@@ -92,6 +92,7 @@ class SqliteJobStore final : public JobStore {
   std::vector<StoredJob> jobs() const override;
   std::vector<StoredWorker> workers() const override;
   bool blob_tenant(const std::string& tenant, const std::string& sha256) const override;
+  std::optional<Tombstone> tombstone(const std::string& job_id) const override;
   void for_each_lease(const std::string& job_id,
                       const std::function<void(const StoredLease&)>& f) const override;
   std::vector<TaskFailure> failures(const std::string& job_id) const override;
@@ -195,6 +196,11 @@ void SqliteJobStore::open_schema() {
   // Its scene versions and requeued frames (coordinator/versions.h), '' until a requeue.
   if (!columns.count("versions"))
     exec("ALTER TABLE jobs ADD COLUMN versions TEXT NOT NULL DEFAULT ''");
+  // When it last ended (Unix seconds; 0 while queued or running, and in rows of earlier builds),
+  // and when retention expired it (0: not expired; a deleted row with 0 was a client's delete).
+  if (!columns.count("ended")) exec("ALTER TABLE jobs ADD COLUMN ended INTEGER NOT NULL DEFAULT 0");
+  if (!columns.count("expired"))
+    exec("ALTER TABLE jobs ADD COLUMN expired INTEGER NOT NULL DEFAULT 0");
   columns.clear();
   {
     Stmt s(db_, "SELECT name FROM pragma_table_info('task_events')", path_);
@@ -287,8 +293,8 @@ void SqliteJobStore::apply(const StoreWrite& write) {
               .bind(j.tenant)
               .step();
         } else if constexpr (std::is_same_v<W, store::SetState>) {
-          Stmt s(db_, "UPDATE jobs SET state = ?, error = ? WHERE id = ?", path_);
-          s.bind(int64_t(w.state)).bind(w.error).bind(w.job_id).step();
+          Stmt s(db_, "UPDATE jobs SET state = ?, error = ?, ended = ? WHERE id = ?", path_);
+          s.bind(int64_t(w.state)).bind(w.error).bind(w.ended_unix).bind(w.job_id).step();
         } else if constexpr (std::is_same_v<W, store::AddCoreSeconds>) {
           Stmt s(db_, "UPDATE jobs SET core_seconds = core_seconds + ? WHERE id = ?", path_);
           s.bind(w.seconds).bind(w.job_id).step();
@@ -314,9 +320,9 @@ void SqliteJobStore::apply(const StoreWrite& write) {
         } else if constexpr (std::is_same_v<W, store::DeleteJob>) {
           Stmt s(db_,
                  "UPDATE jobs SET deleted = 1, spec = x'', error = '', build = '', held = '', "
-                 "versions = '' WHERE id = ?",
+                 "versions = '', expired = ? WHERE id = ?",
                  path_);
-          s.bind(w.job_id).step();
+          s.bind(w.expired_unix).bind(w.job_id).step();
           for (const char* sql :
                {"DELETE FROM task_events WHERE job_id = ?", "DELETE FROM leases WHERE job_id = ?",
                 "DELETE FROM attempts WHERE job_id = ?"}) {
@@ -375,6 +381,9 @@ void SqliteJobStore::apply(const StoreWrite& write) {
         } else if constexpr (std::is_same_v<W, store::AddBlobTenant>) {
           Stmt s(db_, "INSERT OR IGNORE INTO blob_tenants (tenant, sha256) VALUES (?,?)", path_);
           s.bind(w.tenant).bind(w.sha256).step();
+        } else if constexpr (std::is_same_v<W, store::ForgetBlob>) {
+          Stmt s(db_, "DELETE FROM blob_tenants WHERE sha256 = ?", path_);
+          s.bind(w.sha256).step();
         } else if constexpr (std::is_same_v<W, store::InsertLease>) {
           const StoredLease& l = w.lease;
           Stmt s(db_,
@@ -411,7 +420,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
   std::lock_guard lock(mu_);
   Stmt s(db_,
          "SELECT id, seq, spec, state, error, submitted, core_seconds, tenant, build, paused, "
-         "priority, held, cpu_kind, versions FROM jobs WHERE deleted = 0 ORDER BY seq",
+         "priority, held, cpu_kind, versions, ended FROM jobs WHERE deleted = 0 ORDER BY seq",
          path_);
   std::vector<StoredJob> out;
   while (s.step()) {
@@ -421,6 +430,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
     if (!s.null(10)) out.back().priority = int(s.integer(10));
     out.back().cpu_kind = s.text(12);
     out.back().versions = s.text(13);
+    out.back().ended_unix = s.integer(14);
     if (std::string held = s.text(11); !held.empty()) {
       try {
         out.back().held = parse_frame_range(held);
@@ -446,6 +456,15 @@ bool SqliteJobStore::blob_tenant(const std::string& tenant, const std::string& s
   Stmt s(db_, "SELECT 1 FROM blob_tenants WHERE tenant = ? AND sha256 = ?", path_);
   s.bind(tenant).bind(sha256);
   return s.step();
+}
+
+std::optional<Tombstone> SqliteJobStore::tombstone(const std::string& job_id) const {
+  std::lock_guard lock(mu_);
+  Stmt s(db_, "SELECT expired, tenant FROM jobs WHERE id = ? AND deleted = 1 AND expired > 0",
+         path_);
+  s.bind(job_id);
+  if (!s.step()) return std::nullopt;
+  return Tombstone{s.integer(0), s.text(1)};
 }
 
 void SqliteJobStore::for_each_lease(const std::string& job_id,

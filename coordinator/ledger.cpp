@@ -67,7 +67,8 @@ Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string&
                            job_state_name(job.state) + " -> " + job_state_name(to));
   job.state = to;
   job.error = error;
-  std::vector<StoreWrite> writes{store::SetState{job.id, int(to), error}};
+  job.ended_unix = terminal(to) ? int64_t(now() + unix_offset_) : 0;
+  std::vector<StoreWrite> writes{store::SetState{job.id, int(to), error, job.ended_unix}};
   if (terminal(to)) {
     stopped_attempts(writes, job.id, std::nullopt, 0,
                      std::string("its job ended (") + job_state_name(to) + ")", now());
@@ -112,7 +113,8 @@ Ledger::Ticket Ledger::retry(JobRecord& job, const std::vector<FrameNumber>& reo
                              job_state_name(job.state));
     job.state = JobState::Running;
     job.error.clear();
-    writes.push_back(store::SetState{job.id, int(JobState::Running), ""});
+    job.ended_unix = 0;
+    writes.push_back(store::SetState{job.id, int(JobState::Running), "", 0});
     scheduler_.reopen_job(job.id);
     std::set<FrameNumber> open(reopen.begin(), reopen.end());
     for (FrameNumber f : job.frame_numbers())
@@ -132,7 +134,8 @@ Ledger::Ticket Ledger::requeue(JobRecord& job, const std::vector<FrameNumber>& f
   if (terminal(job.state)) {
     job.state = JobState::Running;
     job.error.clear();
-    writes.push_back(store::SetState{job.id, int(JobState::Running), ""});
+    job.ended_unix = 0;
+    writes.push_back(store::SetState{job.id, int(JobState::Running), "", 0});
     scheduler_.reopen_job(job.id);
     for (FrameNumber f : job.frame_numbers())
       if (!again.count(f)) scheduler_.stop_frame(job.id, f, 0);
@@ -155,9 +158,9 @@ Ledger::Ticket Ledger::requeue(JobRecord& job, const std::vector<FrameNumber>& f
   return journal_.append(std::move(writes));
 }
 
-Ledger::Ticket Ledger::delete_job(const JobRecord& job) {
+Ledger::Ticket Ledger::delete_job(const JobRecord& job, int64_t expired_unix) {
   scheduler_.remove_job(job.id);
-  return journal_.append({store::DeleteJob{job.id}});
+  return journal_.append({store::DeleteJob{job.id, expired_unix}});
 }
 
 void Ledger::restore_job(JobRecord& job, const Trail& trail) {

@@ -74,7 +74,7 @@ class Ledger {
                  bool release_pin);
 
   // `delete`: the job is forgotten (its tasks and leases) and its store rows go (store::DeleteJob).
-  Ticket delete_job(const JobRecord& job);
+  Ticket delete_job(const JobRecord& job, int64_t expired_unix = 0);
 
   // ---- Restoring at start (nothing written: it is what the store and checkpoints hold)
   struct Trail {

@@ -72,7 +72,14 @@ void Coordinator::finish_deletes() {
     const std::string name = entry.path().filename().string();
     if (name.rfind(".deleted-", 0) != 0) continue;
     const std::string id = name.substr(9);
-    journal_->write_ahead({store::DeleteJob{id}});
+    int64_t expired_unix = 0;  // an expiry's time (retention.cpp), or a client's delete
+    try {
+      if (fs::exists(entry.path() / "expired"))
+        expired_unix = std::stoll(read_file_bytes((entry.path() / "expired").string()));
+    } catch (const std::exception&) {
+      expired_unix = int64_t(unix_now());
+    }
+    journal_->write_ahead({store::DeleteJob{id, expired_unix}});
     std::error_code rm;
     fs::remove_all(entry.path(), rm);
     spdlog::info("job {}: finished its deletion, which a stop interrupted{}", id,
@@ -224,6 +231,12 @@ void Coordinator::restore(const StoredJob& stored) {
     remove_stale_folders(*job);
     job->state = JobState(stored.state);
     job->error = stored.error;
+    job->ended_unix = stored.ended_unix;
+    if (terminal(job->state) && job->ended_unix == 0) {
+      // Ended under a build before retention: its keep time counts from this start.
+      job->ended_unix = int64_t(unix_now());
+      journal_->append({store::SetState{job->id, stored.state, stored.error, job->ended_unix}});
+    }
     job->submitted_unix = stored.submitted_unix;
     job->core_seconds = stored.core_seconds;
     job->tenant = stored.tenant;

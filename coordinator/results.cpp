@@ -207,57 +207,6 @@ void Coordinator::retry(const std::string& id, const std::string& frames, const 
   wait_stored(ticket, "the retry");
 }
 
-void Coordinator::delete_job(const std::string& id, bool force, const Caller& caller) {
-  std::shared_ptr<JobRecord> job;
-  auto check = [&] {
-    if (!terminal(job->state) && !force)
-      refuse(ErrorCode::FailedPrecondition,
-             "job " + id + " is " + (job->state == JobState::Queued ? "queued" : "running") +
-                 "; cancel it first, or delete --force");
-  };
-  {
-    std::lock_guard lock(mu_);
-    job = find_for(id, caller);
-    check();
-  }
-  // No merge of the job is in progress while it goes (merges take a frame's lock before mu_).
-  std::vector<std::unique_lock<std::mutex>> frame_locks;
-  for (auto& f : job->frames) frame_locks.emplace_back(f->m);
-  const std::string dir = options_.state_dir + "/jobs/" + job->id;
-  const std::string tomb = options_.state_dir + "/jobs/.deleted-" + job->id;
-  Ledger::Ticket ticket = 0;
-  {
-    std::lock_guard lock(mu_);
-    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(id) + "'");
-    check();
-    // The point of no return: a restart finishes the delete from the renamed folder.
-    if (fs::exists(dir)) {
-      try {
-        rename_durably(dir, tomb);
-      } catch (const std::exception& e) {
-        refuse(ErrorCode::Unavailable, std::string("cannot delete job ") + id +
-                                           " now: " + e.what() + "; nothing was deleted");
-      }
-    }
-    job->deleted = true;
-    ticket = ledger_->delete_job(*job);
-    jobs_.erase(job->id);
-    std::erase_if(requests_, [&](const auto& r) { return r.second == job->id; });
-    std::erase_if(verifying_, [&](const auto& v) { return v.first.job_id == job->id; });
-    spdlog::info("job {} ({}) deleted by {}", job->id, job_state_name(job->state),
-                 caller.principal);
-    ++version_;
-    changed_.notify_all();
-  }
-  for (auto& f : job->frames) f->acc.reset();
-  frame_locks.clear();
-  wait_stored(ticket, "the deletion");
-  std::error_code ec;
-  fs::remove_all(tomb, ec);
-  if (ec)
-    spdlog::warn("job {}: {} not removed ({}); the next start removes it", id, tomb, ec.message());
-}
-
 // Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
 // frame's header (scene digest, seed, frame, integrator, settings, resolution).
 SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const BufferHeader& base,

@@ -14,10 +14,13 @@
 
 #include <sys/file.h>
 
+#include <algorithm>
 #include <chrono>
+#include <condition_variable>
 #include <ctime>
 #include <mutex>
 #include <optional>
+#include <thread>
 
 #include "coordinator/core.h"
 #include "coordinator/metrics.h"
@@ -678,6 +681,11 @@ struct CoordinatorServer::Impl {
   std::unique_ptr<grpc::Server> health_server;  // --health-listen: the health service alone
   std::unique_ptr<MetricsServer> metrics;       // --metrics-listen; goes before the core
   int port = 0, health_port = 0;
+  // Retention (Coordinator::collect) at start and then every interval, until shutdown.
+  std::thread retention;
+  std::mutex retention_mu;
+  std::condition_variable retention_cv;
+  bool stopping = false;
 };
 
 CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
@@ -697,6 +705,8 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   core.share = o.share;
   core.limits = o.limits;
   core.verify_fraction = o.verify_fraction;
+  core.keep_finished_seconds = o.keep_finished_seconds;
+  core.blob_grace_seconds = o.blob_grace_seconds;
   core.scene_checker = child_scene_checker(o.scene_check_binary, o.limits.scene_check);
   impl_->core = std::make_unique<Coordinator>(core);
   impl_->gate->count_in(impl_->core.get());
@@ -743,6 +753,25 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   impl_->core->set_storage_listener(set_storage);
   if (!o.metrics_listen.empty())
     impl_->metrics = std::make_unique<MetricsServer>(o.metrics_listen, *impl_->core);
+  // Often enough that nothing outstays its time by more than a quarter of it (at most a minute).
+  const double keep = o.keep_finished_seconds > 0 ? o.keep_finished_seconds : 1e9;
+  const double interval = std::clamp(std::min(keep, o.blob_grace_seconds) / 4, 1.0, 60.0);
+  impl_->retention = std::thread([impl = impl_.get(), interval] {
+    std::unique_lock lock(impl->retention_mu);
+    while (!impl->stopping) {
+      lock.unlock();
+      try {
+        impl->core->collect(
+            std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+                .count());
+      } catch (const std::exception& e) {  // the next pass tries again
+        spdlog::warn("retention: {}", e.what());
+      }
+      lock.lock();
+      impl->retention_cv.wait_for(lock, std::chrono::duration<double>(interval),
+                                  [impl] { return impl->stopping; });
+    }
+  });
 }
 
 CoordinatorServer::~CoordinatorServer() { shutdown(); }
@@ -759,6 +788,12 @@ void CoordinatorServer::wait() { impl_->server->Wait(); }
 
 void CoordinatorServer::shutdown() {
   if (!impl_ || !impl_->server) return;
+  {
+    std::lock_guard lock(impl_->retention_mu);
+    impl_->stopping = true;
+  }
+  impl_->retention_cv.notify_all();
+  if (impl_->retention.joinable()) impl_->retention.join();
   impl_->core->shut_down();
   impl_->server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(5));
   if (impl_->health_server) impl_->health_server->Shutdown();

@@ -33,6 +33,9 @@ struct CoordinatorOptions {
   uint64_t max_blob_bytes = 1ull << 30;    // one scene asset
   uint64_t max_bundle_bytes = 4ull << 30;  // all assets of one submit
   uint64_t max_buffer_bytes = 4ull << 30;  // one task's sample buffer
+  // Retention (CoreOptions): --keep-finished (<= 0: for ever) and --blob-grace, in seconds.
+  double keep_finished_seconds = 7 * 86400.0;
+  double blob_grace_seconds = 3600;
   // The binary whose `check-scenes` command parses submitted scenes in child processes
   // (scene_check.h): this one.
   std::string scene_check_binary = "/proc/self/exe";

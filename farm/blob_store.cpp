@@ -1,5 +1,8 @@
 #include "farm/blob_store.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+
 #include <filesystem>
 
 #include "engine/digest.h"
@@ -61,6 +64,8 @@ std::string BlobStore::put(std::string_view bytes, const std::string& expected_s
   if (!has(digest)) {
     fs::create_directories(fs::path(path_of(digest)).parent_path());
     write_file_atomic(path_of(digest), bytes);
+  } else {
+    touch(digest);  // stored again: its grace period starts now
   }
   return digest;
 }
@@ -68,6 +73,33 @@ std::string BlobStore::put(std::string_view bytes, const std::string& expected_s
 std::optional<std::string> BlobStore::get(const std::string& sha256) const {
   if (!has(sha256)) return std::nullopt;
   return read_file_bytes(path_of(sha256));
+}
+
+std::vector<BlobStore::Entry> BlobStore::list() const {
+  std::vector<Entry> out;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir_, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    std::error_code e;
+    if (!is_sha256_hex(name) || !it->is_regular_file(e)) continue;
+    struct stat st {};
+    if (::stat(it->path().c_str(), &st) != 0) continue;
+    out.push_back(
+        {name, uint64_t(st.st_size), double(st.st_mtim.tv_sec) + st.st_mtim.tv_nsec * 1e-9});
+  }
+  return out;
+}
+
+void BlobStore::touch(const std::string& sha256) const {
+  if (!is_sha256_hex(sha256)) return;
+  ::utimensat(AT_FDCWD, path_of(sha256).c_str(), nullptr, 0);  // both times: now
+}
+
+bool BlobStore::remove(const std::string& sha256) const {
+  if (!is_sha256_hex(sha256)) return false;
+  std::error_code ec;
+  return fs::remove(path_of(sha256), ec);
 }
 
 std::string BlobStore::materialize(const std::vector<BundleEntry>& bundle,

@@ -4,6 +4,7 @@
 // digest); materialize() lays it out as files so the engine's scene loader reads it unchanged.
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -42,6 +43,17 @@ class BlobStore {
   // Lays the bundle out under dir (hard links or copies of the blobs); throws BlobError naming
   // the first missing blob or bad path. Returns dir.
   std::string materialize(const std::vector<BundleEntry>& bundle, const std::string& dir) const;
+
+  // Retention (the coordinator's blob collection, the worker's bounded cache): a blob's file
+  // time is when it was last stored, asked for or used (touch), in Unix seconds.
+  struct Entry {
+    std::string sha256;
+    uint64_t bytes = 0;
+    double used_unix = 0;
+  };
+  std::vector<Entry> list() const;  // every stored blob (files that are not blobs left out)
+  void touch(const std::string& sha256) const;   // used now (nothing if it is not stored)
+  bool remove(const std::string& sha256) const;  // false if it was not stored
 
  private:
   std::string dir_;

@@ -6,9 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -66,6 +68,8 @@ class CoreBench {
     o.clock = [this] { return now; };
     o.limits = limits;
     o.verify_fraction = verify_fraction;
+    o.keep_finished_seconds = keep_finished;
+    o.blob_grace_seconds = blob_grace;
     core_ = std::make_unique<Coordinator>(o);
   }
 
@@ -137,6 +141,7 @@ class CoreBench {
   int scene_checks = 0;  // calls of the scene checker, over every start
   JobLimits limits;  // for the next start()
   double verify_fraction = 0;
+  double keep_finished = 7 * 86400.0, blob_grace = 3600;  // retention, for the next start()
   std::string scene_file;  // the scene results are rendered from ("": the submitted one)
 
   // A copy of the submitted scene with `from` replaced by `to` in its scene file, its bundle
@@ -362,6 +367,97 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
   for (const char* w : {"w1", "w2", "w3"})
     EXPECT_NE(s.error.find(std::string("out of memory on ") + w), std::string::npos) << s.error;
   EXPECT_FALSE(bench.core().lease(bench.worker("w4")).task) << "a failed job hands out nothing";
+}
+
+double unix_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// The bytes of the files under `dir` (each file once: bundles are hard links of blobs).
+uint64_t disk_bytes(const std::string& dir) {
+  std::set<std::pair<dev_t, ino_t>> seen;
+  uint64_t total = 0;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::end(it);
+       it.increment(ec)) {
+    struct stat st {};
+    if (::lstat(it->path().c_str(), &st) == 0 && S_ISREG(st.st_mode) &&
+        seen.insert({st.st_dev, st.st_ino}).second)
+      total += uint64_t(st.st_size);
+  }
+  return total;
+}
+
+// Retention: finished jobs expire once --keep-finished has passed since they ended (a queued one
+// never does), their folders go and their ids answer "expired" to their tenant ("no job" to
+// others); blobs no job references go once their grace period passed since they were last
+// stored or asked for. The job and blob folders are back to their bytes before the jobs, across
+// a restart in the middle of a cleanup (a job's folder renamed, the point of no return, and the
+// process gone before the rest).
+TEST(CoordinatorCore, RetentionExpiresFinishedJobsAndCollectsBlobsNoJobUses) {
+  CoreBench bench("core-retention");
+  bench.keep_finished = 100;
+  bench.blob_grace = 50;
+  bench.start("A");
+  const std::string jobs_dir = bench.state_dir() + "/jobs",
+                    blobs_dir = bench.state_dir() + "/blobs";
+  const uint64_t jobs0 = disk_bytes(jobs_dir), blobs0 = disk_bytes(blobs_dir);
+  const Caller shot1{"alice", "shot1", false}, shot2{"bob", "shot2", false};
+  const std::string done = bench.submit(1, shot1);
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(bench.complete(bench.lease("w"), 1.0f));
+  ASSERT_EQ(bench.core().status(done).state, JobState::Completed);
+  const std::string cancelled = bench.submit(1, shot1);
+  bench.core().cancel(cancelled);
+  const std::string interrupted = bench.submit(1, shot1);
+  bench.core().cancel(interrupted);
+  const std::string queued = bench.submit(1, shot1);
+  EXPECT_GT(disk_bytes(jobs_dir), jobs0);
+  EXPECT_GT(disk_bytes(blobs_dir), blobs0);
+
+  const double t0 = unix_now();
+  Coordinator::Collected c = bench.core().collect(t0 + 50);
+  EXPECT_EQ(c.jobs_expired, 0u) << "kept for 100 s";
+  // The restart in the middle of a cleanup: one job's folder renamed with its expiry time, as
+  // remove_job leaves it at its point of no return, and the process stopped.
+  bench.stop();
+  fs::rename(jobs_dir + "/" + interrupted, jobs_dir + "/.deleted-" + interrupted);
+  test::write_text(jobs_dir + "/.deleted-" + interrupted + "/expired",
+                   std::to_string(int64_t(t0 + 60)));
+  bench.start("B");
+  EXPECT_FALSE(fs::exists(jobs_dir + "/.deleted-" + interrupted)) << "finished at the start";
+  std::string why = refusal_message([&] { bench.core().status(interrupted, shot1); });
+  EXPECT_NE(why.find("expired at"), std::string::npos) << why;
+
+  c = bench.core().collect(t0 + 101);
+  EXPECT_EQ(c.jobs_expired, 2u);
+  EXPECT_EQ(c.blobs_removed, 0u) << "the queued job uses them";
+  for (const std::string& id : {done, cancelled}) {
+    EXPECT_FALSE(fs::exists(jobs_dir + "/" + id));
+    why = refusal_message([&] { bench.core().status(id, shot1); });
+    EXPECT_NE(why.find("job " + id + " expired at"), std::string::npos) << why;
+    EXPECT_NE(why.find("--keep-finished"), std::string::npos) << why;
+    EXPECT_EQ(refusal([&] { bench.core().fetch(id, 1, shot1); }), ErrorCode::NotFound);
+    why = refusal_message([&] { bench.core().status(id, shot2); });
+    EXPECT_EQ(why, "no job '" + id + "'") << "another tenant learns nothing";
+  }
+  EXPECT_EQ(bench.core().status(queued).state, JobState::Queued) << "only finished jobs expire";
+
+  // The queued job deleted, its blobs are no job's: gone once their grace period passed.
+  bench.core().delete_job(queued, true);
+  const std::string fresh = bench.core().put_blob("a blob uploaded for a submit to come", shot1);
+  c = bench.core().collect(unix_now() + 10);
+  EXPECT_EQ(c.blobs_removed, 0u) << "within 50 s of their upload (and of a MissingBlobs)";
+  EXPECT_TRUE(bench.core().missing_blobs({fresh}, shot1).empty());
+  c = bench.core().collect(unix_now() + 51);
+  EXPECT_GT(c.blobs_removed, 1u);
+  EXPECT_EQ(bench.core().missing_blobs({fresh}, shot1), std::vector<std::string>{fresh});
+  EXPECT_EQ(disk_bytes(jobs_dir), jobs0);
+  EXPECT_EQ(disk_bytes(blobs_dir), blobs0);
+  // Jobs submitted after, and a restart, see none of it.
+  bench.start("C");
+  const std::string again = bench.submit(1, shot1);
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(bench.complete(bench.lease("w"), 1.0f));
+  EXPECT_EQ(bench.core().status(again, shot1).state, JobState::Completed);
 }
 
 // `requeue`: frame 2 of a running job renders again from a new scene version; a lease of its old

@@ -865,6 +865,43 @@ TEST(Farm, ARequeuedFrameEqualsTheLocalRenderOfTheNewScene) {
   expect_same_image(farm.fetched(job, 2), farm.local(blue + "/scene.json" + settings, 2));
 }
 
+// Retention with real processes: with --keep-finished 2s and --blob-grace 2s, a completed job
+// expires within the coordinator's sweep (every second here): `status` and `fetch` answer that it
+// expired (exit 2), its folder and its blobs are gone (the state's job and blob folders hold no
+// file), and the answer outlives a restart.
+TEST(Farm, FinishedJobsExpireAndTheirFilesGo) {
+  Farm farm("farm-retention", 30, "", {"--keep-finished", "2s", "--blob-grace", "2s"});
+  const std::string job = farm.submit(kCornell + " --spp 4 --passes 1 --res 16x16");
+  farm.worker();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  test::CommandResult r;
+  for (int i = 0; i < 100; ++i) {  // 2 s to expire, a sweep a second: well within 10 s
+    r = farm.client("status " + job);
+    if (r.exit_code != 0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("job " + job + " expired at"), std::string::npos) << r.output;
+  r = farm.client("fetch " + job + " -o " + farm.dir() + "/out");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("expired at"), std::string::npos) << r.output;
+  auto files_under = [](const std::string& dir) {
+    size_t n = 0;
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::end(it);
+         it.increment(ec))
+      n += it->is_regular_file();
+    return n;
+  };
+  for (int i = 0; i < 100 && files_under(farm.dir() + "/state/blobs") > 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  EXPECT_EQ(files_under(farm.dir() + "/state/blobs"), 0u);
+  EXPECT_EQ(files_under(farm.dir() + "/state/jobs"), 0u);
+  farm.restart_coordinator();
+  r = farm.client("status " + job);
+  EXPECT_NE(r.output.find("expired at"), std::string::npos) << r.output;
+}
+
 // `delete` with real processes: a queued job is refused without --force (exit 1) and deleted with
 // it; a completed job's folder goes, and neither comes back after a coordinator restart (status:
 // NOT_FOUND, exit 2).

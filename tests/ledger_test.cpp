@@ -46,6 +46,9 @@ class TestStore final : public JobStore {
   bool blob_tenant(const std::string& t, const std::string& d) const override {
     return inner_->blob_tenant(t, d);
   }
+  std::optional<Tombstone> tombstone(const std::string& j) const override {
+    return inner_->tombstone(j);
+  }
   void for_each_lease(const std::string& j,
                       const std::function<void(const StoredLease&)>& f) const override {
     inner_->for_each_lease(j, f);
