@@ -20,6 +20,7 @@
 // - the valid job's spp not equal to its merged passes times the samples per pass.
 #include <unistd.h>
 
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -132,7 +133,7 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
-constexpr int kRequests = 23;  // the operations of Farm::request
+constexpr int kRequests = 24;  // the operations of Farm::request
 
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
@@ -363,6 +364,19 @@ class Farm {
         else if (how & 4)
           scene = SceneVersion{in.str(), {{in.str(32), in.str(64)}}, ""};
         core_->requeue(job, frames, scene, how & 8 ? in.str(16) : "", caller);
+        return;
+      }
+      case 23: {  // retention, up to 255 days ahead (finished jobs expire after 7, blobs after 1 h)
+        const double ahead = in.byte() * 86400.0 + in.byte() * 60.0;
+        core_->collect(
+            std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+                .count() +
+            ahead);
+        try {
+          core_->status(job0_, kCallers[0]);
+        } catch (const CoordinatorError& e) {
+          if (e.code == ErrorCode::NotFound) job0_deleted_ = true;  // it expired
+        }
         return;
       }
       case 15: {  // a new priority, any 32-bit value
