@@ -61,6 +61,28 @@ double duration_option(const std::string& name, const std::string& v, bool never
   return n * scale;
 }
 
+// A size in bytes, with an optional binary unit (K, M, G, T).
+uint64_t byte_size_option(const std::string& name, const std::string& v) {
+  size_t end = 0;
+  unsigned long long n = 0;
+  bool ok = !v.empty() && std::isdigit(static_cast<unsigned char>(v[0]));
+  try {
+    if (ok) n = std::stoull(v, &end);
+  } catch (const std::exception&) {
+    ok = false;
+  }
+  const std::string unit = ok ? v.substr(end) : "";
+  const int shift = unit.empty()  ? 0
+                    : unit == "K" ? 10
+                    : unit == "M" ? 20
+                    : unit == "G" ? 30
+                    : unit == "T" ? 40
+                                  : -1;
+  if (!ok || shift < 0 || (shift > 0 && n > (~0ull >> shift)))
+    throw CLI::ValidationError(name, "'" + v + "' is not a size (bytes, or 512M, 20G, 1T)");
+  return uint64_t(n) << shift;
+}
+
 }  // namespace
 
 void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
@@ -195,6 +217,13 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   worker->add_option("--coordinator", shared.coordinator,
                      "coordinator address (default: $RAYFARM_COORDINATOR, else 127.0.0.1:7070)");
   worker->add_option("--cache-dir", wo->cache_dir, "blob cache (default ~/.cache/rayfarm)");
+  worker
+      ->add_option_function<std::string>(
+          "--cache-bytes",
+          [wo](const std::string& v) { wo->cache_bytes = byte_size_option("--cache-bytes", v); },
+          "bound of the blob cache: least recently used scene files are removed beyond it "
+          "(bytes, or with K, M, G, T; 0: no bound; default 20G)")
+      ->default_str("20G");
   worker
       ->add_option("--drain-seconds", wo->drain_seconds,
                    "on SIGTERM, finish the task in flight if done within this, else hand it back")

@@ -8,6 +8,7 @@
 
 #include <signal.h>
 #include <unistd.h>
+#include "farm/blob_store.h"
 #include "farm/chunking.h"
 #include "farm/probe.h"
 #include "proto/rayfarm.grpc.pb.h"
@@ -818,6 +819,50 @@ TEST(Farm, ARetriedJobRendersItsFramesAgainAndEqualsTheLocalRender) {
       << r.output;
 }
 
+// A copy of the Cornell box in `dir` with its left wall blue instead of red; returns `dir`.
+std::string blue_cornell(const std::string& dir) {
+  fs::copy(fs::path(test::source_dir() + "/" + kCornell).parent_path(), dir,
+           fs::copy_options::recursive);
+  std::string text = read_file_bytes(dir + "/scene.json");
+  EXPECT_NE(text.find("[0.63, 0.065, 0.05]"), std::string::npos);
+  text.replace(text.find("[0.63, 0.065, 0.05]"), 19, "[0.05, 0.065, 0.63]");
+  test::write_text(dir + "/scene.json", text);
+  return dir;
+}
+
+// A worker's blob cache stays within --cache-bytes: with a bound below one scene's bundle, after
+// jobs of two scenes it holds exactly the blobs of the scene it set up last (the bundle being set
+// up is never evicted), and both jobs equal their local renders.
+TEST(Farm, AWorkersBlobCacheStaysWithinItsBound) {
+  Farm farm("farm-cache");
+  const std::string settings = " --spp 4 --passes 1 --res 16x16";
+  const std::string blue = blue_cornell(farm.dir() + "/blue") + "/scene.json";
+  const std::string red_job = farm.submit(kCornell + settings);
+  const std::string blue_job = farm.submit(blue + settings);
+  Process& w = farm.worker({"--exit-when-idle", "--cache-bytes", "1"});
+  ASSERT_EQ(farm.client("watch " + red_job).exit_code, 0);
+  ASSERT_EQ(farm.client("watch " + blue_job).exit_code, 0);
+  ASSERT_EQ(w.wait(60), 0) << w.log();
+  EXPECT_NE(w.log().find("blob cache: removed"), std::string::npos) << w.log();
+  std::set<std::string> cached;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(farm.dir() + "/cache/blobs", ec);
+       !ec && it != fs::end(it); it.increment(ec))
+    if (it->is_regular_file()) cached.insert(it->path().filename().string());
+  auto digests = [](const std::string& scene) {
+    std::set<std::string> out;
+    for (const BundleEntry& e : bundle_of_scene(scene)) out.insert(e.sha256);
+    return out;
+  };
+  const std::set<std::string> red = digests(test::source_dir() + "/" + kCornell),
+                              blue_set = digests(blue);
+  EXPECT_TRUE(cached == red || cached == blue_set) << cached.size() << " blobs cached";
+  for (const auto& [job, scene] : {std::pair{red_job, kCornell}, std::pair{blue_job, blue}}) {
+    ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+    expect_same_image(farm.fetched(job, 0), farm.local(scene + settings, 0));
+  }
+}
+
 // `requeue` with real processes: a completed job's frame 2 renders again from a fixed scene (its
 // bundle uploaded by the CLI), across a coordinator restart; the fetched frames equal the local
 // renders of the scene each was rendered from, with the job's settings and seed. A frame the job
@@ -829,14 +874,8 @@ TEST(Farm, ARequeuedFrameEqualsTheLocalRenderOfTheNewScene) {
   farm.worker();
   ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
   // The fixed scene: the left wall blue instead of red.
-  const std::string blue = farm.dir() + "/blue";
-  fs::copy(fs::path(test::source_dir() + "/" + kCornell).parent_path(), blue,
-           fs::copy_options::recursive);
-  std::string text = read_file_bytes(blue + "/scene.json");
-  ASSERT_NE(text.find("[0.63, 0.065, 0.05]"), std::string::npos);
-  text.replace(text.find("[0.63, 0.065, 0.05]"), 19, "[0.05, 0.065, 0.63]");
-  test::write_text(blue + "/scene.json", text);
-  std::string light = text;
+  const std::string blue = blue_cornell(farm.dir() + "/blue");
+  std::string light = read_file_bytes(blue + "/scene.json");
   light.replace(light.find("\"type\": \"path\""), 14, "\"type\": \"light\"");
   test::write_text(blue + "/light.json", light);
 

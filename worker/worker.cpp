@@ -217,11 +217,15 @@ class Worker {
 
   struct CachedScene {
     std::string key;
+    std::string dir;  // its bundle's layout (hard links into the blob cache)
     std::unique_ptr<Scene> scene;
     std::unique_ptr<Renderer> renderer;
   };
   std::deque<CachedScene> scenes_;  // most recently used first
   std::set<std::string> verified_;  // blob digests checked against their content
+  // Keeps the blob cache within WorkerOptions::cache_bytes: the least recently used blobs go
+  // first, never those of `keep` (the bundle being set up).
+  void bound_cache(const std::vector<BundleEntry>& keep);
   // The previous task's upload runs while the next task renders, hiding the round trip and the
   // coordinator's durable write. At most one upload is in flight.
   std::thread uploader_;
@@ -370,6 +374,31 @@ void Worker::fetch_blob(const std::string& sha256) {
   blobs_.put(chunks.take(), sha256);
 }
 
+void Worker::bound_cache(const std::vector<BundleEntry>& keep) {
+  if (o_.cache_bytes == 0) return;
+  std::vector<BlobStore::Entry> all = blobs_.list();
+  uint64_t total = 0;
+  for (const BlobStore::Entry& e : all) total += e.bytes;
+  if (total <= o_.cache_bytes) return;
+  std::set<std::string> kept;
+  for (const BundleEntry& e : keep) kept.insert(e.sha256);
+  std::sort(all.begin(), all.end(),
+            [](const auto& a, const auto& b) { return a.used_unix < b.used_unix; });
+  uint64_t removed = 0, bytes = 0;
+  for (const BlobStore::Entry& e : all) {
+    if (total <= o_.cache_bytes) break;
+    if (kept.count(e.sha256) || !blobs_.remove(e.sha256)) continue;
+    total -= e.bytes;
+    bytes += e.bytes;
+    ++removed;
+    verified_.erase(e.sha256);
+  }
+  spdlog::info(
+      "blob cache: removed {} blobs ({} bytes), least recently used first, to hold at "
+      "most {} bytes (--cache-bytes); {} bytes cached",
+      removed, bytes, o_.cache_bytes, total);
+}
+
 Renderer& Worker::prepare(const pb::Task& task) {
   std::string files;
   std::vector<BundleEntry> bundle;
@@ -392,26 +421,37 @@ Renderer& Worker::prepare(const pb::Task& task) {
       }
       return *scenes_.front().renderer;
     }
-  for (const BundleEntry& e : bundle) {
-    // A cached blob is checked once per process: a corrupted cache is fetched again, not rendered.
-    if (blobs_.has(e.sha256) && !verified_.count(e.sha256)) {
-      std::optional<std::string> bytes = blobs_.get(e.sha256);
-      if (!bytes || sha256_hex(*bytes) != e.sha256) {
-        spdlog::warn("cached blob {} is corrupted; fetching it again", e.sha256);
-        fs::remove(blobs_.path_of(e.sha256));
-      }
-    }
-    if (!blobs_.has(e.sha256)) fetch_blob(e.sha256);
-    verified_.insert(e.sha256);
-  }
   // One directory per bundle and process: workers sharing a cache never write the same files.
   std::string dir =
       cache_dir_ + "/bundles/" + sha256_hex(files).substr(0, 16) + "-" + std::to_string(::getpid());
-  try {
-    blobs_.materialize(bundle, dir);
-  } catch (const std::exception& e) {
-    throw TaskFailure(e.what());
+  // Twice at most: another worker sharing the cache may evict a blob between its fetch and the
+  // layout (BlobError names it); it is fetched again.
+  for (int attempt = 0;; ++attempt) {
+    for (const BundleEntry& e : bundle) {
+      // A cached blob is checked once per process: a corrupted cache is fetched again, not
+      // rendered.
+      if (blobs_.has(e.sha256) && !verified_.count(e.sha256)) {
+        std::optional<std::string> bytes = blobs_.get(e.sha256);
+        if (!bytes || sha256_hex(*bytes) != e.sha256) {
+          spdlog::warn("cached blob {} is corrupted; fetching it again", e.sha256);
+          fs::remove(blobs_.path_of(e.sha256));
+        }
+      }
+      if (!blobs_.has(e.sha256)) fetch_blob(e.sha256);
+      blobs_.touch(e.sha256);  // used now: the last to be evicted
+      verified_.insert(e.sha256);
+    }
+    try {
+      blobs_.materialize(bundle, dir);
+      break;
+    } catch (const BlobError& e) {
+      if (attempt > 0) throw TaskFailure(e.what());
+      for (const BundleEntry& b : bundle) verified_.erase(b.sha256);
+    } catch (const std::exception& e) {
+      throw TaskFailure(e.what());
+    }
   }
+  bound_cache(bundle);
   SceneOverrides ov = to_scene_overrides(task.overrides());
   CachedScene c;
   c.key = key;
@@ -429,8 +469,18 @@ Renderer& Worker::prepare(const pb::Task& task) {
   spdlog::info("scene {} ({}): {} in {:.2f} s", task.scene_path(), c.scene->digest.substr(0, 12),
                geometry_moves(*c.scene) ? "renderer set up (a BVH per frame)" : "BVH built",
                std::chrono::duration<double>(Clock::now() - t0).count());
+  c.dir = dir;
   scenes_.push_front(std::move(c));
-  while (scenes_.size() > kScenesKept) scenes_.pop_back();
+  while (scenes_.size() > kScenesKept) {
+    // Its layout goes with it (the hard links would keep evicted blobs on disk), unless a scene
+    // kept shares it (the same bundle with other settings).
+    const std::string old = scenes_.back().dir;
+    scenes_.pop_back();
+    bool shared = false;
+    for (const CachedScene& s : scenes_) shared |= s.dir == old;
+    std::error_code ec;
+    if (!shared) fs::remove_all(old, ec);
+  }
   return *scenes_.front().renderer;
 }
 

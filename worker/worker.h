@@ -22,6 +22,9 @@ struct WorkerOptions {
   std::string coordinator = "127.0.0.1:7070";
   ClientCredentials creds;  // token and TLS material (farm/channel.h)
   std::string cache_dir;    // default: $XDG_CACHE_HOME/rayfarm or ~/.cache/rayfarm
+  // The blob cache's bound: after each new scene, the least recently used blobs go until the
+  // cache holds at most this many bytes (never the blobs of the scene being set up). 0: no bound.
+  uint64_t cache_bytes = uint64_t(20) << 30;
   double drain_seconds = 60;
   bool exit_when_idle = false;
   double idle_poll_seconds = 1;
