@@ -333,6 +333,7 @@ CoordinatorMetrics Coordinator::metrics() const {
   m.counters.calls_refused = refused_calls_;
   m.counters.refusal_lines_suppressed = suppressed_refusal_lines_;
   m.storage_ok = storage_problem_.empty();
+  m.blob_store_bytes = blob_store_bytes_;
   m.pools[kAnyPool];  // always shown, 0 when idle
   for (const auto& [id, w] : workers_) m.workers_registered += !outvoted_.count(id);
   for (const auto& [id, seen] : last_seen_)

@@ -194,6 +194,9 @@ struct CoordinatorMetrics {
     std::vector<uint64_t> lease_buckets;  // per bound of kLeaseBuckets (not cumulative)
     uint64_t calls_refused = 0;           // calls the service's gate refused (tokens, roles)
     uint64_t refusal_lines_suppressed = 0;  // of those, not logged (the log's rate limit)
+    uint64_t jobs_expired = 0;              // finished jobs retention removed (--keep-finished)
+    uint64_t blobs_collected = 0;           // blobs no job referenced, removed
+    uint64_t blob_bytes_collected = 0;
   };
   static constexpr double kLeaseBuckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
                                              0.05,   0.1,   0.25,   0.5,   1,    2.5};
@@ -219,6 +222,7 @@ struct CoordinatorMetrics {
   size_t jobs_by_state[6] = {};  // indexed by JobState
   std::vector<Job> jobs;         // queued and running
   bool storage_ok = true;
+  uint64_t blob_store_bytes = 0;  // the scene blobs stored, as of the last retention pass
 };
 
 struct CoreOptions {
@@ -543,6 +547,7 @@ class Coordinator {
   uint64_t next_seq_ = 1, next_worker_ = 1, next_staging_ = 1;
   CoordinatorMetrics::Counters counters_;            // under mu_
   std::atomic<uint64_t> refused_calls_{0}, suppressed_refusal_lines_{0};
+  uint64_t blob_store_bytes_ = 0;                    // under mu_: as of the last retention pass
   mutable std::map<std::string, double> last_seen_;  // worker id -> now() of its last call
 };
 

@@ -90,6 +90,17 @@ std::vector<MetricFamily> metric_families(const CoordinatorMetrics& m) {
                        double(m.workers_registered)));
   out.push_back(single("rayfarm_workers_connected", "Workers heard from within one lease time", G,
                        double(m.workers_connected)));
+  out.push_back(single("rayfarm_jobs_expired_total",
+                       "Finished jobs removed by retention (--keep-finished)", C,
+                       double(c.jobs_expired)));
+  out.push_back(single("rayfarm_blobs_collected_total",
+                       "Scene blobs no job referenced, removed after --blob-grace", C,
+                       double(c.blobs_collected)));
+  out.push_back(single("rayfarm_blob_collected_bytes_total", "Bytes of the blobs collected", C,
+                       double(c.blob_bytes_collected)));
+  out.push_back(single("rayfarm_blob_store_bytes",
+                       "Bytes of scene blobs stored, as of the last retention pass", G,
+                       double(m.blob_store_bytes)));
   out.push_back(single("rayfarm_storage_ok",
                        "1 while the coordinator can store results, 0 while it cannot (disk full)",
                        G, m.storage_ok ? 1 : 0));

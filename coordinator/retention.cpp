@@ -146,17 +146,24 @@ Coordinator::Collected Coordinator::collect(double unix_now) {
         for (const BundleEntry& f : job->files_of(v)) referenced.insert(f.sha256);
   }
   std::vector<StoreWrite> forget;
+  uint64_t stored = 0;
   for (const BlobStore::Entry& b : blobs_.list()) {
+    stored += b.bytes;
     if (referenced.count(b.sha256) || b.used_unix + options_.blob_grace_seconds > unix_now)
       continue;
     if (!blobs_.remove(b.sha256)) continue;
+    stored -= b.bytes;
     forget.push_back(store::ForgetBlob{b.sha256});
     ++out.blobs_removed;
     out.blob_bytes_removed += b.bytes;
   }
-  if (!forget.empty()) {
+  {
     std::lock_guard lock(mu_);
-    journal_->append(std::move(forget));  // a lost row only names a blob that is gone
+    if (!forget.empty()) journal_->append(std::move(forget));  // a lost row names a blob gone
+    counters_.jobs_expired += out.jobs_expired;
+    counters_.blobs_collected += out.blobs_removed;
+    counters_.blob_bytes_collected += out.blob_bytes_removed;
+    blob_store_bytes_ = stored;
   }
   if (out.jobs_expired || out.blobs_removed)
     spdlog::info("retention: {} jobs expired, {} blobs ({} bytes) no job references removed",

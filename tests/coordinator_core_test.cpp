@@ -430,6 +430,8 @@ TEST(CoordinatorCore, RetentionExpiresFinishedJobsAndCollectsBlobsNoJobUses) {
 
   c = bench.core().collect(t0 + 101);
   EXPECT_EQ(c.jobs_expired, 2u);
+  EXPECT_EQ(bench.core().metrics().counters.jobs_expired, 2u);
+  EXPECT_GT(bench.core().metrics().blob_store_bytes, 0u);
   EXPECT_EQ(c.blobs_removed, 0u) << "the queued job uses them";
   for (const std::string& id : {done, cancelled}) {
     EXPECT_FALSE(fs::exists(jobs_dir + "/" + id));
@@ -453,6 +455,7 @@ TEST(CoordinatorCore, RetentionExpiresFinishedJobsAndCollectsBlobsNoJobUses) {
   EXPECT_EQ(bench.core().missing_blobs({fresh}, shot1), std::vector<std::string>{fresh});
   EXPECT_EQ(disk_bytes(jobs_dir), jobs0);
   EXPECT_EQ(disk_bytes(blobs_dir), blobs0);
+  EXPECT_EQ(bench.core().metrics().blob_store_bytes, blobs0);
   // Jobs submitted after, and a restart, see none of it.
   bench.start("C");
   const std::string again = bench.submit(1, shot1);

@@ -103,6 +103,8 @@ TEST(Metrics, ASnapshotBecomesFamiliesWithJobSeriesOnlyForLiveJobs) {
   m.counters.lease_buckets[4] = 1;  // <= 10 ms
   m.tasks_queued = 5;
   m.tasks_paused = 3;
+  m.counters.jobs_expired = 4;
+  m.blob_store_bytes = 1234;
   m.jobs_by_state[size_t(JobState::Running)] = 1;
   CoordinatorMetrics::Job j;
   j.job_id = "j000004";
@@ -127,6 +129,8 @@ TEST(Metrics, ASnapshotBecomesFamiliesWithJobSeriesOnlyForLiveJobs) {
   EXPECT_EQ(by_name["rayfarm_tasks_leased_total"]->metric.at(0).counter.value, 7);
   EXPECT_EQ(by_name["rayfarm_tasks_queued"]->metric.at(0).gauge.value, 5);
   EXPECT_EQ(by_name["rayfarm_tasks_paused"]->metric.at(0).gauge.value, 3);
+  EXPECT_EQ(by_name["rayfarm_jobs_expired_total"]->metric.at(0).counter.value, 4);
+  EXPECT_EQ(by_name["rayfarm_blob_store_bytes"]->metric.at(0).gauge.value, 1234);
   const auto& pools = by_name["rayfarm_pool_tasks_queued"]->metric;  // by pool name
   ASSERT_EQ(pools.size(), 2u);
   EXPECT_EQ(pools[0].label.at(0).value, "any");
