@@ -171,6 +171,18 @@ TEST(Cli, BadArgumentsAreNamed) {
   r = test::run_command(cli("render scenes/nope/missing.json -o /tmp/x.exr"));
   EXPECT_NE(r.exit_code, 0);
   EXPECT_NE(r.output.find("missing.json"), std::string::npos) << r.output;
+  // Durations and sizes (retention, the worker's cache) name the flag and what they take.
+  for (const std::string& bad :
+       {std::string("coordinator --state-dir /tmp/x --keep-finished 7x"),
+        std::string("coordinator --state-dir /tmp/x --keep-finished -1d"),
+        std::string("coordinator --state-dir /tmp/x --blob-grace never"),
+        std::string("worker --cache-bytes 20GB"), std::string("worker --cache-bytes -5")}) {
+    r = test::run_command(cli(bad));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    const std::string flag = bad.substr(bad.rfind("--"), bad.rfind(' ') - bad.rfind("--"));
+    EXPECT_NE(r.output.find(flag), std::string::npos) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find("is not a"), std::string::npos) << bad << ": " << r.output;
+  }
 }
 
 // Exit codes are 0, 1 (failure at run time), 2 (bad usage, parse errors included) for every
