@@ -260,6 +260,24 @@ void Coordinator::restore(const StoredJob& stored) {
     if (!terminal(job->state) && ledger_->scheduler().job_failed(job->id))
       set_state(*job, JobState::Failed, ledger_->scheduler().job_error(job->id));
     for (auto& f : job->frames) resume_frame(*job, *f);
+    // A job stored by a build before the CPU kind pin, whose checkpoints hold merged passes: their
+    // kind is its pin (a frame merges results of one kind only), when they agree on one.
+    if (!terminal(job->state) && job->cpu_kind.empty()) {
+      std::string kind;
+      bool one = true;
+      for (auto& f : job->frames) {
+        if (!f->acc || f->acc->passes_merged() == 0) continue;
+        const std::string& k = f->acc->frame().header.isa;
+        if (k.empty() || k.rfind("mixed:", 0) == 0 || (!kind.empty() && k != kind)) one = false;
+        kind = k;
+      }
+      if (one && !kind.empty()) {
+        job->cpu_kind = kind;
+        journal_->append({store::SetBuild{job->id, job->build_id, kind}});
+        spdlog::info("job {}: pinned to the CPU kind its merged passes were rendered on ({})",
+                     job->id, kind);
+      }
+    }
   } catch (const std::exception& e) {  // bad_alloc included: one job never stops the others
     if (job) ledger_->drop_job(job->id);
     return restore_failed(stored, e.what());

@@ -125,6 +125,7 @@ class CoreBench {
     return encode_buffer(result_buffer(a, value));
   }
   const std::string& state_dir() const { return state_; }
+  JobStore& store() { return *store_; }  // the memory store (Store::Memory)
   void stop() { core_.reset(); }
 
   bool complete(const TaskAssignment& a, float value, const std::string& worker = "w") {
@@ -371,6 +372,23 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
 
 double unix_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// A job stored without a CPU kind pin (by a build before it) whose checkpoints hold merged passes
+// takes their kind as its pin at the restart, so a worker of another kind gets none of its tasks.
+TEST(CoordinatorCore, AJobStoredWithoutAKindPinTakesItsCheckpointsKind) {
+  CoreBench bench("core-kind-restore");
+  const std::string job = bench.submit(2);
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(bench.complete(bench.lease("w"), 1.0f));  // pass 0
+  ASSERT_EQ(bench.core().status(job).cpu_kind, cpu_isa());
+  bench.stop();
+  bench.store().write(store::SetBuild{job, "", ""});  // as an earlier build stored it
+  bench.start("B");
+  EXPECT_EQ(bench.core().status(job).cpu_kind, cpu_isa());
+  WorkerInfo other{"other", 1, build_id(), "x86_64-other-kind"};
+  const std::string w = bench.core().register_worker(other).worker_id;
+  EXPECT_FALSE(bench.core().lease(w).task) << "a worker of another kind gets none of its tasks";
+  EXPECT_TRUE(bench.core().lease(bench.worker("w")).task);
 }
 
 // The bytes of the files under `dir` (each file once: bundles are hard links of blobs).
