@@ -226,6 +226,27 @@ JobSpec job_spec(const SubmitArgs& a) {
   return spec;
 }
 
+// Writes `first` (Submit's spec, RequeueJob's request), then the bundle's files the coordinator
+// lacks (each once) as blob chunks, and finishes the stream.
+template <class Message, class Writer>
+grpc::Status stream_bundle(Writer& w, const Message& first, const std::vector<BundleEntry>& files,
+                           const fs::path& dir, std::set<std::string> missing) {
+  bool ok = w.Write(first);
+  for (const BundleEntry& f : files) {
+    if (!ok || !missing.count(f.sha256)) continue;
+    missing.erase(f.sha256);
+    std::string bytes = read_file_bytes((dir / f.path).string());
+    for_each_chunk(bytes, [&](pb::Chunk&& c) {
+      if (!ok) return;
+      Message m;
+      *m.mutable_blob_chunk() = std::move(c);
+      ok = w.Write(m);
+    });
+  }
+  if (ok) w.WritesDone();
+  return w.Finish();
+}
+
 // Streams the spec, then the bundle's files the coordinator lacks (each once), in chunks.
 grpc::Status upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const fs::path& dir,
                         std::set<std::string> missing, double seconds, std::string* job_id) {
@@ -235,20 +256,7 @@ grpc::Status upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const f
   auto w = stub.Submit(&ctx, &resp);
   pb::SubmitRequest first;
   *first.mutable_spec() = to_wire(spec);
-  bool ok = w->Write(first);
-  for (const BundleEntry& f : spec.files) {
-    if (!ok || !missing.count(f.sha256)) continue;
-    missing.erase(f.sha256);
-    std::string bytes = read_file_bytes((dir / f.path).string());
-    for_each_chunk(bytes, [&](pb::Chunk&& c) {
-      if (!ok) return;
-      pb::SubmitRequest m;
-      *m.mutable_blob_chunk() = std::move(c);
-      ok = w->Write(m);
-    });
-  }
-  if (ok) w->WritesDone();
-  grpc::Status s = w->Finish();
+  grpc::Status s = stream_bundle(*w, first, spec.files, dir, std::move(missing));
   *job_id = resp.job_id();
   return s;
 }
@@ -652,21 +660,8 @@ int cmd_requeue(const Endpoint& ep, const std::string& job, const std::string& f
     auto w = stub->RequeueJob(&ctx, &status);
     pb::RequeueMessage first;
     *first.mutable_request() = req;
-    bool ok = w->Write(first);
-    const fs::path dir = fs::path(scene).parent_path();
-    for (const BundleEntry& f : files) {
-      if (!ok || !missing.count(f.sha256)) continue;
-      missing.erase(f.sha256);
-      std::string bytes = read_file_bytes((dir / f.path).string());
-      for_each_chunk(bytes, [&](pb::Chunk&& c) {
-        if (!ok) return;
-        pb::RequeueMessage m;
-        *m.mutable_blob_chunk() = std::move(c);
-        ok = w->Write(m);
-      });
-    }
-    if (ok) w->WritesDone();
-    grpc::Status s = w->Finish();
+    grpc::Status s =
+        stream_bundle(*w, first, files, fs::path(scene).parent_path(), std::move(missing));
     if (s.ok()) {
       uint32_t version = 0;  // the newest, which this requeue added
       for (const pb::FrameStatus& f : status.frames())
