@@ -23,6 +23,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include "coordinator/errors.h"
@@ -548,6 +549,11 @@ class Coordinator {
   CoordinatorMetrics::Counters counters_;            // under mu_
   std::atomic<uint64_t> refused_calls_{0}, suppressed_refusal_lines_{0};
   uint64_t blob_store_bytes_ = 0;                    // under mu_: as of the last retention pass
+  // Blob digest -> the scene versions of jobs held that name it (retention collects a blob only
+  // once this is 0 and its grace period passed). Under mu_; rebuilt from the jobs at a start.
+  std::unordered_map<std::string, int64_t> blob_refs_;
+  // Counts the blobs of the job's scene versions from `from_version` on: +1 (held), -1 (gone).
+  void reference_blobs(const JobRecord& job, uint32_t from_version, int delta);  // under mu_
   mutable std::map<std::string, double> last_seen_;  // worker id -> now() of its last call
 };
 

@@ -512,6 +512,7 @@ std::string Coordinator::submit(const JobSpec& spec, const Caller& caller) {
   std::lock_guard lock(mu_);
   ledger_->add_job(*job);
   jobs_[id] = job;
+  reference_blobs(*job, 0, +1);
   ++version_;
   changed_.notify_all();
   spdlog::info("job {} submitted by {}{}: {} frames x {} passes x {} tiles ({})", id,

@@ -283,6 +283,7 @@ void Coordinator::restore(const StoredJob& stored) {
     return restore_failed(stored, e.what());
   }
   jobs_[job->id] = job;
+  reference_blobs(*job, 0, +1);
   spdlog::info("restored job {} ({}), {} tasks done in the database", job->id,
                job_state_name(job->state), store_->tasks_done(job->id));
 }
@@ -298,6 +299,7 @@ void Coordinator::restore_failed(const StoredJob& stored, const std::string& why
   job->state = JobState(stored.state);
   job->error = stored.error;
   jobs_[job->id] = job;
+  reference_blobs(*job, 0, +1);
   spdlog::error("job {}: cannot be restored: {}", stored.id, why);
   if (!terminal(job->state))
     set_state(*job, JobState::Failed, "the coordinator could not restore it: " + why);

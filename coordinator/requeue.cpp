@@ -150,6 +150,7 @@ void Coordinator::requeue(const std::string& id, const std::string& frames,
       refuse(ErrorCode::Unavailable, std::string("cannot store the requeue: ") + e.what());
     }
     ticket = ledger_->requeue(*job, numbers, held, encode_versions(job->versions), release_pin);
+    if (added) reference_blobs(*job, version, +1);
     for (FrameNumber n : numbers) {
       FrameRecord& f = *job->by_number.at(n);
       replaced.push_back(dir + frame_folder(n, f.run));

@@ -63,6 +63,7 @@ void Coordinator::remove_job(const std::shared_ptr<JobRecord>& job,
     job->deleted = true;
     ticket = ledger_->delete_job(*job, expired_unix);
     jobs_.erase(id);
+    reference_blobs(*job, 0, -1);
     std::erase_if(requests_, [&](const auto& r) { return r.second == id; });
     std::erase_if(verifying_, [&](const auto& v) { return v.first.job_id == id; });
     spdlog::info("job {} ({}) {}", id, job_state_name(job->state), why);
@@ -76,6 +77,18 @@ void Coordinator::remove_job(const std::shared_ptr<JobRecord>& job,
   fs::remove_all(tomb, ec);
   if (ec)
     spdlog::warn("job {}: {} not removed ({}); the next start removes it", id, tomb, ec.message());
+}
+
+void Coordinator::reference_blobs(const JobRecord& job, uint32_t from_version, int delta) {
+  for (uint32_t v = from_version; v <= job.versions.added.size(); ++v) {
+    std::set<std::string> once;  // a bundle may name one content under two paths
+    for (const BundleEntry& f : job.files_of(v)) once.insert(f.sha256);
+    for (const std::string& d : once) {
+      int64_t& n = blob_refs_[d];
+      n += delta;
+      if (n <= 0) blob_refs_.erase(d);
+    }
+  }
 }
 
 std::string Coordinator::expired_message(const std::string& id, const Caller& caller) const {
@@ -138,19 +151,19 @@ Coordinator::Collected Coordinator::collect(double unix_now) {
   // stored or asked for within the grace period. A submit or requeue being checked references
   // its blobs only once accepted: the grace period (far longer than a scene check may take)
   // covers it, as it covers the time between a client's MissingBlobs and its Submit.
-  std::set<std::string> referenced;
+  // The store is listed off the lock; only the reference counts are read under it.
+  std::vector<BlobStore::Entry> stored_blobs = blobs_.list(), unused;
+  uint64_t stored = 0;
   {
     std::lock_guard lock(mu_);
-    for (const auto& [id, job] : jobs_)
-      for (uint32_t v = 0; v <= job->versions.added.size(); ++v)
-        for (const BundleEntry& f : job->files_of(v)) referenced.insert(f.sha256);
+    for (BlobStore::Entry& b : stored_blobs) {
+      stored += b.bytes;
+      if (!blob_refs_.count(b.sha256) && b.used_unix + options_.blob_grace_seconds <= unix_now)
+        unused.push_back(std::move(b));
+    }
   }
   std::vector<StoreWrite> forget;
-  uint64_t stored = 0;
-  for (const BlobStore::Entry& b : blobs_.list()) {
-    stored += b.bytes;
-    if (referenced.count(b.sha256) || b.used_unix + options_.blob_grace_seconds > unix_now)
-      continue;
+  for (const BlobStore::Entry& b : unused) {
     if (!blobs_.remove(b.sha256)) continue;
     stored -= b.bytes;
     forget.push_back(store::ForgetBlob{b.sha256});
