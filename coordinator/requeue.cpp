@@ -142,12 +142,21 @@ void Coordinator::requeue(const std::string& id, const std::string& frames,
     // The pin goes with the last merged result: a job requeued whole renders on today's farm.
     const bool release_pin = job->spec.build_id.empty() && !merged_elsewhere && !job->pin_pending &&
                              (!job->build_id.empty() || !job->cpu_kind.empty());
+    // The new runs' checkpoint folders and the folder's record, before anything changes: a full
+    // or unwritable disk refuses the requeue whole.
+    std::map<FrameNumber, std::unique_ptr<FrameCheckpoint>> fresh;
     std::swap(job->versions, next);
     try {
+      for (FrameNumber n : numbers)
+        fresh[n] = std::make_unique<FrameCheckpoint>(
+            dir + frame_folder(n, job->versions.frames.at(n).run));
       write_folder_versions(*job);  // before the store's row: the folder is never behind it
     } catch (const std::exception& e) {
       std::swap(job->versions, next);
-      refuse(ErrorCode::Unavailable, std::string("cannot store the requeue: ") + e.what());
+      // A filesystem error's message would name the state directory: its cause only.
+      const auto* fe = dynamic_cast<const fs::filesystem_error*>(&e);
+      refuse(ErrorCode::Unavailable, std::string("cannot store the requeue now: ") +
+                                         (fe ? fe->code().message() : e.what()));
     }
     ticket = ledger_->requeue(*job, numbers, held, encode_versions(job->versions), release_pin);
     if (added) reference_blobs(*job, version, +1);
@@ -161,7 +170,7 @@ void Coordinator::requeue(const std::string& id, const std::string& frames,
       }
       f.version = r.version;
       f.run = r.run;
-      f.checkpoint = std::make_unique<FrameCheckpoint>(dir + frame_folder(n, r.run));
+      f.checkpoint = std::move(fresh.at(n));
       f.acc.reset();
       f.progress = FrameProgress{};
       f.progress.passes_total = job->passes;
