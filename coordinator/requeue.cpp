@@ -20,8 +20,11 @@ using core_detail::refuse;
 
 void Coordinator::write_folder_versions(const JobRecord& job) const {
   const std::string path = options_.state_dir + "/jobs/" + job.id + "/versions.json";
-  std::error_code ec;
-  if (job.versions.empty() && !fs::exists(path, ec)) return;
+  if (job.versions.empty()) {  // none (or a copy ahead of the store's record): no file
+    std::error_code ec;
+    fs::remove(path, ec);
+    return;
+  }
   write_file_atomic(path, encode_versions(job.versions) + "\n");
 }
 

@@ -3,6 +3,7 @@
 // them. Completion after a restart, late and duplicate results, failure counting, the progress
 // report, and the codes of refused requests.
 #include "coordinator/core.h"
+#include "coordinator/versions.h"
 
 #include <gtest/gtest.h>
 
@@ -372,6 +373,30 @@ TEST(CoordinatorCore, ATaskFailingOnThreeWorkersFailsTheJob) {
 
 double unix_now() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// A requeue stopped before its store row (the new run's folder and versions.json written, the
+// process gone): the store's record wins at the start: the old run's checkpoint serves the frame,
+// the new run's folder is removed and the folder's record is rewritten to agree.
+TEST(CoordinatorCore, ARequeueStoppedBeforeItsRowLeavesTheOldRunWhole) {
+  CoreBench bench("core-requeue-crash");
+  const std::string job = bench.submit(1);
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(bench.complete(bench.lease("w"), 1.0f));
+  ASSERT_EQ(bench.core().status(job).state, JobState::Completed);
+  bench.stop();
+  const std::string dir = bench.state_dir() + "/jobs/" + job + "/";
+  fs::create_directories(dir + "frame-1.r1");
+  JobVersions ahead;
+  ahead.frames[1] = FrameRun{0, 1};
+  test::write_text(dir + "versions.json", encode_versions(ahead) + "\n");
+  bench.start("B");
+  JobStatus s = bench.core().status(job);
+  EXPECT_EQ(s.state, JobState::Completed);
+  EXPECT_EQ(s.frames[0].run, 0u);
+  EXPECT_EQ(s.frames[0].progress.passes_merged, 1u);
+  EXPECT_EQ(bench.image(job, 1).header.passes.count(), 1u);
+  EXPECT_FALSE(fs::exists(dir + "frame-1.r1"));
+  EXPECT_FALSE(fs::exists(dir + "versions.json")) << "the store records no requeue";
 }
 
 // A job stored without a CPU kind pin (by a build before it) whose checkpoints hold merged passes
