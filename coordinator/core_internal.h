@@ -79,6 +79,8 @@ struct JobRecord {
   int priority = 0;            // the spec's, or what `priority JOB N` set since
   bool deleted = false;        // `delete`: gone from the coordinator; a merge in flight stops
   int64_t ended_unix = 0;      // when it last ended (retention counts --keep-finished from it)
+  uint64_t endings = 0;        // times it entered an ended state (the ledger counts them)
+  uint64_t released_at = 0;    // `endings` when retention last dropped its accumulators
   JobVersions versions;        // scene versions and requeued frames (`requeue`)
   std::vector<Rect> tiles;
   bool splats = false;

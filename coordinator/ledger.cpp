@@ -68,6 +68,7 @@ Ledger::Ticket Ledger::set_state(JobRecord& job, JobState to, const std::string&
   job.state = to;
   job.error = error;
   job.ended_unix = terminal(to) ? int64_t(now() + unix_offset_) : 0;
+  if (terminal(to)) ++job.endings;
   std::vector<StoreWrite> writes{store::SetState{job.id, int(to), error, job.ended_unix}};
   if (terminal(to)) {
     stopped_attempts(writes, job.id, std::nullopt, 0,

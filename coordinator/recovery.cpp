@@ -232,6 +232,7 @@ void Coordinator::restore(const StoredJob& stored) {
     job->state = JobState(stored.state);
     job->error = stored.error;
     job->ended_unix = stored.ended_unix;
+    if (terminal(job->state)) job->endings = 1;  // its frames' accumulators go at the next pass
     if (terminal(job->state) && job->ended_unix == 0) {
       // Ended under a build before retention: its keep time counts from this start.
       job->ended_unix = int64_t(unix_now());

@@ -115,7 +115,7 @@ Coordinator::Collected Coordinator::collect(double unix_now) {
       if (options_.keep_finished_seconds > 0 &&
           double(job->ended_unix) + options_.keep_finished_seconds <= unix_now)
         expiring.push_back(job);
-      else
+      else if (job->released_at != job->endings)  // once per ending, not at every pass
         ended.push_back(job);
     }
   }
@@ -138,7 +138,12 @@ Coordinator::Collected Coordinator::collect(double unix_now) {
     }
   }
   // 2. Ended jobs keep no accumulator: their images are in their checkpoints (fetch reads them).
-  for (const auto& job : ended)
+  for (const auto& job : ended) {
+    uint64_t endings = 0;
+    {
+      std::lock_guard lock(mu_);
+      endings = job->endings;
+    }
     for (auto& f : job->frames) {
       std::lock_guard frame_lock(f->m);
       std::lock_guard lock(mu_);
@@ -147,6 +152,9 @@ Coordinator::Collected Coordinator::collect(double unix_now) {
         ++out.accumulators_released;
       }
     }
+    std::lock_guard lock(mu_);
+    if (terminal(job->state) && job->endings == endings) job->released_at = endings;
+  }
   // 3. Blobs no job references (any scene version of any job the coordinator holds) and not
   // stored or asked for within the grace period. A submit or requeue being checked references
   // its blobs only once accepted: the grace period (far longer than a scene check may take)

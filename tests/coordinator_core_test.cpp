@@ -470,6 +470,12 @@ TEST(CoordinatorCore, RetentionExpiresFinishedJobsAndCollectsBlobsNoJobUses) {
   EXPECT_FALSE(fs::exists(jobs_dir + "/.deleted-" + interrupted)) << "finished at the start";
   std::string why = refusal_message([&] { bench.core().status(interrupted, shot1); });
   EXPECT_NE(why.find("expired at"), std::string::npos) << why;
+  // The restored ended jobs' frames were read back from their checkpoints: the next pass drops
+  // those accumulators, and a later pass visits them no more.
+  c = bench.core().collect(t0 + 55);
+  EXPECT_EQ(c.jobs_expired, 0u);
+  EXPECT_GE(c.accumulators_released, 1u);
+  EXPECT_EQ(bench.core().collect(t0 + 56).accumulators_released, 0u);
 
   c = bench.core().collect(t0 + 101);
   EXPECT_EQ(c.jobs_expired, 2u);
