@@ -1,6 +1,7 @@
 #include "coordinator/checkpoint.h"
 
 #include "engine/buffer_file.h"
+#include "engine/digest.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -16,8 +17,12 @@ FrameCheckpoint::FrameCheckpoint(std::string dir) : dir_(std::move(dir)) {
 }
 
 void FrameCheckpoint::save_task(uint32_t pass, uint32_t tile, const SampleBuffer& buffer) const {
-  write_buffer_file(dir_ + "/task-" + std::to_string(pass) + "-" + std::to_string(tile) + ".rfb",
-                    buffer);
+  save_task(pass, tile, encode_buffer(buffer));
+}
+
+void FrameCheckpoint::save_task(uint32_t pass, uint32_t tile, std::string_view encoded) const {
+  write_file_atomic(dir_ + "/task-" + std::to_string(pass) + "-" + std::to_string(tile) + ".rfb",
+                    encoded);
 }
 
 void FrameCheckpoint::save_prefix(const SampleBuffer& frame) const {

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "engine/sample_buffer.h"
@@ -23,6 +24,8 @@ class FrameCheckpoint {
   explicit FrameCheckpoint(std::string dir);  // creates it
 
   void save_task(uint32_t pass, uint32_t tile, const SampleBuffer& buffer) const;
+  // A received result's bytes as they came (already decoded and checked: a .rfb file).
+  void save_task(uint32_t pass, uint32_t tile, std::string_view encoded) const;
   // Writes the prefix (passes [0, k)), then removes task files of passes < k.
   void save_prefix(const SampleBuffer& frame) const;
 

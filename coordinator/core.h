@@ -359,7 +359,7 @@ class Coordinator {
   // task is no longer needed (stopped frame, ended job). The result is durable before this
   // returns true. A result that does not match its task (tile, pass, header, sample counts) or
   // holds a non-finite sum is refused with InvalidArgument and logged against its worker.
-  bool complete(const TaskResult& result, const Caller& caller = {});
+  bool complete(TaskResult result, const Caller& caller = {});
   void fail(const TaskFailureReport& report, const Caller& caller = {});
   // An upload that check_upload let start was refused before it became a result (its chunks
   // out of order, over the size limit, or failing their checksum): as a refused result, its lease
@@ -451,7 +451,7 @@ class Coordinator {
   bool verified(const TaskRef& task) const;
   // A verified task's result: true when it agrees with another worker's (merge it now); false
   // when it is held (the task goes to another worker) or the job failed.          // under mu_
-  bool verify(JobRecord& job, const TaskResult& r, const SampleBuffer& buffer);
+  bool verify(JobRecord& job, const TaskResult& r, const EncodedBuffer& buffer);
   // Whether the job merges results of this build and CPU kind (its pin, or any while none is
   // known; a worker whose kind is unknown, '', may lease any).
   bool pin_ok(const JobRecord& job, const std::string& build_id,
@@ -470,9 +470,9 @@ class Coordinator {
   // published. Under mu_ (and the frame's lock, or no merge can reach it).
   void adopt_frame(JobRecord& job, FrameRecord& f, LoadedFrame loaded);
   void resume_frame(JobRecord& job, FrameRecord& f) { adopt_frame(job, f, load_frame(job, f)); }
-  // The result decoded and checked against its task and the frame's header `base`.
-  SampleBuffer checked_buffer(const JobRecord& job, const BufferHeader& base,
-                              const TaskResult& r) const;
+  // The result decoded where it lies (its bytes move out of r) and checked against its task and
+  // the frame's header `base`.
+  EncodedBuffer checked_buffer(const JobRecord& job, const BufferHeader& base, TaskResult& r) const;
   bool record_result(JobRecord& job, const TaskResult& r,  // under mu_
                      const BufferHeader& header);
   void publish_frame(JobRecord& job, FrameRecord& f);                          // under mu_
@@ -539,7 +539,7 @@ class Coordinator {
   std::map<std::string, WorkerRecord> workers_;
   // Verification (CoreOptions::verify_fraction): each selected task's results so far, one per
   // worker, until two agree; and the workers outvoted, with why.
-  std::map<TaskRef, std::vector<std::pair<std::string, SampleBuffer>>> verifying_;
+  std::map<TaskRef, std::vector<std::pair<std::string, EncodedBuffer>>> verifying_;
   std::map<std::string, std::string> outvoted_;
   std::string storage_problem_;  // under mu_
   std::function<void(const std::string&)> storage_listener_;

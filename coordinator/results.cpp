@@ -41,9 +41,7 @@ std::set<FrameNumber> core_detail::named_frames(const JobRecord& job, const std:
 
 // After a merge or a restore: the frame's figures, the scheduler's stop, the job's completion.
 void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
-  if (f.acc)
-    f.progress = frame_progress(f.acc->frame(), job.passes, f.acc->done(),
-                                f.acc->stopped_on_target(), job.noise_target, -1);
+  if (f.acc) f.progress = frame_progress(*f.acc, job.passes, job.noise_target, -1);
   if (f.progress.done) ledger_->frame_done(job, f, f.progress.passes_merged);
   bool all_done = true;
   std::vector<FrameNumber> held;
@@ -207,32 +205,33 @@ void Coordinator::retry(const std::string& id, const std::string& frames, const 
   wait_stored(ticket, "the retry");
 }
 
-// Decodes a result and checks it belongs to its task: the task's tile, its one pass, and the
-// frame's header (scene digest, seed, frame, integrator, settings, resolution).
-SampleBuffer Coordinator::checked_buffer(const JobRecord& job, const BufferHeader& base,
-                                         const TaskResult& r) const {
+// Decodes a result where it lies and checks it belongs to its task: the task's tile, its one
+// pass, and the frame's header (scene digest, seed, frame, integrator, settings, resolution).
+EncodedBuffer Coordinator::checked_buffer(const JobRecord& job, const BufferHeader& base,
+                                          TaskResult& r) const {
   std::string task_id = task_id_text(r.task);
-  SampleBuffer buffer;
+  EncodedBuffer encoded;
   try {
-    buffer = decode_buffer(r.buffer, "sample buffer of task " + task_id);
+    encoded = EncodedBuffer(std::move(r.buffer), "sample buffer of task " + task_id);
   } catch (const std::exception& e) {
     refuse(ErrorCode::InvalidArgument, e.what());
   }
+  const BufferView buffer = encoded.view();
   const Rect& rect = job.tiles[r.task.tile];
   if (!(buffer.rect == rect))
     refuse(ErrorCode::InvalidArgument,
            "task " + task_id + ": buffer covers " + std::to_string(buffer.rect.w) + "x" +
                std::to_string(buffer.rect.h) + " at " + std::to_string(buffer.rect.x0) + "," +
                std::to_string(buffer.rect.y0) + ", not the task's tile");
-  if (!(buffer.header.passes == PassSet::range(r.task.pass, r.task.pass + 1)))
+  if (!(buffer.header->passes == PassSet::range(r.task.pass, r.task.pass + 1)))
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": buffer holds passes " +
-                                           buffer.header.passes.to_string() + ", not pass " +
+                                           buffer.header->passes.to_string() + ", not pass " +
                                            std::to_string(r.task.pass));
-  if (std::string why = merge_incompatibility(base, buffer.header); !why.empty())
+  if (std::string why = merge_incompatibility(base, *buffer.header); !why.empty())
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
   if (std::string why = task_buffer_problem(buffer, job.spp_per_pass); !why.empty())
     refuse(ErrorCode::InvalidArgument, "task " + task_id + ": " + why);
-  return buffer;
+  return encoded;
 }
 
 // The ledger's verdict on a durable result: the task done (its rows to the journal), or, when it
@@ -276,7 +275,7 @@ void Coordinator::refuse_upload(const std::string& worker_id, const std::string&
   ledger_->refuse_result(worker_id, lease_id, task, why, now(), bounded_log(log));
 }
 
-bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
+bool Coordinator::complete(TaskResult r, const Caller& caller) {
   if (!check_upload(r.worker_id, r.lease_id, r.task, caller)) return false;  // not needed
   std::shared_ptr<JobRecord> job;
   FrameRecord* f = nullptr;
@@ -289,7 +288,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     base = f->base;
     run = f->run;
   }
-  SampleBuffer buffer;
+  EncodedBuffer buffer;
   try {
     buffer = checked_buffer(*job, base, r);
   } catch (const CoordinatorError& e) {
@@ -308,12 +307,12 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     if (f->run != run) return false;
     // A worker registered by an earlier build has no kind on record: its result says it.
     if (auto w = workers_.find(r.worker_id); w != workers_.end() && w->second.isa.empty())
-      w->second.isa = w->second.info.isa = buffer.header.isa;
+      w->second.isa = w->second.info.isa = buffer.header().isa;
     // The pin is checked, and taken by a job not yet pinned, here: under mu_ and before the
     // result is stored, so results of two kinds racing on two frames are never both kept.
     // Another build's or kind's result (the job was pinned while the task was out) is not the
     // worker's fault: its task goes back to the queue for a worker of the pin, uncounted.
-    if (std::string why = pin_problem(*job, buffer.header); !why.empty()) {
+    if (std::string why = pin_problem(*job, buffer.header()); !why.empty()) {
       Ledger::Ticket ticket = 0;
       ledger_->fail(r.lease_id, r.worker_id, why, /*handed_back=*/true, now(), &ticket, r.log);
       spdlog::info("result of task {} from worker {} not merged: {}", task_id_text(r.task),
@@ -321,8 +320,8 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
       refuse(ErrorCode::FailedPrecondition, why);
     }
     if (job->build_id.empty() || job->cpu_kind.empty()) {
-      if (job->build_id.empty()) job->build_id = buffer.header.build_id;
-      if (job->cpu_kind.empty()) job->cpu_kind = buffer.header.isa;
+      if (job->build_id.empty()) job->build_id = buffer.header().build_id;
+      if (job->cpu_kind.empty()) job->cpu_kind = buffer.header().isa;
       job->pin_pending = true;  // stored with the first merged result (Ledger::complete)
     }
   }
@@ -335,7 +334,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
     f->acc =
         std::make_unique<FrameAccumulator>(f->base, job->tiles, job->splats, job->merge_options());
   }
-  if (!f->acc->task_needed(buffer.rect, r.task.pass)) {  // merged already, or beyond the stop
+  if (!f->acc->task_needed(buffer.rect(), r.task.pass)) {  // merged already, or beyond the stop
     std::lock_guard lock(mu_);
     ledger_->not_needed(r.lease_id, r.task, r.worker_id, now(), r.log);
     return false;
@@ -347,7 +346,7 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   // Durable first: the task's result (its checkpoint file, the record of which tasks an image
   // holds), then the ledger's transition and its rows, then the answer once they are stored.
   try {
-    f->checkpoint->save_task(r.task.pass, r.task.tile, buffer);
+    f->checkpoint->save_task(r.task.pass, r.task.tile, buffer.bytes());  // as received
   } catch (const std::exception& e) {
     // The coordinator's fault (disk full, unwritable state): never the worker's. It retries.
     std::lock_guard lock(mu_);
@@ -358,11 +357,11 @@ bool Coordinator::complete(const TaskResult& r, const Caller& caller) {
   {
     std::lock_guard lock(mu_);
     if (journal_->problem().empty()) storage_ok();
-    if (!record_result(*job, r, buffer.header)) return false;
+    if (!record_result(*job, r, buffer.header())) return false;
     ++counters_.tasks_completed;
-    counters_.samples_merged += buffer.total_samples();
-    counters_.bytes_merged += r.buffer.size();
-    counters_.core_seconds += buffer.header.core_seconds;
+    counters_.samples_merged += buffer.view().total_samples();
+    counters_.bytes_merged += buffer.bytes().size();
+    counters_.core_seconds += buffer.header().core_seconds;
   }
   // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
   // frames' merges go on meanwhile.
@@ -395,12 +394,12 @@ bool Coordinator::verified(const TaskRef& task) const {
   return double(h) / double(uint64_t(1) << 60) < f;
 }
 
-bool Coordinator::verify(JobRecord& job, const TaskResult& r, const SampleBuffer& buffer) {
-  std::vector<std::pair<std::string, SampleBuffer>>& held = verifying_[r.task];
+bool Coordinator::verify(JobRecord& job, const TaskResult& r, const EncodedBuffer& buffer) {
+  std::vector<std::pair<std::string, EncodedBuffer>>& held = verifying_[r.task];
   for (const auto& [worker, other] : held) {
-    if (worker == r.worker_id || !same_samples(other, buffer)) continue;
+    if (worker == r.worker_id || !same_samples(other.view(), buffer.view())) continue;
     for (const auto& [liar, theirs] : held) {
-      if (same_samples(theirs, buffer)) continue;
+      if (same_samples(theirs.view(), buffer.view())) continue;
       std::string why = "its result of task " + task_id_text(r.task) +
                         " differed from those of workers " + worker + " and " + r.worker_id;
       outvoted_[liar] = why;

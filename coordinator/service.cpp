@@ -3,6 +3,8 @@
 // errors into status codes in one place (grpc_code). The job logic lives in the core.
 #include "coordinator/service.h"
 
+#include "engine/buffer_file.h"
+
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -598,7 +600,7 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
         return;
       }
       UploadSlot slot(*this, header.worker_id());
-      ChunkAssembler chunks(o_.max_buffer_bytes);
+      ChunkAssembler chunks(o_.max_buffer_bytes, ChunkAssembler::Digest::Optional);
       try {
         while (r->Read(&msg)) {
           if (!msg.has_chunk()) bad_request("only chunks may follow the header");
@@ -808,6 +810,7 @@ int run_coordinator(const CoordinatorOptions& o) {
   pthread_sigmask(SIG_BLOCK, &set, nullptr);  // before gRPC starts its threads
   // A file size limit (ulimit -f) reached is a write error (EFBIG) to report, not a reason to die.
   ::signal(SIGXFSZ, SIG_IGN);
+  keep_heap_for_sample_buffers();  // results arrive and are freed all day
   std::unique_ptr<CoordinatorServer> started;
   try {
     started = std::make_unique<CoordinatorServer>(o);

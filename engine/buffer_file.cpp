@@ -1,11 +1,12 @@
-// .rfb format, version 2 (docs/sample-buffer-format.md). All integers and floats little-endian.
-// Version 2 added the AOV plane and the "aovs" header key; version 1 files (no AOVs) are still
-// read.
+// .rfb format, version 3 (docs/sample-buffer-format.md). All integers and floats little-endian.
+// Version 3 replaced the SHA-256 at the end with XXH3-128 (16 bytes), which a coordinator checks
+// at memory speed; version 2 added the AOV plane and the "aovs" header key. Versions 1 and 2
+// (SHA-256, 32 bytes) are still read.
 //
 //   offset  size     content
 //   0       8        magic 89 52 46 42 0D 0A 1A 0A ("\x89RFB\r\n\x1a\n"; PNG-style, so 7-bit
 //                    transfers and line-ending conversion are caught at the first bytes)
-//   8       4        u32 format version = 2 (1 is read too)
+//   8       4        u32 format version = 3 (1 and 2 are read too)
 //   12      4        u32 header length L
 //   16      L        header: UTF-8 JSON object, padded with trailing spaces so that 16 + L is a
 //                    multiple of 8 (the planes are then 8-byte aligned in the file)
@@ -17,18 +18,22 @@
 //                      batch_sum_sq f64 x 3A
 //                      aov          f64 x C * A   (C = channels of the "aovs" set, engine/aov.h)
 //                      splat        f64 x 3 * width * height   (only when has_splats)
-//   end-32  32       SHA-256 of every byte before it
+//   end-16  16       XXH3-128 of every byte before it, canonical (big-endian) byte order, as
+//                    xxh128sum prints it (versions 1 and 2: end-32, 32 bytes of SHA-256)
 //
 // Header keys: format ("rayfarm-sample-buffer"), scene_digest, seed, frame, integrator, settings,
-// width, height, aovs (version 2: engine/aov.h's canonical list, "" for none), passes (PassSet::to_string), build_id, isa, core_seconds, rect {x0, y0, w, h},
-// has_splats, light_paths, nonfinite_samples, rays. Unknown keys are ignored, so a later version
-// may add keys without breaking this reader.
+// width, height, aovs (version 2: engine/aov.h's canonical list, "" for none), passes
+// (PassSet::to_string), build_id, isa, core_seconds, rect {x0, y0, w, h}, has_splats, light_paths,
+// nonfinite_samples, rays. Unknown keys are ignored, so a later version may add keys without
+// breaking this reader.
 //
 // Reading checks, in this order: magic, version, header length against the file size, the
 // checksum, every header field's type and range, the rect inside the frame, and that the plane
 // bytes are exactly what the rect and flags say. Nothing is allocated or read before the sizes
 // agree, so a truncated or lying file costs an exception, never an out-of-bounds read.
 #include "engine/buffer_file.h"
+
+#include <malloc.h>
 
 #include <algorithm>
 #include <bit>
@@ -39,6 +44,9 @@
 
 #include "engine/digest.h"
 
+#define XXH_INLINE_ALL  // header-only: inlined, and no library for the runtime image
+#include <xxhash.h>
+
 namespace rf {
 
 namespace {
@@ -46,17 +54,26 @@ namespace {
 using nlohmann::json;
 
 constexpr char kMagic[8] = {'\x89', 'R', 'F', 'B', '\r', '\n', '\x1a', '\n'};
-constexpr uint32_t kFormatVersion = 2;
+constexpr uint32_t kFormatVersion = 3;
 constexpr uint32_t kOldestReadableVersion = 1;
 constexpr size_t kPreambleBytes = 16;  // magic, version, header length
-constexpr size_t kChecksumBytes = 32;
+constexpr size_t kChecksumBytes = 16;  // XXH3-128 (version 3)
+constexpr size_t kSha256Bytes = 32;    // versions 1 and 2
+
+size_t checksum_bytes(uint32_t version) { return version >= 3 ? kChecksumBytes : kSha256Bytes; }
+
+std::string xxh3_raw(std::string_view bytes) {
+  XXH128_canonical_t c;
+  XXH128_canonicalFromHash(&c, XXH3_128bits(bytes.data(), bytes.size()));
+  return std::string(reinterpret_cast<const char*>(c.digest), sizeof c.digest);
+}
 constexpr uint64_t kMaxDimension = 1 << 20;  // larger frames are refused as implausible
 
 void put_u32(std::string& out, uint32_t v) {
   for (int b = 0; b < 4; ++b) out.push_back(char((v >> (8 * b)) & 0xff));
 }
 
-uint32_t get_u32(const std::string& in, size_t at) {
+uint32_t get_u32(std::string_view in, size_t at) {
   uint32_t v = 0;
   for (int b = 0; b < 4; ++b) v |= uint32_t(uint8_t(in[at + b])) << (8 * b);
   return v;
@@ -222,31 +239,76 @@ Rect read_rect(const HeaderReader& r, const BufferHeader& h) {
 
 // Checks everything before the JSON header is parsed; returns the header length and sets the
 // format version.
-size_t check_preamble(const std::string& bytes, const std::string& what, uint32_t& version) {
+size_t check_preamble(std::string_view bytes, const std::string& what, uint32_t& version) {
   auto fail = [&](const std::string& why) { return BufferFileError(what + ": " + why); };
   size_t n = bytes.size();
   if (std::memcmp(bytes.data(), kMagic, std::min<size_t>(n, 8)) != 0) {
     throw fail("not a rayfarm sample buffer (bad magic)");
   }
-  if (n < kPreambleBytes + kChecksumBytes) {
-    throw fail("truncated (" + std::to_string(n) + " bytes; the smallest buffer file has " +
-               std::to_string(kPreambleBytes + kChecksumBytes) + ")");
-  }
+  auto truncated = [&](size_t smallest) {
+    return fail("truncated (" + std::to_string(n) + " bytes; the smallest buffer file has " +
+                std::to_string(smallest) + ")");
+  };
+  if (n < kPreambleBytes + kChecksumBytes) throw truncated(kPreambleBytes + kChecksumBytes);
   version = get_u32(bytes, 8);
   if (version < kOldestReadableVersion || version > kFormatVersion) {
     throw fail("unsupported format version " + std::to_string(version) + " (this build reads " +
                std::to_string(kOldestReadableVersion) + " to " + std::to_string(kFormatVersion) + ")");
   }
+  const size_t sum_bytes = checksum_bytes(version);
+  if (n < kPreambleBytes + sum_bytes) throw truncated(kPreambleBytes + sum_bytes);
   size_t header_len = get_u32(bytes, 12);
-  if (header_len > n - kPreambleBytes - kChecksumBytes) {
+  if (header_len > n - kPreambleBytes - sum_bytes) {
     throw fail("header length " + std::to_string(header_len) +
                " runs past the end of the file (file is corrupt or truncated)");
   }
-  std::string_view body(bytes.data(), n - kChecksumBytes);
-  if (sha256_raw(body) != std::string_view(bytes).substr(n - kChecksumBytes)) {
+  std::string_view body = bytes.substr(0, n - sum_bytes);
+  std::string expected = version >= 3 ? xxh3_raw(body) : sha256_raw(body);
+  if (expected != bytes.substr(n - sum_bytes)) {
     throw fail("checksum mismatch (file is corrupt or truncated)");
   }
   return header_len;
+}
+
+// What decoding learns before reading the planes: everything checked, sizes matched.
+struct Parsed {
+  BufferHeader header;
+  Rect rect;
+  bool has_splats = false;
+  uint64_t light_paths = 0, nonfinite_samples = 0, rays = 0;
+  size_t planes_at = 0;
+};
+
+Parsed parse(std::string_view bytes, const std::string& what) {
+  uint32_t version = 0;
+  size_t header_len = check_preamble(bytes, what, version);
+  json j = json::parse(bytes.begin() + kPreambleBytes,
+                       bytes.begin() + std::ptrdiff_t(kPreambleBytes + header_len), nullptr,
+                       /*allow_exceptions=*/false);
+  if (!j.is_object()) throw BufferFileError(what + ": header is not a JSON object");
+  HeaderReader r{j, what};
+  Parsed p;
+  p.header = read_header(r, version);
+  const BufferHeader& h = p.header;
+  p.rect = read_rect(r, h);
+  p.has_splats = r.boolean("has_splats");
+
+  // Sizes are bounded by kMaxDimension, so these products cannot overflow.
+  uint64_t expected = 8 * ((13 + uint64_t(h.aovs.channels())) * uint64_t(p.rect.area()) +
+                           (p.has_splats ? 3 * uint64_t(h.width) * uint64_t(h.height) : 0));
+  uint64_t actual = bytes.size() - kPreambleBytes - header_len - checksum_bytes(version);
+  if (expected != actual) {
+    throw BufferFileError(what + ": header describes " + std::to_string(expected) +
+                          " bytes of planes (rect " + to_string(p.rect) +
+                          (p.has_splats ? ", with splats" : "") +
+                          (h.aovs.any() ? ", AOVs " + to_string(h.aovs) : "") +
+                          ") but the file holds " + std::to_string(actual));
+  }
+  p.light_paths = r.uint("light_paths");
+  p.nonfinite_samples = r.uint("nonfinite_samples");
+  p.rays = r.uint("rays");
+  p.planes_at = kPreambleBytes + header_len;
+  return p;
 }
 
 }  // namespace
@@ -266,41 +328,61 @@ std::string encode_buffer(const SampleBuffer& buf) {
   put_u32(out, uint32_t(header.size()));
   out += header;
   for_each_plane(buf, [&](const auto& plane) { append_plane(out, plane); });
-  out += sha256_raw(out);
+  out += xxh3_raw(out);
   return out;
 }
 
 SampleBuffer decode_buffer(const std::string& bytes, const std::string& what_for_errors) {
-  const std::string& what = what_for_errors;
-  uint32_t version = 0;
-  size_t header_len = check_preamble(bytes, what, version);
-  json j = json::parse(bytes.begin() + kPreambleBytes,
-                       bytes.begin() + std::ptrdiff_t(kPreambleBytes + header_len), nullptr,
-                       /*allow_exceptions=*/false);
-  if (!j.is_object()) throw BufferFileError(what + ": header is not a JSON object");
-  HeaderReader r{j, what};
-  BufferHeader h = read_header(r, version);
-  Rect rect = read_rect(r, h);
-  bool has_splats = r.boolean("has_splats");
-
-  // Sizes are bounded by kMaxDimension, so these products cannot overflow.
-  uint64_t expected = 8 * ((13 + uint64_t(h.aovs.channels())) * uint64_t(rect.area()) +
-                           (has_splats ? 3 * uint64_t(h.width) * uint64_t(h.height) : 0));
-  uint64_t actual = bytes.size() - kPreambleBytes - header_len - kChecksumBytes;
-  if (expected != actual) {
-    throw BufferFileError(what + ": header describes " + std::to_string(expected) +
-                          " bytes of planes (rect " + to_string(rect) +
-                          (has_splats ? ", with splats" : "") +
-                          (h.aovs.any() ? ", AOVs " + to_string(h.aovs) : "") + ") but the file holds " +
-                          std::to_string(actual));
-  }
-  SampleBuffer buf(std::move(h), rect, has_splats);
-  buf.light_paths = r.uint("light_paths");
-  buf.nonfinite_samples = r.uint("nonfinite_samples");
-  buf.rays = r.uint("rays");
-  size_t at = kPreambleBytes + header_len;
+  Parsed p = parse(bytes, what_for_errors);
+  SampleBuffer buf(std::move(p.header), p.rect, p.has_splats);
+  buf.light_paths = p.light_paths;
+  buf.nonfinite_samples = p.nonfinite_samples;
+  buf.rays = p.rays;
+  size_t at = p.planes_at;
   for_each_plane(buf, [&](auto& plane) { read_plane(bytes, at, plane); });
   return buf;
+}
+
+EncodedBuffer::EncodedBuffer(std::string bytes, const std::string& what_for_errors) {
+  static_assert(std::endian::native == std::endian::little,
+                "EncodedBuffer reads the little-endian planes in place");
+  Parsed p = parse(bytes, what_for_errors);
+  bytes_ = std::move(bytes);
+  header_ = std::move(p.header);
+  rect_ = p.rect;
+  has_splats_ = p.has_splats;
+  light_paths_ = p.light_paths;
+  nonfinite_samples_ = p.nonfinite_samples;
+  rays_ = p.rays;
+  planes_at_ = p.planes_at;
+}
+
+BufferView EncodedBuffer::view() const {
+  BufferView v;
+  v.header = &header_;
+  v.rect = rect_;
+  v.light_paths = light_paths_;
+  v.nonfinite_samples = nonfinite_samples_;
+  v.rays = rays_;
+  if (bytes_.empty()) return v;  // default-constructed: no planes
+  // The format puts the planes 8-byte aligned after the header, and the string's storage is
+  // aligned for any scalar: the doubles are read where they lie.
+  const char* at = bytes_.data() + planes_at_;
+  const size_t a = size_t(rect_.area());
+  v.count = {reinterpret_cast<const uint64_t*>(at), a};
+  at += 8 * a;
+  auto next = [&](size_t n) {
+    std::span<const double> s(reinterpret_cast<const double*>(at), n);
+    at += 8 * n;
+    return s;
+  };
+  v.sum = next(3 * a);
+  v.sum_sq = next(3 * a);
+  v.batch_sum = next(3 * a);
+  v.batch_sum_sq = next(3 * a);
+  v.aov = next(size_t(header_.aovs.channels()) * a);
+  if (has_splats_) v.splat = next(3 * size_t(header_.width) * size_t(header_.height));
+  return v;
 }
 
 void write_buffer_file(const std::string& path, const SampleBuffer& buf) {
@@ -322,5 +404,9 @@ SampleBuffer read_buffer_file(const std::string& path) {
   return decode_buffer(bytes, path);
 }
 
+void keep_heap_for_sample_buffers() {
+  ::mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  ::mallopt(M_TRIM_THRESHOLD, 128 << 20);
+}
 
 }  // namespace rf

@@ -20,7 +20,14 @@ std::string merge_incompatibility(const BufferHeader& a, const BufferHeader& b);
 
 // dst += src: same rect, compatible headers, disjoint passes. Throws MergeError saying which
 // field differs or which passes overlap. Associative and commutative up to summation order.
-void merge_into(SampleBuffer& dst, const SampleBuffer& src);
+void merge_into(SampleBuffer& dst, const BufferView& src);
+
+// dst += tile over the tile's rect (inside dst's rect; a splat plane is the whole frame's and is
+// added whole), with its counters, build, CPU kind and core-seconds, but not its passes: the
+// frame accumulator adds a pass's tiles one by one and its pass once. Per pixel the same sums as
+// assembling the pass and merging it. The caller has checked merge_incompatibility; this checks
+// the rect and planes and throws MergeError.
+void add_tile(SampleBuffer& dst, const BufferView& tile);
 
 // Copies a tile's buffer into a larger buffer of the same pass set (assembling one pass of a
 // frame from its tiles). Throws MergeError if the tile is outside dst.rect or headers differ.

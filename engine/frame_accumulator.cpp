@@ -2,7 +2,18 @@
 
 #include <algorithm>
 
+#include "engine/progress.h"
+
 namespace rf {
+
+namespace {
+
+BufferView view_of(const std::variant<SampleBuffer, EncodedBuffer>& task) {
+  if (const SampleBuffer* b = std::get_if<SampleBuffer>(&task)) return BufferView(*b);
+  return std::get<EncodedBuffer>(task).view();
+}
+
+}  // namespace
 
 FrameAccumulator::FrameAccumulator(const BufferHeader& base, std::vector<Rect> tiles, bool splats,
                                    const ProgressiveOptions& options)
@@ -27,43 +38,70 @@ bool FrameAccumulator::task_needed(const Rect& rect, uint32_t pass) const {
       pass >= options_.first_pass + options_.pass_count)
     return false;
   auto it = pending_.find(pass);
-  return it == pending_.end() || !it->second.have[tile_index(rect)];
+  return it == pending_.end() || !it->second.tiles[tile_index(rect)];
 }
 
 FrameAccumulator::AddResult FrameAccumulator::add(SampleBuffer task) {
-  if (task.header.passes.count() != 1 || task.header.passes.ranges.size() != 1)
-    throw MergeError("a task buffer must hold exactly one pass, got " +
-                     task.header.passes.to_string());
-  std::string why = merge_incompatibility(base_, task.header);
+  BufferHeader h = task.header;
+  Rect rect = task.rect;
+  if (!task.planes_match_rect()) throw MergeError("plane sizes do not match the rect");
+  return add_task(std::move(task), h, rect);
+}
+
+FrameAccumulator::AddResult FrameAccumulator::add(EncodedBuffer task) {
+  BufferHeader h = task.header();
+  Rect rect = task.rect();
+  return add_task(std::move(task), h, rect);
+}
+
+FrameAccumulator::AddResult FrameAccumulator::add_task(Task task, const BufferHeader& header,
+                                                       const Rect& rect) {
+  if (header.passes.count() != 1 || header.passes.ranges.size() != 1)
+    throw MergeError("a task buffer must hold exactly one pass, got " + header.passes.to_string());
+  std::string why = merge_incompatibility(base_, header);
   if (!why.empty()) throw MergeError(why);
-  uint32_t pass = task.header.passes.ranges[0].first;
-  size_t ti = tile_index(task.rect);
+  uint32_t pass = header.passes.ranges[0].first;
+  size_t ti = tile_index(rect);
+  BufferView v = view_of(task);
+  if (v.splat.empty() == splats_)
+    throw MergeError(splats_ ? "a task of this frame must carry a splat plane"
+                             : "a task of this frame must not carry a splat plane");
   if (pass < options_.first_pass || pass >= options_.first_pass + options_.pass_count)
     return AddResult::Dropped;
   if (pass < options_.first_pass + merged_) return AddResult::Duplicate;
   if (done_) return AddResult::Dropped;
 
   auto it = pending_.find(pass);
-  if (it == pending_.end()) {
-    BufferHeader h = base_;
-    h.passes = PassSet::range(pass, pass + 1);
-    PendingPass pp{SampleBuffer(h, Rect{0, 0, base_.width, base_.height}, splats_),
-                   std::vector<bool>(tiles_.size(), false), tiles_.size()};
-    it = pending_.emplace(pass, std::move(pp)).first;
-  }
+  if (it == pending_.end())
+    it = pending_
+             .emplace(pass,
+                      PendingPass{std::vector<std::optional<Task>>(tiles_.size()), tiles_.size()})
+             .first;
   PendingPass& pp = it->second;
-  if (pp.have[ti]) return AddResult::Duplicate;
-  if (splats_ || task.rect == pp.buffer.rect) {
-    // Whole-frame task: it is the pass.
-    pp.buffer = std::move(task);
-  } else {
-    assemble_tile(pp.buffer, task);
-  }
-  pp.have[ti] = true;
+  if (pp.tiles[ti]) return AddResult::Duplicate;
+  pp.tiles[ti] = std::move(task);
   --pp.remaining;
   size_t before = merged_;
   merge_ready_passes();
   return merged_ > before ? AddResult::Merged : AddResult::Pending;
+}
+
+double FrameAccumulator::prefix_rel_mse() const {
+  double total = 0;
+  for (const Rect& t : tiles_) total += rel_mse_sum(frame_, t);
+  double area = double(frame_.rect.area());
+  return area > 0 ? total / (3.0 * area) : 0.0;
+}
+
+void FrameAccumulator::decide_after(uint32_t merged) {
+  double rel = rel_mse();
+  if (merged == options_.pass_count) {
+    done_ = true;
+  } else if (options_.noise_target > 0 &&
+             merged >= std::min(options_.min_passes, options_.pass_count) &&
+             rel <= options_.noise_target) {
+    done_ = stopped_on_target_ = true;
+  }
 }
 
 void FrameAccumulator::resume_from(SampleBuffer prefix) {
@@ -77,35 +115,38 @@ void FrameAccumulator::resume_from(SampleBuffer prefix) {
     throw MergeError("checkpoint holds passes " + prefix.header.passes.to_string() +
                      ", not a prefix of this frame's passes");
   if (!(prefix.rect == frame_.rect) || prefix.splat.size() != frame_.splat.size() ||
-      prefix.count.size() != frame_.count.size())
+      !prefix.planes_match_rect() || prefix.aov.size() != frame_.aov.size())
     throw MergeError("checkpoint has another frame size or planes");
   frame_ = std::move(prefix);
   merged_ = k;
-  double rel = frame_.rel_mse();
-  rel_mse_history_.assign(k, rel);  // only the last value is known; it is the one that decides
-  if (merged_ == options_.pass_count)
-    done_ = true;
-  else if (options_.noise_target > 0 && merged_ >= std::min(options_.min_passes, options_.pass_count) &&
-           rel <= options_.noise_target)
-    done_ = stopped_on_target_ = true;
+  // Only the last value is known; it is the one that decides.
+  rel_mse_history_.assign(k, prefix_rel_mse());
+  samples_ = frame_.total_samples();
+  spp_ = rf::samples_per_pixel(frame_);
+  decide_after(merged_);
 }
 
+// Adds the next pass's tiles into the frame in tile order once all are there. The relMSE of the
+// new prefix is summed per tile right after the tile is added, while its pixels are in cache.
 void FrameAccumulator::merge_ready_passes() {
+  const double area = double(frame_.rect.area());
   while (!done_) {
-    auto it = pending_.find(options_.first_pass + merged_);
+    const uint32_t pass = options_.first_pass + merged_;
+    auto it = pending_.find(pass);
     if (it == pending_.end() || it->second.remaining != 0) return;
-    merge_into(frame_, it->second.buffer);
+    frame_.header.passes.add(PassSet::range(pass, pass + 1));  // the variance counts it
+    double rel = 0;
+    for (size_t t = 0; t < tiles_.size(); ++t) {
+      BufferView tile = view_of(*it->second.tiles[t]);
+      add_tile(frame_, tile);  // checked when it was added: cannot throw
+      samples_ += tile.total_samples();
+      rel += rel_mse_sum(frame_, tiles_[t]);
+    }
     pending_.erase(it);
     ++merged_;
-    double rel = frame_.rel_mse();
-    rel_mse_history_.push_back(rel);
-    if (merged_ == options_.pass_count) {
-      done_ = true;
-    } else if (options_.noise_target > 0 &&
-               merged_ >= std::min(options_.min_passes, options_.pass_count) &&
-               rel <= options_.noise_target) {
-      done_ = stopped_on_target_ = true;
-    }
+    rel_mse_history_.push_back(area > 0 ? rel / (3.0 * area) : 0.0);
+    spp_ = area > 0 ? double(samples_ ? samples_ : frame_.light_paths) / area : 0.0;
+    decide_after(merged_);
   }
   if (done_) pending_.clear();  // passes beyond the prefix are dropped
 }

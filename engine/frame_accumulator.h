@@ -1,6 +1,8 @@
 // The progressive merger of one frame (DESIGN.md "Sample buffers and variance"), shared by the
-// local renderer and the coordinator. Tasks (rect, pass) arrive in any order; each pass is
-// assembled from its tiles, and complete passes are merged into the frame strictly in pass order.
+// local renderer and the coordinator. Tasks (rect, pass) arrive in any order and are held as
+// they came (a rendered buffer, or a received one still encoded); once every tile of the next
+// pass is there, its tiles are added into the frame where they lie, so passes are merged strictly
+// in pass order and each pixel's sums are the same as a whole-frame render's.
 // The stop decision (noise target, pass budget) is taken on the completed prefix 0..k-1 only,
 // so the final image is exactly that prefix, whatever order workers finished in.
 #pragma once
@@ -10,6 +12,9 @@
 #include <optional>
 #include <vector>
 
+#include <variant>
+
+#include "engine/buffer_file.h"
 #include "engine/buffer_merge.h"
 
 namespace rf {
@@ -32,6 +37,7 @@ class FrameAccumulator {
   // Adds a task's one-pass buffer. Duplicate: that (rect, pass) was already added. Dropped: its
   // pass lies beyond the stop point or outside the range. Throws MergeError on a mismatch.
   AddResult add(SampleBuffer task);
+  AddResult add(EncodedBuffer task);  // merged from its bytes, without a copy
 
   // Restores a checkpointed prefix (what frame() returned earlier, for passes [first_pass,
   // first_pass + k)) into a fresh accumulator; the stop decision is taken again on it. Throws
@@ -43,14 +49,22 @@ class FrameAccumulator {
   uint32_t passes_merged() const { return merged_; }   // length of the merged prefix
   const SampleBuffer& frame() const { return frame_; }  // the merged prefix (empty header passes
                                                         // until the first pass is merged)
-  // relMSE of the merged prefix after each pass merged, for ETA estimates.
+  // relMSE of the merged prefix after each pass merged, for ETA estimates. The sum runs tile by
+  // tile (each tile row-major), as the tiles are merged, so it may differ from frame().rel_mse()
+  // in the last bits; the stop decision uses this one, here and after a resume.
   const std::vector<double>& rel_mse_history() const { return rel_mse_history_; }
+  double rel_mse() const { return rel_mse_history_.empty() ? 0 : rel_mse_history_.back(); }
+  double samples_per_pixel() const { return spp_; }  // of the merged prefix
   // Passes not yet merged that still need this tile (for schedulers).
   bool task_needed(const Rect& rect, uint32_t pass) const;
   size_t tile_index(const Rect& rect) const;  // throws MergeError if rect is not a tile
 
  private:
+  using Task = std::variant<SampleBuffer, EncodedBuffer>;
+  AddResult add_task(Task task, const BufferHeader& header, const Rect& rect);
   void merge_ready_passes();
+  double prefix_rel_mse() const;  // tile by tile
+  void decide_after(uint32_t merged);
 
   BufferHeader base_;
   std::vector<Rect> tiles_;
@@ -58,8 +72,7 @@ class FrameAccumulator {
   ProgressiveOptions options_;
   SampleBuffer frame_;
   struct PendingPass {
-    SampleBuffer buffer;
-    std::vector<bool> have;
+    std::vector<std::optional<Task>> tiles;  // by tile index
     size_t remaining;
   };
   std::map<uint32_t, PendingPass> pending_;
@@ -67,6 +80,8 @@ class FrameAccumulator {
   bool done_ = false;
   bool stopped_on_target_ = false;
   std::vector<double> rel_mse_history_;
+  uint64_t samples_ = 0;  // camera samples in the merged prefix
+  double spp_ = 0;
 };
 
 }  // namespace rf

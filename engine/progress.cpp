@@ -1,5 +1,7 @@
 #include "engine/progress.h"
 
+#include "engine/frame_accumulator.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -37,6 +39,21 @@ FrameProgress frame_progress(const SampleBuffer& merged, uint32_t passes_total, 
   p.eta_seconds = done ? 0
                        : eta_seconds(p.passes_merged, passes_total, p.rel_mse, noise_target,
                                      seconds_so_far);
+  return p;
+}
+
+FrameProgress frame_progress(const FrameAccumulator& acc, uint32_t passes_total,
+                             double noise_target, double seconds_so_far) {
+  FrameProgress p;
+  p.passes_merged = acc.passes_merged();
+  p.passes_total = passes_total;
+  p.spp = acc.samples_per_pixel();
+  p.rel_mse = acc.rel_mse();
+  p.done = acc.done();
+  p.stopped_on_target = acc.stopped_on_target();
+  p.eta_seconds =
+      p.done ? 0
+             : eta_seconds(p.passes_merged, passes_total, p.rel_mse, noise_target, seconds_so_far);
   return p;
 }
 

@@ -10,6 +10,8 @@
 
 namespace rf {
 
+class FrameAccumulator;
+
 // Samples per pixel of a buffer: its camera samples per pixel of its rect, or, for light
 // tracing (no camera samples), its light paths per pixel, the work a camera sample stands for.
 double samples_per_pixel(const SampleBuffer& buffer);
@@ -34,6 +36,11 @@ double eta_seconds(uint32_t passes_merged, uint32_t passes_total, double rel_mse
 // `seconds_so_far` is the time since the frame's first task started (< 0: unknown).
 FrameProgress frame_progress(const SampleBuffer& merged, uint32_t passes_total, bool done,
                              bool stopped_on_target, double noise_target, double seconds_so_far);
+
+// The same from an accumulator's figures, kept as passes merge: nothing reads the frame's planes
+// (the coordinator takes this under its lock at every result).
+FrameProgress frame_progress(const FrameAccumulator& acc, uint32_t passes_total,
+                             double noise_target, double seconds_so_far);
 
 // "45 s", "12 min", "3.5 h"; "?" for a negative (unknown) duration.
 std::string duration_text(double seconds);

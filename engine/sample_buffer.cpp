@@ -5,6 +5,7 @@
 #include <cassert>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 
@@ -164,16 +165,20 @@ RGB SampleBuffer::estimate(int x, int y) const { return to_rgb(estimate_at(*this
 
 RGB SampleBuffer::variance_of_mean(int x, int y) const { return to_rgb(variance_at(*this, x, y)); }
 
-double SampleBuffer::rel_mse() const {
-  if (rect.area() == 0) return 0.0;
+double rel_mse_sum(const SampleBuffer& b, const Rect& region) {
   double total = 0.0;
-  for (int y = rect.y0; y < rect.y1(); ++y) {
-    for (int x = rect.x0; x < rect.x1(); ++x) {
-      RGBd m = estimate_at(*this, x, y), v = variance_at(*this, x, y);
+  for (int y = region.y0; y < region.y1(); ++y) {
+    for (int x = region.x0; x < region.x1(); ++x) {
+      RGBd m = estimate_at(b, x, y), v = variance_at(b, x, y);
       for (int c = 0; c < 3; ++c) total += relative_error(v[c], m[c]);
     }
   }
-  return total / (3.0 * double(rect.area()));
+  return total;
+}
+
+double SampleBuffer::rel_mse() const {
+  if (rect.area() == 0) return 0.0;
+  return rel_mse_sum(*this, rect) / (3.0 * double(rect.area()));
 }
 
 RGB SampleBuffer::mean_estimate() const {
@@ -189,31 +194,66 @@ RGB SampleBuffer::mean_estimate() const {
   return to_rgb(total);
 }
 
-uint64_t SampleBuffer::total_samples() const {
+uint64_t SampleBuffer::total_samples() const { return BufferView(*this).total_samples(); }
+
+bool SampleBuffer::planes_match_rect() const { return BufferView(*this).planes_match_rect(); }
+
+BufferView::BufferView(const SampleBuffer& b)
+    : header(&b.header),
+      rect(b.rect),
+      count(b.count),
+      sum(b.sum),
+      sum_sq(b.sum_sq),
+      batch_sum(b.batch_sum),
+      batch_sum_sq(b.batch_sum_sq),
+      splat(b.splat),
+      aov(b.aov),
+      light_paths(b.light_paths),
+      nonfinite_samples(b.nonfinite_samples),
+      rays(b.rays) {}
+
+uint64_t BufferView::total_samples() const {
   uint64_t n = 0;
   for (uint64_t c : count) n += c;
   return n;
 }
 
-bool SampleBuffer::planes_match_rect() const {
+bool BufferView::planes_match_rect() const {
   if (rect.w < 0 || rect.h < 0) return false;
   size_t a = size_t(rect.area());
   return count.size() == a && sum.size() == 3 * a && sum_sq.size() == 3 * a &&
          batch_sum.size() == 3 * a && batch_sum_sq.size() == 3 * a &&
-         aov.size() == size_t(header.aovs.channels()) * a &&
-         (splat.empty() || splat.size() == frame_channels(header));
+         aov.size() == size_t(header->aovs.channels()) * a &&
+         (splat.empty() || splat.size() == frame_channels(*header));
+}
+
+SampleBuffer BufferView::copy() const {
+  SampleBuffer b;
+  b.header = *header;
+  b.rect = rect;
+  b.count.assign(count.begin(), count.end());
+  b.sum.assign(sum.begin(), sum.end());
+  b.sum_sq.assign(sum_sq.begin(), sum_sq.end());
+  b.batch_sum.assign(batch_sum.begin(), batch_sum.end());
+  b.batch_sum_sq.assign(batch_sum_sq.begin(), batch_sum_sq.end());
+  b.splat.assign(splat.begin(), splat.end());
+  b.aov.assign(aov.begin(), aov.end());
+  b.light_paths = light_paths;
+  b.nonfinite_samples = nonfinite_samples;
+  b.rays = rays;
+  return b;
 }
 
 namespace {
 
-std::string samples_problem(const SampleBuffer& b, uint64_t spp_per_pass, double max_core_seconds) {
+std::string samples_problem(const BufferView& b, uint64_t spp_per_pass, double max_core_seconds) {
   if (!b.planes_match_rect()) return "its planes do not match its rect";
-  const double cs = b.header.core_seconds;
+  const double cs = b.header->core_seconds;
   if (!std::isfinite(cs) || cs < 0 || cs > max_core_seconds)
     return "core_seconds " + std::to_string(cs) + " is outside 0.." +
            std::to_string(max_core_seconds);
   const uint64_t samples = b.total_samples();
-  const uint64_t frame_pixels = uint64_t(b.header.width) * uint64_t(b.header.height);
+  const uint64_t frame_pixels = uint64_t(b.header->width) * uint64_t(b.header->height);
   if (samples == 0 && !b.splat.empty()) {
     if (b.light_paths != spp_per_pass * frame_pixels)
       return std::to_string(b.light_paths) + " light paths, not the pass's " +
@@ -229,7 +269,7 @@ std::string samples_problem(const SampleBuffer& b, uint64_t spp_per_pass, double
   }
   if (b.nonfinite_samples > std::max(samples, b.light_paths))
     return "more non-finite samples than samples";
-  auto finite = [](const std::vector<double>& v, bool non_negative) {
+  auto finite = [](std::span<const double> v, bool non_negative) {
     for (double x : v)
       if (!std::isfinite(x) || (non_negative && x < 0)) return false;
     return true;
@@ -249,30 +289,35 @@ std::string samples_problem(const SampleBuffer& b, uint64_t spp_per_pass, double
 
 }  // namespace
 
-std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass) {
+std::string task_buffer_problem(const BufferView& b, uint64_t spp_per_pass) {
   return samples_problem(b, spp_per_pass, 1e7);
 }
 
-std::string buffer_problem(const SampleBuffer& b) {
+std::string buffer_problem(const BufferView& b) {
   const std::string key = "spp_per_pass=";
-  size_t at = b.header.settings.find(key);
+  size_t at = b.header->settings.find(key);
   if (at == std::string::npos) return "its header does not say its samples per pass";
-  uint64_t spp = std::strtoull(b.header.settings.c_str() + at + key.size(), nullptr, 10);
-  uint64_t passes = b.header.passes.count();
+  uint64_t spp = std::strtoull(b.header->settings.c_str() + at + key.size(), nullptr, 10);
+  uint64_t passes = b.header->passes.count();
   if (spp == 0 || passes == 0)
-    return "its header holds no samples (passes " + b.header.passes.to_string() + ")";
+    return "its header holds no samples (passes " + b.header->passes.to_string() + ")";
   // 1e12 core-seconds is 31,700 core-years: more is no honest render's.
   std::string why = samples_problem(b, spp * passes, 1e12);
   if (why.empty()) return "";
-  return why + " (passes " + b.header.passes.to_string() + " of " + std::to_string(spp) +
+  return why + " (passes " + b.header->passes.to_string() + " of " + std::to_string(spp) +
          " samples each)";
 }
 
-bool same_samples(const SampleBuffer& a, const SampleBuffer& b) {
-  return a.rect == b.rect && a.header.passes == b.header.passes && a.count == b.count &&
-         a.sum == b.sum && a.sum_sq == b.sum_sq && a.batch_sum == b.batch_sum &&
-         a.batch_sum_sq == b.batch_sum_sq && a.splat == b.splat && a.light_paths == b.light_paths &&
-         a.aov == b.aov && a.nonfinite_samples == b.nonfinite_samples;
+bool same_samples(const BufferView& a, const BufferView& b) {
+  auto same = [](auto x, auto y) {  // bit for bit (a NaN equals itself, 0 is not -0)
+    return x.size() == y.size() &&
+           (x.empty() || std::memcmp(x.data(), y.data(), x.size_bytes()) == 0);
+  };
+  return a.rect == b.rect && a.header->passes == b.header->passes && same(a.count, b.count) &&
+         same(a.sum, b.sum) && same(a.sum_sq, b.sum_sq) && same(a.batch_sum, b.batch_sum) &&
+         same(a.batch_sum_sq, b.batch_sum_sq) && same(a.splat, b.splat) &&
+         a.light_paths == b.light_paths && same(a.aov, b.aov) &&
+         a.nonfinite_samples == b.nonfinite_samples;
 }
 
 }  // namespace rf

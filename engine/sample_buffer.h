@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -138,6 +139,30 @@ struct SampleBuffer {
   bool planes_match_rect() const;
 };
 
+// A sample buffer's header, rect, planes and counters, not owned: a SampleBuffer's, or the
+// planes inside an encoded buffer's bytes (buffer_file.h's EncodedBuffer), so that checks and
+// merges read a received result where it lies.
+struct BufferView {
+  const BufferHeader* header = nullptr;
+  Rect rect;
+  std::span<const uint64_t> count;
+  std::span<const double> sum, sum_sq, batch_sum, batch_sum_sq, splat, aov;
+  uint64_t light_paths = 0, nonfinite_samples = 0, rays = 0;
+
+  BufferView() = default;
+  BufferView(const SampleBuffer& b);  // NOLINT(google-explicit-constructor): a view of it
+  size_t pixel_index(int x, int y) const {
+    return size_t(y - rect.y0) * size_t(rect.w) + size_t(x - rect.x0);
+  }
+  uint64_t total_samples() const;
+  bool planes_match_rect() const;
+  SampleBuffer copy() const;  // an owning copy
+};
+
+// The sum over `region`'s pixels (inside b's rect) and RGB of relative_error(variance of the mean,
+// estimate): rel_mse() is this over the rect, divided by 3 x its area. Row-major over the region.
+double rel_mse_sum(const SampleBuffer& b, const Rect& region);
+
 // Splats (DESIGN.md "Pixels, filters and splats"): light-path contributions that reach the
 // camera, recorded per chunk of paths and added to the splat plane in chunk order, so the sums do
 // not depend on which thread traced which chunk.
@@ -162,15 +187,15 @@ void splat_to_film(SplatTarget& target, Vec2 raster, RGB value);
 // camera plane empty and traces spp_per_pass light paths per pixel of the frame), a non-finite
 // sum, a negative sum of radiance or of squares, or diagnostics out of range (core_seconds over
 // 1e7 for one task). The coordinator refuses such uploads before they are merged.
-std::string task_buffer_problem(const SampleBuffer& b, uint64_t spp_per_pass);
+std::string task_buffer_problem(const BufferView& b, uint64_t spp_per_pass);
 // The same for a buffer of any number of passes (a partial result, a merged frame): the samples
 // per pass come from its header's settings, and every pixel must hold passes x that many;
 // core_seconds at most 1e12. `rayfarm merge` refuses inputs that fail it.
-std::string buffer_problem(const SampleBuffer& b);
+std::string buffer_problem(const BufferView& b);
 
 // Whether two buffers hold the same samples, bit for bit: every plane and count, ignoring the
 // provenance that may differ between honest renders (core_seconds, isa). The determinism
 // contract makes two renders of one task by one build equal in this sense.
-bool same_samples(const SampleBuffer& a, const SampleBuffer& b);
+bool same_samples(const BufferView& a, const BufferView& b);
 
 }  // namespace rf

@@ -7,7 +7,7 @@
 namespace rf {
 
 void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::v1::Chunk&&)>& emit,
-                    size_t chunk_bytes) {
+                    size_t chunk_bytes, bool with_sha256) {
   size_t offset = 0;
   do {
     rayfarm::v1::Chunk c;
@@ -16,7 +16,7 @@ void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::
     c.set_data(std::string(payload.substr(offset, n)));
     if (offset == 0) {
       c.set_total_size(payload.size());
-      c.set_sha256(sha256_hex(payload));
+      if (with_sha256) c.set_sha256(sha256_hex(payload));
     }
     offset += n;
     emit(std::move(c));
@@ -27,7 +27,7 @@ ChunkAssembler::Status ChunkAssembler::add(const rayfarm::v1::Chunk& c) {
   if (!started_) {
     if (c.offset() != 0)
       return fail(Status::InvalidArgument, "first chunk has offset " + std::to_string(c.offset()));
-    if (c.sha256().size() != 64)
+    if (c.sha256().size() != 64 && !(digest_ == Digest::Optional && c.sha256().empty()))
       return fail(Status::InvalidArgument, "first chunk lacks the payload's SHA-256");
     if (c.total_size() > max_bytes_)
       return fail(Status::ResourceExhausted, "payload of " + std::to_string(c.total_size()) +
@@ -54,7 +54,8 @@ ChunkAssembler::Status ChunkAssembler::finish() {
   if (data_.size() != total_)
     return fail(Status::InvalidArgument, "payload ends at " + std::to_string(data_.size()) +
                                              " of " + std::to_string(total_) + " bytes");
-  if (sha256_hex(data_) != sha256_) return fail(Status::DataLoss, "checksum mismatch");
+  if (!sha256_.empty() && sha256_hex(data_) != sha256_)
+    return fail(Status::DataLoss, "checksum mismatch");
   return Status::Ok;
 }
 
@@ -63,12 +64,15 @@ bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& str
   rayfarm::v1::CompleteRequest head;
   *head.mutable_header() = header;
   bool ok = stream.Write(head);
-  for_each_chunk(payload, [&](rayfarm::v1::Chunk&& c) {
-    if (!ok) return;
-    rayfarm::v1::CompleteRequest m;
-    *m.mutable_chunk() = std::move(c);
-    ok = stream.Write(m);
-  });
+  for_each_chunk(
+      payload,
+      [&](rayfarm::v1::Chunk&& c) {
+        if (!ok) return;
+        rayfarm::v1::CompleteRequest m;
+        *m.mutable_chunk() = std::move(c);
+        ok = stream.Write(m);
+      },
+      kChunkBytes, /*with_sha256=*/false);
   if (ok) ok = stream.WritesDone();
   return ok;
 }

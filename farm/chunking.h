@@ -19,12 +19,14 @@ namespace rf {
 
 inline constexpr size_t kChunkBytes = 1 << 20;
 
-// Calls emit for each chunk of payload, in order (at least one chunk, even when empty).
+// Calls emit for each chunk of payload, in order (at least one chunk, even when empty). The first
+// carries the payload's SHA-256 unless `with_sha256` is false (a payload that checks itself).
 void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::v1::Chunk&&)>& emit,
-                    size_t chunk_bytes = kChunkBytes);
+                    size_t chunk_bytes = kChunkBytes, bool with_sha256 = true);
 
-// A CompleteTask upload's messages: the header, then `payload` in chunks, then WritesDone. False
-// when a write failed (the stream is broken; Finish() says why).
+// A CompleteTask upload's messages: the header, then `payload` (a sample buffer, which carries
+// its own checksum: no SHA-256 in the chunks) in chunks, then WritesDone. False when a write
+// failed (the stream is broken; Finish() says why).
 bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& stream,
                   const rayfarm::v1::CompleteHeader& header, std::string_view payload);
 
@@ -32,7 +34,11 @@ bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& str
 class ChunkAssembler {
  public:
   enum class Status { Ok, InvalidArgument, ResourceExhausted, DataLoss };
-  explicit ChunkAssembler(uint64_t max_bytes) : max_bytes_(max_bytes) {}
+  // Digest::Optional: the payload checks itself (a sample buffer, CompleteTask); a SHA-256 in
+  // the first chunk, as workers before format 3 send, is still checked.
+  enum class Digest { Required, Optional };
+  explicit ChunkAssembler(uint64_t max_bytes, Digest digest = Digest::Required)
+      : max_bytes_(max_bytes), digest_(digest) {}
 
   // Adds the next chunk; on a problem returns it and keeps the message for error().
   Status add(const rayfarm::v1::Chunk& chunk);
@@ -47,6 +53,7 @@ class ChunkAssembler {
     return s;
   }
   uint64_t max_bytes_;
+  Digest digest_;
   uint64_t total_ = 0;
   bool started_ = false;
   std::string sha256_;

@@ -7,6 +7,7 @@
 
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -58,18 +59,31 @@ TEST(BufferFile, LayoutIsAsDocumented) {
   uint32_t version, header_len;
   std::memcpy(&version, bytes.data() + 8, 4);  // the tests run on little-endian hosts
   std::memcpy(&header_len, bytes.data() + 12, 4);
-  EXPECT_EQ(version, 2u);
+  EXPECT_EQ(version, 3u);
   EXPECT_EQ((16 + header_len) % 8, 0u);  // planes are 8-byte aligned
-  EXPECT_EQ(bytes.size(), 16 + header_len + 8 * 13 * 6 + 32);
+  EXPECT_EQ(bytes.size(), 16 + header_len + 8 * 13 * 6 + 16);
   uint64_t count0;
   std::memcpy(&count0, bytes.data() + 16 + header_len, 8);
   EXPECT_EQ(count0, b.count[0]);
+  // The last 16 bytes: XXH3-128 of the rest, canonical (big-endian) order, as xxh128sum
+  // prints it.
   std::string checksum_hex;
-  for (size_t i = bytes.size() - 32; i < bytes.size(); ++i) {
+  for (size_t i = bytes.size() - 16; i < bytes.size(); ++i) {
     checksum_hex += "0123456789abcdef"[uint8_t(bytes[i]) >> 4];
     checksum_hex += "0123456789abcdef"[uint8_t(bytes[i]) & 15];
   }
-  EXPECT_EQ(checksum_hex, sha256_hex(bytes.substr(0, bytes.size() - 32)));
+  std::string dir = test::make_temp_dir("rfb-layout");
+  {
+    std::ofstream body(dir + "/body", std::ios::binary);
+    body.write(bytes.data(), std::streamsize(bytes.size() - 16));
+  }
+  test::CommandResult sum = test::run_command("(xxhsum -H2 " + dir + "/body 2>/dev/null)");
+  if (sum.exit_code == 0) {  // xxhsum (Debian's xxhash package) is not a build dependency
+    EXPECT_EQ(sum.output.substr(0, 32), checksum_hex) << sum.output;
+  }
+  EXPECT_EQ(
+      bytes.substr(bytes.size() - 16),
+      test::rfb_with_checksum(bytes.substr(0, bytes.size() - 16), 3).substr(bytes.size() - 16));
   auto j = nlohmann::json::parse(bytes.substr(16, header_len));
   EXPECT_EQ(j["passes"], "4");
   EXPECT_EQ(j["aovs"], "");  // no AOV plane
@@ -85,10 +99,8 @@ std::string with_header(const std::string& bytes, const nlohmann::json& j) {
   uint32_t len = uint32_t(header.size());
   out.append(reinterpret_cast<const char*>(&len), 4);
   out += header;
-  out += bytes.substr(16 + header_len, bytes.size() - 16 - header_len - 32);
-  std::string hex = sha256_hex(out);
-  for (size_t i = 0; i < 32; ++i) out.push_back(char(std::stoi(hex.substr(2 * i, 2), nullptr, 16)));
-  return out;
+  out += bytes.substr(16 + header_len, bytes.size() - 16 - header_len - 16);
+  return test::rfb_with_checksum(out, 3);
 }
 
 nlohmann::json header_of(const std::string& bytes) {
@@ -106,12 +118,12 @@ TEST(BufferFile, RejectsBadMagicAndVersion) {
   EXPECT_THROW(decode_buffer("hello world, this is not a buffer at all....................", "t"),
                BufferFileError);
   bad = good;
-  bad[8] = 3;
+  bad[8] = 4;
   m = test::error_of([&] { decode_buffer(bad, "a.rfb"); });
-  EXPECT_EQ(m, "a.rfb: unsupported format version 3 (this build reads 1 to 2)");
+  EXPECT_EQ(m, "a.rfb: unsupported format version 4 (this build reads 1 to 3)");
   bad[8] = 0;
   m = test::error_of([&] { decode_buffer(bad, "a.rfb"); });
-  EXPECT_EQ(m, "a.rfb: unsupported format version 0 (this build reads 1 to 2)");
+  EXPECT_EQ(m, "a.rfb: unsupported format version 0 (this build reads 1 to 3)");
 }
 
 TEST(BufferFile, EveryTruncationThrows) {
@@ -194,6 +206,56 @@ TEST(BufferFile, NegativeFramesRoundTripAndFramesOutOfRangeAreRefused) {
     EXPECT_NE(m.find("\"frame\""), std::string::npos) << m;
     EXPECT_NE(m.find("from -2147483648 to 2147483647"), std::string::npos) << m;
   }
+}
+
+// EncodedBuffer reads the planes where they lie: the same header, rect, planes and counters as
+// decode_buffer's copy, bit for bit, for every version, and the same refusals.
+TEST(BufferFile, EncodedBufferViewsWhatDecodeCopies) {
+  for (const SampleBuffer& b : {small_buffer(false), small_buffer(true), small_tile()}) {
+    std::string bytes = encode_buffer(b);
+    EncodedBuffer e(bytes, "mem");
+    test::expect_bit_identical(e.decoded(), decode_buffer(bytes, "mem"));
+    EXPECT_EQ(e.bytes(), bytes);
+    EXPECT_TRUE(same_samples(e.view(), b));
+    EncodedBuffer moved = std::move(e);  // the view follows the bytes
+    test::expect_bit_identical(moved.decoded(), b);
+  }
+  std::string good = encode_buffer(small_tile());
+  for (size_t n : {size_t(0), size_t(20), good.size() - 1})
+    EXPECT_THROW(EncodedBuffer(good.substr(0, n), "t.rfb"), BufferFileError) << n;
+  std::string bad = good;
+  bad[good.size() / 2] ^= 1;
+  EXPECT_EQ(test::error_of([&] { EncodedBuffer(bad, "a.rfb"); }),
+            "a.rfb: checksum mismatch (file is corrupt or truncated)");
+}
+
+// Files of format version 2 (SHA-256), written by the build before version 3
+// (tests/data/rfb-v2/README.md): a.rfb holds passes 0-1 and b.rfb passes 2-3 of a 12x8 render,
+// ab.rfb their merge by that build. This build reads them, merges them to the same samples, and
+// `rayfarm merge` takes them and writes version 3.
+TEST(BufferFile, VersionTwoFilesStillReadAndMerge) {
+  const std::string data = test::source_dir() + "/tests/data/rfb-v2/";
+  std::string a_bytes = read_file_bytes(data + "a.rfb");
+  uint32_t version;
+  std::memcpy(&version, a_bytes.data() + 8, 4);
+  ASSERT_EQ(version, 2u);
+  SampleBuffer a = read_buffer_file(data + "a.rfb"), b = read_buffer_file(data + "b.rfb");
+  SampleBuffer old_merge = read_buffer_file(data + "ab.rfb");
+  EncodedBuffer a_in_place(a_bytes, "a.rfb");
+  test::expect_bit_identical(a_in_place.decoded(), a);
+  SampleBuffer merged = a;
+  merge_into(merged, b);
+  EXPECT_TRUE(same_samples(merged, old_merge));
+  EXPECT_EQ(merged.header.passes.to_string(), "0-3");
+
+  std::string dir = test::make_temp_dir("rfb-v2-merge");
+  test::CommandResult r = test::run_command(test::rayfarm_binary() + " merge " + data + "a.rfb " +
+                                            data + "b.rfb -o " + dir + "/ab.rfb");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::string out = read_file_bytes(dir + "/ab.rfb");
+  std::memcpy(&version, out.data() + 8, 4);
+  EXPECT_EQ(version, 3u);
+  EXPECT_TRUE(same_samples(read_buffer_file(dir + "/ab.rfb"), old_merge));
 }
 
 }  // namespace

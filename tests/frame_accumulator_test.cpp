@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -104,6 +105,45 @@ TEST(FrameAccumulator, ResumeRefusesAnotherImageOrANonPrefix) {
 
   EXPECT_THROW(first.resume_from(prefix), MergeError) << "not a fresh accumulator";
   EXPECT_EQ(b.passes_merged(), 0u) << "a refused resume leaves the accumulator as it was";
+}
+
+// Tasks held encoded (as the coordinator receives them) or owned (as the local render makes
+// them), in any arrival order, give the frame that whole passes merged in order give: each pass's
+// tiles are added where they lie, and each pixel sums its passes in pass order.
+TEST(FrameAccumulator, EncodedAndOwnedTasksInAnyOrderGiveThePassOrderFrame) {
+  ProgressiveOptions opt;
+  opt.pass_count = 4;
+  SampleBuffer expected(make_header({}), Rect{0, 0, 8, 8}, false);
+  for (uint32_t p = 0; p < 4; ++p) {
+    SampleBuffer pass(make_header(PassSet::range(p, p + 1)), Rect{0, 0, 8, 8}, false);
+    for (size_t t = 0; t < kTiles.size(); ++t)
+      assemble_tile(pass, random_pass(p, kTiles[t], 1000 * p + t));
+    merge_into(expected, pass);
+  }
+  std::vector<std::pair<uint32_t, size_t>> order;
+  for (uint32_t p = 0; p < 4; ++p)
+    for (size_t t = 0; t < kTiles.size(); ++t) order.push_back({p, t});
+  for (int variant = 0; variant < 3; ++variant) {
+    SCOPED_TRACE("variant " + std::to_string(variant));
+    if (variant == 1) std::reverse(order.begin(), order.end());  // the last pass first
+    if (variant == 2) std::rotate(order.begin(), order.begin() + 5, order.end());
+    FrameAccumulator acc(make_header({}), kTiles, false, opt);
+    for (size_t i = 0; i < order.size(); ++i) {
+      auto [p, t] = order[i];
+      SampleBuffer task = random_pass(p, kTiles[t], 1000 * p + t);
+      if (i % 2)
+        acc.add(EncodedBuffer(encode_buffer(task), "task"));
+      else
+        acc.add(std::move(task));
+    }
+    ASSERT_TRUE(acc.done());
+    EXPECT_TRUE(same_samples(acc.frame(), expected));
+    EXPECT_EQ(acc.frame().rays, expected.rays);
+    EXPECT_EQ(acc.frame().header.passes, expected.header.passes);
+    // The published figures, kept as passes merged, are the frame's.
+    EXPECT_NEAR(acc.rel_mse(), expected.rel_mse(), 1e-12 * expected.rel_mse());
+    EXPECT_DOUBLE_EQ(acc.samples_per_pixel(), 12.0);  // 3 samples a pass
+  }
 }
 
 }  // namespace

@@ -8,6 +8,11 @@
 
 #include "tests/support/test_support.h"
 
+#define XXH_INLINE_ALL
+#include <xxhash.h>
+
+#include "engine/digest.h"
+
 namespace rf::test {
 
 Scene cornell_box(const CornellBox& c) {
@@ -80,6 +85,20 @@ void expect_bit_identical(const SampleBuffer& a, const SampleBuffer& b) {
   EXPECT_EQ(a.light_paths, b.light_paths);
   EXPECT_EQ(a.nonfinite_samples, b.nonfinite_samples);
   EXPECT_EQ(a.rays, b.rays);
+}
+
+size_t rfb_checksum_bytes(uint32_t version) { return version >= 3 ? 16 : 32; }
+
+std::string rfb_with_checksum(std::string body, uint32_t version) {
+  for (int b = 0; b < 4; ++b) body[8 + size_t(b)] = char((version >> (8 * b)) & 0xff);
+  if (version >= 3) {
+    XXH128_canonical_t c;
+    XXH128_canonicalFromHash(&c, XXH3_128bits(body.data(), body.size()));
+    return body + std::string(reinterpret_cast<const char*>(c.digest), sizeof c.digest);
+  }
+  std::string hex = sha256_hex(body);
+  for (size_t i = 0; i < 32; ++i) body += char(std::stoi(hex.substr(2 * i, 2), nullptr, 16));
+  return body;
 }
 
 }  // namespace rf::test

@@ -46,6 +46,13 @@ void expect_bit_identical(const SampleBuffer& a, const SampleBuffer& b);
 
 inline Rect full_frame(const BufferHeader& h) { return Rect{0, 0, h.width, h.height}; }
 
+// The checksum an .rfb of `version` ends with: 16 bytes of XXH3-128 (3), 32 of SHA-256 (1, 2).
+size_t rfb_checksum_bytes(uint32_t version);
+// `body` (an .rfb without its checksum) with the version field set to `version` and that
+// version's checksum appended: a file as a build writing that version would, for the planes and
+// header given (the caller keeps them to that version's rules).
+std::string rfb_with_checksum(std::string body, uint32_t version);
+
 // The message of the exception f() throws, or "(no exception)".
 template <class F>
 std::string error_of(F&& f) {
