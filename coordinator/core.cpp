@@ -70,6 +70,7 @@ Coordinator::Coordinator(CoreOptions o)
             std::lock_guard lock(mu_);  // the journal's writer thread, holding no lock of its own
             problem.empty() ? storage_ok() : storage_failed(problem);
           })),
+      results_sync_(std::make_unique<GroupSync>(options_.state_dir)),
       ledger_(std::make_unique<Ledger>(
           SchedulerOptions{
               options_.lease_seconds, options_.max_failures, options_.window_frames,

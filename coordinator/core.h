@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "coordinator/errors.h"
+#include "coordinator/group_sync.h"
 #include "coordinator/job_store.h"
 #include "coordinator/scene_check.h"
 #include "coordinator/scheduler.h"
@@ -512,6 +513,8 @@ class Coordinator {
   BlobStore blobs_;
   std::shared_ptr<JobStore> store_;
   std::unique_ptr<Journal> journal_;  // the store's writes, in order, off mu_ (journal.h)
+  // Task files written unflushed are made durable together (group_sync.h), off every lock.
+  std::unique_ptr<GroupSync> results_sync_;
   std::unique_ptr<Ledger> ledger_;    // the only code that changes task and job state
   mutable std::mutex mu_;
   std::mutex requeue_mu_;  // before any frame's lock and mu_: one requeue at a time

@@ -60,6 +60,9 @@ struct FrameRecord {
   bool held = false;            // unfinished and left out of a `retry --frames`: not queued
   uint32_t version = 0;         // the scene version it renders (versions.h)
   uint32_t run = 0;             // requeued this many times: its checkpoint's folder
+  // Under the frame's lock: tasks (pass, tile) whose results are being made durable, their
+  // frame lock let go meanwhile; another result of one of them is not needed.
+  std::set<std::pair<uint32_t, uint32_t>> storing;
 };
 
 struct JobRecord {

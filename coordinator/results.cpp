@@ -299,7 +299,7 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
     refuse_upload(r.worker_id, r.lease_id, r.task, e.what(), r.log);
     throw;
   }
-  std::lock_guard frame_lock(f->m);  // one merge and checkpoint at a time per frame
+  std::unique_lock frame_lock(f->m);  // one merge and checkpoint at a time per frame
   {
     std::lock_guard lock(mu_);
     if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
@@ -343,10 +343,18 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
     std::lock_guard lock(mu_);
     if (!verify(*job, r, buffer)) return true;  // taken, and held until another result agrees
   }
-  // Durable first: the task's result (its checkpoint file, the record of which tasks an image
-  // holds), then the ledger's transition and its rows, then the answer once they are stored.
+  const std::pair<uint32_t, uint32_t> key{r.task.pass, r.task.tile};
+  if (f->storing.count(key)) {  // another result of the task is being stored: it will be merged
+    std::lock_guard lock(mu_);
+    ledger_->not_needed(r.lease_id, r.task, r.worker_id, now(), r.log);
+    return false;
+  }
+  // Durable first: the task's result (its record in the frame's checkpoint log, the record of
+  // which tasks an image holds), then the ledger's transition and its rows, then the answer once
+  // they are stored. The record is appended unflushed under the frame's lock, and flushed with
+  // the other results that arrive meanwhile (group commit: results_sync_) with no lock held.
   try {
-    f->checkpoint->save_task(r.task.pass, r.task.tile, buffer.bytes());  // as received
+    f->checkpoint->save_task(r.task.pass, r.task.tile, buffer.bytes());
   } catch (const std::exception& e) {
     // The coordinator's fault (disk full, unwritable state): never the worker's. It retries.
     std::lock_guard lock(mu_);
@@ -354,8 +362,29 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
     refuse(ErrorCode::Unavailable,
            std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
   }
+  f->storing.insert(key);
+  frame_lock.unlock();
+  std::string flush_error;
+  try {
+    results_sync_->sync();
+  } catch (const std::exception& e) {
+    flush_error = e.what();
+  }
+  frame_lock.lock();
+  f->storing.erase(key);
+  if (!flush_error.empty()) {
+    // Its record stays in the log, recorded nowhere else: after a restart it counts as a merged
+    // result (as a result stored just before a crash does); here its task is leased again.
+    std::lock_guard lock(mu_);
+    storage_failed(flush_error);
+    refuse(ErrorCode::Unavailable,
+           "the coordinator cannot store results now (" + flush_error + "); retry later");
+  }
   {
     std::lock_guard lock(mu_);
+    // Deleted, or requeued (its old run's folder goes), while the file was flushed.
+    if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
+    if (f->run != run) return false;
     if (journal_->problem().empty()) storage_ok();
     if (!record_result(*job, r, buffer.header())) return false;
     ++counters_.tasks_completed;
@@ -365,7 +394,8 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
   }
   // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
   // frames' merges go on meanwhile.
-  bool merged = f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
+  // (No accumulator: the frame ended while the file was flushed, its image in its checkpoint.)
+  bool merged = f->acc && f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
   if (merged) {
     try {  // the task files stay until a prefix holding them is durable
       f->checkpoint->save_prefix(f->acc->frame());

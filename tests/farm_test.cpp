@@ -248,6 +248,53 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
     expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 
+// Every result acknowledged to a worker survives a SIGKILL of the coordinator: results are
+// acknowledged only once their record is flushed (a group commit covers the results that arrive
+// together). Three workers on tasks of a few milliseconds; the coordinator is killed while
+// results arrive by the dozen. Each task a worker logged "merged" before the kill is never
+// leased again after the restart (it is in the restored state), and the finished image holds
+// every task exactly once: the exact spp everywhere, and equal to the local render.
+TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
+  Farm farm("farm-acks", /*lease_seconds=*/3);
+  const std::string job_args = kCornell + " --spp 256 --passes 64 --res 32x32";
+  std::string job = farm.submit(job_args + " --tile-size 8");  // 16 tiles x 64 passes
+  std::vector<Process*> workers{&farm.worker(), &farm.worker(), &farm.worker()};
+  const std::regex merged("task (\\S+): merged"), leased("task (\\S+): leased");
+  auto matches = [](const std::string& log, const std::regex& re) {
+    std::vector<std::string> ids;
+    for (auto it = std::sregex_iterator(log.begin(), log.end(), re); it != std::sregex_iterator();
+         ++it)
+      ids.push_back((*it)[1]);
+    return ids;
+  };
+  std::set<std::string> acked;
+  std::vector<size_t> seen(workers.size());
+  for (int i = 0; i < 3000 && acked.size() < 150; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    acked.clear();
+    for (size_t w = 0; w < workers.size(); ++w) {
+      std::string log = workers[w]->log();
+      seen[w] = log.size();
+      for (const std::string& id : matches(log, merged)) acked.insert(id);
+    }
+  }
+  farm.restart_coordinator(SIGKILL);  // at once: acks go on arriving until the kill
+  ASSERT_GE(acked.size(), 150u);
+  nlohmann::json restored = farm.status(job);
+  ASSERT_LT(restored["frames"][0]["passes_merged"].get<int>(), 64)
+      << "the job ended before the kill";
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0) << farm.coordinator().log();
+  for (size_t w = 0; w < workers.size(); ++w)
+    for (const std::string& id : matches(workers[w]->log().substr(seen[w]), leased))
+      EXPECT_FALSE(acked.count(id))
+          << "task " << id << " was acknowledged before the kill and leased again after";
+  nlohmann::json done = farm.status(job);
+  EXPECT_EQ(done["frames"][0]["passes_merged"], 64);
+  EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 256.0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
+}
+
 // A graceful stop (SIGTERM) of the coordinator, gone for 3 s, then back: the workers (one
 // busy, one idle, no --exit-when-idle) neither exit nor fail their tasks; they wait for it and
 // finish the job, whose image equals the local render. Before, each exited 1 with
