@@ -48,10 +48,11 @@ for workers in "${WORKER_COUNTS[@]}"; do
   secs=$(sed -n 's/.*"seconds": \([0-9.]*\).*/\1/p' "$DIR/load-$workers.json")
   cpu_ms=$(awk -F, '$3 == "task-clock" { print $1 }' "$DIR/perf-$workers.txt")
   fsyncs=$(awk -F, '$3 ~ /sys_enter_(fsync|fdatasync|syncfs)/ { n += $1 } END { print n + 0 }' "$DIR/perf-$workers.txt")
+  syncfs=$(awk -F, '$3 ~ /sys_enter_syncfs/ { n += $1 } END { print n + 0 }' "$DIR/perf-$workers.txt")
   read -r lu ls <"$DIR/load-$workers.time"
-  awk -v w="$workers" -v m="$merged" -v s="$secs" -v c="$cpu_ms" -v f="$fsyncs" -v lu="$lu" -v ls="$ls" 'BEGIN {
-    printf "  %3d workers: %6d tasks in %.1f s, %6.0f tasks/s | coordinator %5.0f us CPU/task, %.2f fsyncs/task | load generator %5.0f us CPU/task\n",
-      w, m, s, m / s, 1000 * c / m, f / m, 1e6 * (lu + ls) / m }'
+  awk -v w="$workers" -v m="$merged" -v s="$secs" -v c="$cpu_ms" -v f="$fsyncs" -v sf="$syncfs" -v lu="$lu" -v ls="$ls" 'BEGIN {
+    printf "  %3d workers: %6d tasks in %.1f s, %6.0f tasks/s | coordinator %5.0f us CPU/task, %.2f flushes/task (%.2f syncfs) | load generator %5.0f us CPU/task\n",
+      w, m, s, m / s, 1000 * c / m, f / m, sf / m, 1e6 * (lu + ls) / m }'
   kill "$coord" 2>/dev/null || true
   wait "$coord" 2>/dev/null || true
 done

@@ -353,6 +353,7 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
   // which tasks an image holds), then the ledger's transition and its rows, then the answer once
   // they are stored. The record is appended unflushed under the frame's lock, and flushed with
   // the other results that arrive meanwhile (group commit: results_sync_) with no lock held.
+  GroupSync::Writer durable(*results_sync_);  // a flush about to start waits for this write
   try {
     f->checkpoint->save_task(r.task.pass, r.task.tile, buffer.bytes());
   } catch (const std::exception& e) {
@@ -366,7 +367,7 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
   frame_lock.unlock();
   std::string flush_error;
   try {
-    results_sync_->sync();
+    durable.sync();
   } catch (const std::exception& e) {
     flush_error = e.what();
   }

@@ -1,12 +1,17 @@
 // Tests of coordinator/checkpoint: a frame's durable prefix and task log, torn and corrupt records,
 // the log's compaction, and task files of builds before the log.
 #include "coordinator/checkpoint.h"
+#include "coordinator/group_sync.h"
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "engine/buffer_file.h"
 #include "engine/buffer_merge.h"
@@ -140,6 +145,29 @@ TEST(FrameCheckpoint, TheLogShrinksAsThePrefixGrowsAndOldTaskFilesStillRead) {
   merge_into(prefix, old);
   cp.save_prefix(prefix);
   EXPECT_FALSE(fs::exists(dir + "/task-4-0.rfb"));
+}
+
+// Sixteen uploads in flight, each announced before its write: the flush that the first to call
+// sync() starts waits for the others to take their tickets, and one syncfs covers them all.
+TEST(GroupSync, OneFlushCoversTheWritersInFlight) {
+  std::string dir = test::make_temp_dir("group-sync");
+  GroupSync g(dir, /*gather_seconds=*/10);  // the gather ends when all have come, not on time
+  const int n = 16;
+  std::vector<std::unique_ptr<GroupSync::Writer>> writers;
+  for (int i = 0; i < n; ++i) writers.push_back(std::make_unique<GroupSync::Writer>(g));
+  std::vector<std::thread> threads;
+  std::atomic<int> done{0};
+  for (int i = 0; i < n; ++i)
+    threads.emplace_back([&, i] {
+      test::write_text(dir + "/f" + std::to_string(i), "result");
+      writers[size_t(i)]->sync();
+      ++done;
+    });
+  for (std::thread& t : threads) t.join();
+  EXPECT_EQ(done, n);
+  EXPECT_EQ(g.flushes(), 1u);
+  g.sync();  // an unannounced writer flushes alone
+  EXPECT_EQ(g.flushes(), 2u);
 }
 
 }  // namespace
