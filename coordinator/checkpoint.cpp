@@ -142,13 +142,6 @@ void FrameCheckpoint::save_task(uint32_t pass, uint32_t tile, std::string_view e
   }
 }
 
-void FrameCheckpoint::flush_tasks() const {
-  Fd f{::open(log_path().c_str(), O_RDONLY | O_CLOEXEC)};
-  if (f.fd < 0) return;
-  if (::fdatasync(f.fd) != 0)
-    throw std::runtime_error(log_path() + ": fdatasync failed: " + std::strerror(errno));
-}
-
 void FrameCheckpoint::save_prefix(const SampleBuffer& frame) const {
   write_buffer_file(dir_ + "/prefix.rfb", frame);
   uint32_t k = frame.header.passes.count();

@@ -32,11 +32,10 @@ class FrameCheckpoint {
   explicit FrameCheckpoint(std::string dir);  // creates it
 
   // Appends a task's result (encoded, or the bytes as received, already decoded and checked) to
-  // the log, unflushed: the caller makes it durable (GroupSync, or flush_tasks) before it counts
+  // the log, unflushed: the caller makes it durable (GroupSync) before it counts
   // on it. Throws std::runtime_error naming the file (and leaves no partial record behind).
   void save_task(uint32_t pass, uint32_t tile, const SampleBuffer& buffer) const;
   void save_task(uint32_t pass, uint32_t tile, std::string_view encoded) const;
-  void flush_tasks() const;  // fdatasync of the log
   // Writes the prefix (passes [0, k)), then drops the results of passes < k: the log is emptied
   // when none of its records is of a later pass, rewritten with those only (flushed) when they
   // are less than half of it; task files of passes < k are removed.

@@ -113,25 +113,21 @@ void add_tile(SampleBuffer& dst, const BufferView& tile) {
     throw fail("plane sizes do not match the rect " + to_string(tile.rect));
   }
   const size_t na = size_t(dst.header.aovs.channels());
-  const size_t w = size_t(tile.rect.w);
-  if (tile.rect == dst.rect) {  // one run per plane
-    add_values(dst.count.data(), tile.count.data(), dst.count.size());
-    add_values(dst.sum.data(), tile.sum.data(), dst.sum.size());
-    add_values(dst.sum_sq.data(), tile.sum_sq.data(), dst.sum_sq.size());
-    add_values(dst.batch_sum.data(), tile.batch_sum.data(), dst.batch_sum.size());
-    add_values(dst.batch_sum_sq.data(), tile.batch_sum_sq.data(), dst.batch_sum_sq.size());
-    add_values(dst.aov.data(), tile.aov.data(), dst.aov.size());
-  } else {
-    for (int y = tile.rect.y0; y < tile.rect.y1(); ++y) {
-      size_t s = tile.pixel_index(tile.rect.x0, y), d = dst.pixel_index(tile.rect.x0, y);
-      add_values(dst.count.data() + d, tile.count.data() + s, w);
-      add_values(dst.sum.data() + 3 * d, tile.sum.data() + 3 * s, 3 * w);
-      add_values(dst.sum_sq.data() + 3 * d, tile.sum_sq.data() + 3 * s, 3 * w);
-      add_values(dst.batch_sum.data() + 3 * d, tile.batch_sum.data() + 3 * s, 3 * w);
-      add_values(dst.batch_sum_sq.data() + 3 * d, tile.batch_sum_sq.data() + 3 * s, 3 * w);
-      add_values(dst.aov.data() + na * d, tile.aov.data() + na * s, na * w);
-    }
-  }
+  // Adds n pixels of the tile from its pixel s onto dst's pixels from d, every plane.
+  auto add_run = [&](size_t d, size_t s, size_t n) {
+    add_values(dst.count.data() + d, tile.count.data() + s, n);
+    add_values(dst.sum.data() + 3 * d, tile.sum.data() + 3 * s, 3 * n);
+    add_values(dst.sum_sq.data() + 3 * d, tile.sum_sq.data() + 3 * s, 3 * n);
+    add_values(dst.batch_sum.data() + 3 * d, tile.batch_sum.data() + 3 * s, 3 * n);
+    add_values(dst.batch_sum_sq.data() + 3 * d, tile.batch_sum_sq.data() + 3 * s, 3 * n);
+    add_values(dst.aov.data() + na * d, tile.aov.data() + na * s, na * n);
+  };
+  if (tile.rect == dst.rect)  // one run
+    add_run(0, 0, size_t(tile.rect.area()));
+  else
+    for (int y = tile.rect.y0; y < tile.rect.y1(); ++y)
+      add_run(dst.pixel_index(tile.rect.x0, y), tile.pixel_index(tile.rect.x0, y),
+              size_t(tile.rect.w));
   add_values(dst.splat.data(), tile.splat.data(), dst.splat.size());
   dst.light_paths += tile.light_paths;
   dst.nonfinite_samples += tile.nonfinite_samples;

@@ -42,27 +42,23 @@ bool FrameAccumulator::task_needed(const Rect& rect, uint32_t pass) const {
 }
 
 FrameAccumulator::AddResult FrameAccumulator::add(SampleBuffer task) {
-  BufferHeader h = task.header;
-  Rect rect = task.rect;
   if (!task.planes_match_rect()) throw MergeError("plane sizes do not match the rect");
-  return add_task(std::move(task), h, rect);
+  return add_task(std::move(task));
 }
 
 FrameAccumulator::AddResult FrameAccumulator::add(EncodedBuffer task) {
-  BufferHeader h = task.header();
-  Rect rect = task.rect();
-  return add_task(std::move(task), h, rect);
+  return add_task(std::move(task));  // its planes match its rect: decoding checked them
 }
 
-FrameAccumulator::AddResult FrameAccumulator::add_task(Task task, const BufferHeader& header,
-                                                       const Rect& rect) {
+FrameAccumulator::AddResult FrameAccumulator::add_task(Task task) {
+  const BufferView v = view_of(task);  // read before the task moves into pending_
+  const BufferHeader& header = *v.header;
   if (header.passes.count() != 1 || header.passes.ranges.size() != 1)
     throw MergeError("a task buffer must hold exactly one pass, got " + header.passes.to_string());
   std::string why = merge_incompatibility(base_, header);
   if (!why.empty()) throw MergeError(why);
   uint32_t pass = header.passes.ranges[0].first;
-  size_t ti = tile_index(rect);
-  BufferView v = view_of(task);
+  size_t ti = tile_index(v.rect);
   if (v.splat.empty() == splats_)
     throw MergeError(splats_ ? "a task of this frame must carry a splat plane"
                              : "a task of this frame must not carry a splat plane");

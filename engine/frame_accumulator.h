@@ -61,7 +61,7 @@ class FrameAccumulator {
 
  private:
   using Task = std::variant<SampleBuffer, EncodedBuffer>;
-  AddResult add_task(Task task, const BufferHeader& header, const Rect& rect);
+  AddResult add_task(Task task);
   void merge_ready_passes();
   double prefix_rel_mse() const;  // tile by tile
   void decide_after(uint32_t merged);

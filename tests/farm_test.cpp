@@ -258,7 +258,9 @@ TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
   Farm farm("farm-acks", /*lease_seconds=*/3);
   const std::string job_args = kCornell + " --spp 256 --passes 64 --res 32x32";
   std::string job = farm.submit(job_args + " --tile-size 8");  // 16 tiles x 64 passes
-  std::vector<Process*> workers{&farm.worker(), &farm.worker(), &farm.worker()};
+  // Workers that stay through the restart (an idle one would exit with --exit-when-idle while
+  // the restored coordinator still holds the old leases).
+  std::vector<Process*> workers{&farm.worker({}), &farm.worker({}), &farm.worker({})};
   const std::regex merged("task (\\S+): merged"), leased("task (\\S+): leased");
   auto matches = [](const std::string& log, const std::regex& re) {
     std::vector<std::string> ids;
