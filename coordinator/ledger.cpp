@@ -231,7 +231,7 @@ void Ledger::not_needed(const std::string& lease_id, const TaskRef& task,
                         const std::vector<std::string>& log) {
   journal_.append({attempt(lease_id, task, worker_id, AttemptOutcome::NotNeeded,
                            "another result came first, or its frame or job stopped", log, now)});
-  scheduler_.complete(lease_id, task, now);  // ends the lease
+  scheduler_.release(lease_id, task, now);  // ends the lease; the task is not done by it
 }
 
 Ledger::Ticket Ledger::refuse_result(const std::string& worker_id, const std::string& lease_id,

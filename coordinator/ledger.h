@@ -37,6 +37,7 @@ class Ledger {
          double unix_offset = 0);
 
   const Scheduler& scheduler() const { return scheduler_; }
+  void forget_worker(const std::string& worker_id) { scheduler_.forget_worker(worker_id); }
   Journal& journal() { return journal_; }
 
   // ---- Jobs
@@ -105,8 +106,10 @@ class Ledger {
                   const std::string& worker_id, double core_seconds, const std::string& build_id,
                   const std::string& cpu_kind, double now,
                   const std::vector<std::string>& log = {});
-  // A result for a task that needs none (settled, merged already, or beyond its frame's stop):
-  // its lease ends and the task counts as done; only the attempt is stored.
+  // A result not merged because its task needs none (settled, merged already, beyond its
+  // frame's stop) or because another result of it is being stored: its lease ends, only the
+  // attempt is stored. The task is not done by it (Scheduler::release): were it, the result
+  // being stored would find its task settled and not be merged either, and the task be lost.
   void not_needed(const std::string& lease_id, const TaskRef& task, const std::string& worker_id,
                   double now, const std::vector<std::string>& log = {});
   // A result refused (or an upload refused on its way in): the lease ends, the task is queued

@@ -205,6 +205,7 @@ void Scheduler::drop_job_tasks(JobState& j) {
     f.done = {};
     f.waiting = {};
   }
+  j.worker_frame = {};  // affinity is for handing out its tasks: an entry per worker that had one
 }
 
 void Scheduler::expire(double now) {
@@ -358,6 +359,18 @@ void Scheduler::mark_passes_done(const std::string& job_id, FrameNumber frame, u
   if (!j) return;
   for (uint32_t p = 0; p < std::min(passes, j->passes); ++p)
     for (uint32_t t = 0; t < j->tiles; ++t) mark_done(TaskRef{job_id, frame, p, t});
+}
+
+void Scheduler::release(const std::string& lease_id, const TaskRef& task, double now) {
+  expire(now);
+  auto it = leases_.find(lease_id);
+  if (it == leases_.end()) {  // retired, or issued before a restart
+    requeue_if_needed(task);
+    return;
+  }
+  TaskRef leased = it->second.task;
+  if (it->second.live) end_lease(lease_id, it->second);
+  requeue_if_needed(leased);
 }
 
 bool Scheduler::settled(const TaskRef& ref) const {
@@ -517,6 +530,17 @@ bool Scheduler::work_left_for(const std::string& worker_id, const JobFilter& may
       if (f.open_tasks > 0) return true;
   }
   return false;
+}
+
+std::set<std::string> Scheduler::workers_with_live_leases() const {
+  std::set<std::string> out;
+  for (const auto& [id, l] : leases_)
+    if (l.live) out.insert(l.worker_id);
+  return out;
+}
+
+void Scheduler::forget_worker(const std::string& worker_id) {
+  for (auto& [id, j] : jobs_) j.worker_frame.erase(worker_id);
 }
 
 std::vector<TaskRef> Scheduler::leased_to(const std::string& worker_id) const {

@@ -97,6 +97,11 @@ class Scheduler {
   // The same, for a result whose lease this scheduler does not know (issued before a coordinator
   // restart): it is identified by its task. Results are deterministic, so it counts the same.
   CompleteOutcome complete(const std::string& lease_id, const TaskRef& task, double now);
+  // A result arrived for this lease and is not merged (another result of its task is being
+  // stored, or was merged, or the task is past its frame's stop): the lease ends, the task stays
+  // as it is. Never marks the task done: a result that is not merged must not settle it. A task
+  // left with no live lease and not done goes back to the queue.
+  void release(const std::string& lease_id, const TaskRef& task, double now);
   // Restoring from checkpoints: the task's result is already merged or stored.
   void mark_done(const TaskRef& task);
   // Restoring from checkpoints: passes [0, passes) of the frame are merged.
@@ -149,6 +154,11 @@ class Scheduler {
   // The jobs of the live leases held by workers for which `whose` is true.
   std::set<std::string> leased_jobs(
       const std::function<bool(const std::string& worker_id)>& whose) const;
+  // Workers holding a live lease.
+  std::set<std::string> workers_with_live_leases() const;
+  // A worker gone for good (its registration forgotten): its frame affinity in every job. Its
+  // failure counts stay (they bar nobody who can come back, and fail jobs by their number).
+  void forget_worker(const std::string& worker_id);
   // A worker's live leases' tasks, and its failures and refused results in jobs not ended.
   std::vector<TaskRef> leased_to(const std::string& worker_id) const;
   int failures_of(const std::string& worker_id) const;
@@ -163,6 +173,11 @@ class Scheduler {
   // Records held (tasks with leases, failures or exclusions; leases): for tests of the bound.
   size_t task_records() const { return tasks_.size(); }
   size_t lease_records() const { return leases_.size(); }
+  size_t affinity_records() const {  // (job, worker) frame affinities
+    size_t n = 0;
+    for (const auto& [id, j] : jobs_) n += j.worker_frame.size();
+    return n;
+  }
 
  private:
   struct TaskState {  // only for tasks with something to remember

@@ -1032,25 +1032,30 @@ TEST(CoordinatorCore, AJobThatCannotBeRestoredIsFailedAndTheOthersAreServed) {
 
 // A registration that no call uses for 10 minutes (10 lease times if longer) is forgotten at a
 // later registration, in memory and in the store: registrations of a client that never leases
-// do not pile up. A worker that leased stays; a forgotten one that comes back is NotFound
-// (and registers again).
-TEST(CoordinatorCore, RegistrationsThatAreNeverUsedExpire) {
+// do not pile up. So is a worker that leased and then fell silent that long with no live lease
+// (killed: the soak's workers come and go by the thousand). A worker that keeps calling stays;
+// a forgotten one that comes back is NotFound (and registers again).
+TEST(CoordinatorCore, RegistrationsThatAreNeverUsedOrFallSilentExpire) {
   CoreBench bench("core-registrations");
   Coordinator& core = bench.core();
   std::vector<std::string> idle;
   for (int i = 0; i < 200; ++i)
     idle.push_back(core.register_worker({"idle", 1, "b", "i"}).worker_id);
   std::string busy = core.register_worker({"busy", 1, build_id(), "i"}).worker_id;
+  std::string killed = core.register_worker({"killed", 1, build_id(), "i"}).worker_id;
   bench.submit(1);
   EXPECT_TRUE(core.lease(busy).task);
-  EXPECT_EQ(core.metrics().workers_registered, 201u);
+  EXPECT_TRUE(core.lease(killed).task);  // and never heard from again: its lease expires
+  EXPECT_EQ(core.metrics().workers_registered, 202u);
   bench.now += 599;
+  core.lease(busy);  // still calling
   core.register_worker({"late", 1, "b", "i"});
-  EXPECT_EQ(core.metrics().workers_registered, 202u) << "not yet ten minutes";
+  EXPECT_EQ(core.metrics().workers_registered, 203u) << "not yet ten minutes";
   bench.now += 62;
   core.register_worker({"later", 1, "b", "i"});
   EXPECT_EQ(core.metrics().workers_registered, 3u) << "busy, late and later";
   EXPECT_EQ(refusal([&] { core.lease(idle[7]); }), ErrorCode::NotFound);
+  EXPECT_EQ(refusal([&] { core.lease(killed); }), ErrorCode::NotFound);
   EXPECT_EQ(refusal([&] { core.lease(busy); }), std::nullopt);
   bench.start("B");
   EXPECT_EQ(bench.core().metrics().workers_registered, 3u) << "the store forgot them too";

@@ -474,11 +474,11 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   std::optional<Lease> other = b.ledger.lease("w4", b.now, {});
   ASSERT_TRUE(other);
   EXPECT_FALSE(other->task == r->task) << "w4 may not verify its own result";
-  // Not needed (its result merged already, or beyond its frame's stop): the lease ends and the
-  // task counts as done, with only its attempt stored.
+  // Not needed (another result of it being stored, or merged already, or beyond its frame's
+  // stop): the lease ends, with only its attempt stored; the task is not done by it.
   b.ledger.not_needed(other->lease_id, other->task, "w4", b.now);
   EXPECT_EQ(b.ledger.renew(other->lease_id, b.now), LeaseOutcome::Ended);
-  EXPECT_TRUE(b.ledger.scheduler().settled(other->task));
+  EXPECT_FALSE(b.ledger.scheduler().settled(other->task));
   b.flush();
   EXPECT_EQ(b.store.refused_workers("j1"), std::vector<std::string>{"w2"});
   ASSERT_EQ(b.store.failures("j1").size(), 1u);
@@ -522,6 +522,39 @@ TEST(Ledger, TaskTransitionsAndTheirRows) {
   EXPECT_EQ(log[0].outcome, AttemptOutcome::Held);
   EXPECT_EQ(log[1].outcome, AttemptOutcome::NotNeeded);
   EXPECT_EQ(log[1].worker_id, "w5");
+}
+
+// A result not merged never settles its task. The soak lost tasks this way: a stalled worker's
+// lease expired, the task went to a second worker, and the first one's late result, arriving
+// while the second's was being stored, was "not needed" and marked the task done; the stored
+// result then found its task settled and was not merged either, and the frame never completed.
+TEST(Ledger, AResultNotMergedLeavesItsTaskToTheResultThatIs) {
+  Bench b;
+  auto job = make_job("j1", 1, 1);
+  b.store.write(store::InsertJob{{"j1", 1, JobSpec{}, int(JobState::Queued), "", 0, 0, "", ""}});
+  b.ledger.add_job(*job);
+  std::optional<Lease> first = b.ledger.lease("w1", b.now, {});
+  ASSERT_TRUE(first);
+  b.now += 100;  // w1 stalls past its lease: the task is queued again and goes to w2
+  std::optional<Lease> second = b.ledger.lease("w2", b.now, {});
+  ASSERT_TRUE(second);
+  ASSERT_EQ(second->task, first->task);
+  // w1's late result is not merged (w2's is being stored): the expired lease is retired ...
+  b.ledger.not_needed(first->lease_id, first->task, "w1", b.now);
+  EXPECT_FALSE(b.ledger.scheduler().settled(first->task));
+  EXPECT_EQ(b.ledger.renew(second->lease_id, b.now), LeaseOutcome::Ok) << "w2's lease lives on";
+  // ... and a live one (two results racing with the lease still held).
+  std::optional<Lease> third = b.ledger.lease("w3", b.now, {});
+  ASSERT_TRUE(third);
+  EXPECT_FALSE(third->task == first->task) << "leased to w2 still";
+  b.ledger.not_needed(second->lease_id, second->task, "w2", b.now);
+  EXPECT_FALSE(b.ledger.scheduler().settled(second->task));
+  std::optional<Lease> again = b.ledger.lease("w4", b.now, {});
+  ASSERT_TRUE(again) << "no live lease left: the task is queued again";
+  EXPECT_EQ(again->task, first->task);
+  // The result that is merged settles it.
+  b.ledger.complete(*job, again->lease_id, again->task, "w4", 1, "build-1", "K", b.now);
+  EXPECT_TRUE(b.ledger.scheduler().settled(first->task));
 }
 
 // Restoring: an ended job's tasks are not queued; a running job's trail counts as before.

@@ -224,6 +224,28 @@ TEST(Scheduler, CancelEndsEverything) {
   EXPECT_EQ(s.queued_tasks(), 0u);
 }
 
+// Nor the workers a farm ever had: a worker's frame affinity (one per job it leased in) goes when
+// the worker is forgotten or the job ends.
+TEST(Scheduler, WorkerRecordsGoWithTheWorkerOrTheJob) {
+  Scheduler s({30, 3, 4});
+  s.add_job("a", {1, 2}, /*tiles=*/100, /*passes=*/2, 0);
+  s.add_job("b", {1}, /*tiles=*/100, /*passes=*/2, 0);
+  for (int w = 0; w < 50; ++w) {
+    std::optional<Lease> l = s.lease("w" + std::to_string(w), 0);
+    ASSERT_TRUE(l);
+    EXPECT_EQ(s.complete(l->lease_id, 0), CompleteOutcome::Accepted);
+  }
+  EXPECT_EQ(s.affinity_records(), 50u) << "one job each (fair share: 25 per job)";
+  EXPECT_EQ(s.workers_with_live_leases(), std::set<std::string>{});
+  ASSERT_TRUE(s.lease("w0", 0));
+  EXPECT_EQ(s.workers_with_live_leases(), std::set<std::string>{"w0"});
+  for (int w = 0; w < 10; ++w) s.forget_worker("w" + std::to_string(w));
+  EXPECT_EQ(s.affinity_records(), 40u);
+  s.cancel_job("a");  // ended (a completed job is ended by the same call)
+  s.cancel_job("b");
+  EXPECT_EQ(s.affinity_records(), 0u);
+}
+
 // Memory follows what is in flight, not the job's size: a job of 100 million tasks is added at
 // once, and a task has a record only while it is leased (or remembers a failure or a held
 // result). Records and leases go when the task is done, its pass is stopped or its job ends;
