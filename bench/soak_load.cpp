@@ -12,17 +12,28 @@
 // Runs until --seconds pass or SIGTERM/SIGINT, then prints one JSON line of counters. A corrupt
 // result the coordinator accepted is counted in corrupt_accepted (should stay 0).
 //
-//   soak_load --coordinator HOST:PORT [--workers 200] [--seconds 600] [--kill 0.02]
-//             [--stall 0.01] [--corrupt 0.01] [--cache DIR] [--seed 1]
+// With --timeline FILE it also writes, every --interval seconds of wall-clock time (aligned to
+// multiples of it, so that the lines of several load processes fall into the same intervals), one
+// JSON line: the interval's end (Unix seconds), its lease calls answered, the tasks among them,
+// results merged, and a histogram of the lease calls' latency (client-side, connection to answer)
+// in buckets of 2^(1/16) (4.4%): bucket i holds latencies in [2^(i/16), 2^((i+1)/16)) us.
+// bench/soak_plot.py merges the histograms of all load processes into p50 and p99.
+//
+//   soak_load --coordinator HOST:PORT [--workers 200] [--first-index 0] [--seconds 600]
+//             [--kill 0.02] [--stall 0.01] [--corrupt 0.01] [--cache DIR] [--seed 1]
+//             [--timeline FILE] [--interval 5]
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <future>
 #include <map>
@@ -55,7 +66,7 @@ std::atomic<bool> g_stop{false};
 struct Counters {
   std::atomic<uint64_t> registrations{0}, leased{0}, merged{0}, not_needed{0}, refused{0},
       late_refused{0}, upload_errors{0}, lease_errors{0}, kills{0}, stalls{0}, corrupt{0},
-      corrupt_accepted{0}, renewals{0}, renew_failures{0};
+      corrupt_accepted{0}, renewals{0}, renew_failures{0}, lease_calls{0};
 };
 Counters g_count;
 
@@ -65,7 +76,37 @@ struct Options {
   double seconds = 600, kill = 0.02, stall = 0.01, corrupt = 0.01;
   std::string cache = "soak-cache";
   uint32_t seed = 1;
+  int first_index = 0;  // simulated worker names: sim-<first_index + i>
+  std::string timeline;
+  double interval = 5;
 };
+
+// Lease latency per interval: a log-bucketed histogram (16 buckets per doubling).
+class LatencyHistogram {
+ public:
+  void add(double microseconds) {
+    int bucket = int(std::floor(16 * std::log2(std::max(1.0, microseconds))));
+    std::lock_guard lock(mu_);
+    ++counts_[bucket];
+  }
+  // The counts since the last call, as a JSON object {"bucket": count, ...}; resets them.
+  std::string take_json() {
+    std::map<int, uint64_t> counts;
+    {
+      std::lock_guard lock(mu_);
+      counts.swap(counts_);
+    }
+    std::string out = "{";
+    for (const auto& [bucket, n] : counts)
+      out += (out.size() > 1 ? ", \"" : "\"") + std::to_string(bucket) + "\": " + std::to_string(n);
+    return out + "}";
+  }
+
+ private:
+  std::mutex mu_;
+  std::map<int, uint64_t> counts_;
+};
+LatencyHistogram g_lease_latency;
 
 void set_deadline(grpc::ClientContext& ctx, double seconds) {
   ctx.set_deadline(std::chrono::system_clock::now() +
@@ -152,7 +193,7 @@ class SimulatedWorker {
     grpc::ClientContext ctx;
     set_deadline(ctx, 30);
     pb::RegisterRequest req;
-    req.set_hostname("sim-" + std::to_string(index_));
+    req.set_hostname("sim-" + std::to_string(o_.first_index + index_));
     req.set_cores(1);
     req.set_build_id(rf::build_id());
     req.set_isa(rf::cpu_isa());
@@ -173,7 +214,13 @@ class SimulatedWorker {
       pb::LeaseRequest req;
       req.set_worker_id(worker_id_);
       pb::LeaseResponse resp;
+      auto asked = Clock::now();
       grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
+      if (s.ok()) {
+        ++g_count.lease_calls;
+        g_lease_latency.add(
+            std::chrono::duration<double, std::micro>(Clock::now() - asked).count());
+      }
       if (s.error_code() == grpc::StatusCode::NOT_FOUND) return;
       if (!s.ok()) {
         ++g_count.lease_errors;
@@ -294,6 +341,14 @@ class SimulatedWorker {
   double keepalive_seconds_ = 10;
 };
 
+// This process's CPU time (user + system), seconds.
+double cpu_seconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+         1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -307,6 +362,11 @@ int main(int argc, char** argv) {
   app.add_option("--corrupt", o.corrupt)->check(CLI::Range(0.0, 1.0));
   app.add_option("--cache", o.cache, "directory for fetched bundles");
   app.add_option("--seed", o.seed);
+  app.add_option("--first-index", o.first_index, "the first simulated worker's number")
+      ->check(CLI::Range(0, 100000000));
+  app.add_option("--timeline", o.timeline, "write per-interval JSON lines here");
+  app.add_option("--interval", o.interval, "seconds per timeline line")
+      ->check(CLI::Range(0.1, 3600.0));
   CLI11_PARSE(app, argc, argv);
 
   signal(SIGTERM, [](int) { g_stop = true; });
@@ -318,23 +378,54 @@ int main(int argc, char** argv) {
   auto t0 = Clock::now();
   for (int i = 0; i < o.workers; ++i)
     threads.emplace_back([&, i] { SimulatedWorker(o, scenes, i).run(); });
-  while (!g_stop && std::chrono::duration<double>(Clock::now() - t0).count() < o.seconds)
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  std::FILE* timeline = o.timeline.empty() ? nullptr : std::fopen(o.timeline.c_str(), "w");
+  if (!o.timeline.empty() && !timeline) {
+    spdlog::error("{}: {}", o.timeline, std::strerror(errno));
+    return 2;
+  }
+  auto wall = [] {
+    return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  };
+  double next_line = (std::floor(wall() / o.interval) + 1) * o.interval;
+  uint64_t leased_before = 0, merged_before = 0, calls_before = 0;
+  auto write_line = [&](double end) {
+    uint64_t leased = g_count.leased, merged = g_count.merged, calls = g_count.lease_calls;
+    std::fprintf(timeline,
+                 "{\"t\": %.3f, \"lease_calls\": %llu, \"leased\": %llu, \"merged\": %llu, "
+                 "\"latency_us_log2x16\": %s}\n",
+                 end, (unsigned long long)(calls - calls_before),
+                 (unsigned long long)(leased - leased_before),
+                 (unsigned long long)(merged - merged_before), g_lease_latency.take_json().c_str());
+    std::fflush(timeline);
+    leased_before = leased, merged_before = merged, calls_before = calls;
+  };
+  while (!g_stop && std::chrono::duration<double>(Clock::now() - t0).count() < o.seconds) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (timeline && wall() >= next_line) {
+      write_line(next_line);
+      next_line += o.interval;
+    }
+  }
   g_stop = true;
   for (std::thread& t : threads) t.join();
+  if (timeline) {
+    write_line(wall());
+    std::fclose(timeline);
+  }
   const Counters& c = g_count;
   std::printf(
       "{\"seconds\": %.1f, \"workers\": %d, \"registrations\": %llu, \"leased\": %llu, "
       "\"merged\": %llu, \"not_needed\": %llu, \"refused\": %llu, \"late_refused\": %llu, "
       "\"upload_errors\": %llu, \"lease_errors\": %llu, \"kills\": %llu, \"stalls\": %llu, "
       "\"corrupt\": %llu, \"corrupt_accepted\": %llu, \"renewals\": %llu, "
-      "\"renew_failures\": %llu}\n",
+      "\"renew_failures\": %llu, \"cpu_seconds\": %.1f}\n",
       std::chrono::duration<double>(Clock::now() - t0).count(), o.workers,
       (unsigned long long)c.registrations, (unsigned long long)c.leased,
       (unsigned long long)c.merged, (unsigned long long)c.not_needed, (unsigned long long)c.refused,
       (unsigned long long)c.late_refused, (unsigned long long)c.upload_errors,
       (unsigned long long)c.lease_errors, (unsigned long long)c.kills, (unsigned long long)c.stalls,
       (unsigned long long)c.corrupt, (unsigned long long)c.corrupt_accepted,
-      (unsigned long long)c.renewals, (unsigned long long)c.renew_failures);
+      (unsigned long long)c.renewals, (unsigned long long)c.renew_failures, cpu_seconds());
   return c.corrupt_accepted == 0 ? 0 : 1;
 }

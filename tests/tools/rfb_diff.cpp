@@ -9,6 +9,11 @@
 // timing) and every EXR header attribute (provenance). `rays` is a diagnostic counter: printed
 // when it differs, never a failure.
 // Prints one line per difference (or "identical"); exit 0 equal, 1 different, 2 error.
+//
+//   rfb_diff [--exr] [--tolerance] --pairs LIST  many pairs in one process: LIST holds one pair
+//                                                a line ("A B", paths without spaces); prints
+//                                                each differing pair with its differences, then
+//                                                a count. Used by bench/soak.sh.
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -16,6 +21,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -38,9 +45,15 @@ struct Comparison {
   size_t bitwise_only = 0;  // values that differ bitwise but are within the tolerance
   double bitwise_max_rel = 0;
 
+  bool buffered = false;  // --pairs: lines kept in `lines`, printed only for a differing pair
+  std::string lines;
+
   void fail(const std::string& line) {
     different = true;
-    std::printf("%s\n", line.c_str());
+    if (buffered)
+      lines += line + "\n";
+    else
+      std::printf("%s\n", line.c_str());
   }
 };
 
@@ -181,15 +194,54 @@ int usage() {
   std::fprintf(stderr,
                "usage: rfb_diff [--tolerance] A.rfb B.rfb\n"
                "       rfb_diff --exr [--tolerance] A.exr B.exr\n"
+               "       rfb_diff [--exr] [--tolerance] --pairs LIST   (a pair \"A B\" a line)\n"
                "exit 0: equal, 1: different, 2: error\n");
   return 2;
 }
 
 }  // namespace
 
+// --pairs: every pair of the list; 0 all equal, 1 some differ, 2 an error (a missing file too).
+int compare_pairs(const std::string& list, bool exr, bool tolerance) {
+  std::ifstream in(list);
+  if (!in) {
+    std::fprintf(stderr, "rfb_diff: error: %s: cannot open\n", list.c_str());
+    return 2;
+  }
+  size_t pairs = 0, different = 0, errors = 0, line_no = 0;
+  for (std::string line; std::getline(in, line);) {
+    ++line_no;
+    std::istringstream words(line);
+    std::string a, b, extra;
+    if (!(words >> a)) continue;  // a blank line
+    if (!(words >> b) || (words >> extra)) {
+      std::fprintf(stderr, "rfb_diff: error: %s:%zu: expected two paths\n", list.c_str(), line_no);
+      return 2;
+    }
+    ++pairs;
+    Comparison cmp;
+    cmp.tolerance = tolerance;
+    cmp.buffered = true;
+    try {
+      exr ? compare_exrs(a, b, cmp) : compare_buffers(a, b, cmp);
+      if (cmp.different) {
+        ++different;
+        std::printf("%s %s differ:\n%s", a.c_str(), b.c_str(), cmp.lines.c_str());
+      }
+    } catch (const std::exception& e) {
+      std::printf("%s %s: error: %s\n", a.c_str(), b.c_str(), e.what());
+      ++errors;
+    }
+  }
+  std::printf("%zu pairs: %zu equal, %zu different, %zu errors\n", pairs,
+              pairs - different - errors, different, errors);
+  return errors ? 2 : different ? 1 : 0;
+}
+
 int main(int argc, char** argv) {
   Comparison cmp;
   bool exr = false;
+  std::string pairs;
   std::vector<std::string> files;
   for (int i = 1; i < argc; ++i) {
     std::string arg = argv[i];
@@ -197,11 +249,14 @@ int main(int argc, char** argv) {
       cmp.tolerance = true;
     else if (arg == "--exr")
       exr = true;
+    else if (arg == "--pairs" && i + 1 < argc)
+      pairs = argv[++i];
     else if (arg.starts_with("-"))
       return usage();
     else
       files.push_back(arg);
   }
+  if (!pairs.empty()) return files.empty() ? compare_pairs(pairs, exr, cmp.tolerance) : usage();
   if (files.size() != 2) return usage();
   try {
     if (exr)
