@@ -305,9 +305,7 @@ void bench_merge(bool quick) {
   h.scene_digest = "bench";
   h.integrator = "path";
   h.width = h.height = size;
-  std::vector<Rect> tiles;
-  for (int y = 0; y < size; y += tile)
-    for (int x = 0; x < size; x += tile) tiles.push_back({x, y, tile, tile});
+  TileGrid tiles(size, size, tile);
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<std::string> wire;

@@ -85,7 +85,7 @@ struct JobRecord {
   uint64_t endings = 0;        // times it entered an ended state (the ledger counts them)
   uint64_t released_at = 0;    // `endings` when retention last dropped its accumulators
   JobVersions versions;        // scene versions and requeued frames (`requeue`)
-  std::vector<Rect> tiles;
+  TileGrid tiles;  // how its frames split into tasks (three numbers, whatever the tile count)
   bool splats = false;
   uint32_t passes = 0;
   uint64_t spp_per_pass = 0;

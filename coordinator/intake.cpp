@@ -31,7 +31,7 @@ constexpr int kDefaultTileSize = 128;  // big enough that per-task costs stay sm
 // in one place.
 struct FramePlan {
   BufferHeader base;  // what every task buffer of the frame must match
-  std::vector<Rect> tiles;
+  TileGrid tiles;
   bool splats = false;
   uint32_t passes = 0;
   double noise_target = 0;

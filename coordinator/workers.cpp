@@ -21,15 +21,16 @@ using core_detail::unix_now;
 // Workers
 
 // A registration no call has used for kUnusedWorkerSeconds (a worker that registered and died, or
-// a client registering in a loop), and one that has been silent that long with no live lease (a
-// worker killed, its machine gone: a live worker calls at least once a lease time, to lease,
-// renew or upload), is forgotten, in memory, in the scheduler and in the store; a live worker
-// that comes back is answered NOT_FOUND and registers again. Without this a farm whose workers
-// come and go holds a record per worker it ever had (the soak's killed workers: bench/soak.sh).
-// Outvoted workers are kept (their verdict is shown). Swept at most once a minute, at a
-// registration.
+// a client registering in a loop), and one that has been silent for 10 lease times (at least a
+// minute) with no live lease (a worker killed, its machine gone: a live worker calls at least
+// once a lease time, to lease, renew or upload), is forgotten, in memory, in the scheduler and in
+// the store; a live worker that comes back is answered NOT_FOUND and registers again. Without
+// this a farm whose workers come and go holds a record per worker it ever had, and per job it
+// leased in (the soak's killed workers: bench/soak.sh). Outvoted workers are kept (their verdict
+// is shown). Swept at most once a minute, at a registration.
 void Coordinator::forget_unused_workers() {
-  const double expiry = std::max(kUnusedWorkerSeconds, 10 * options_.lease_seconds);
+  const double unused_expiry = std::max(kUnusedWorkerSeconds, 10 * options_.lease_seconds);
+  const double silent_expiry = std::max(60.0, 10 * options_.lease_seconds);
   if (now() - last_worker_sweep_ < 60) return;
   last_worker_sweep_ = now();
   std::set<std::string> leasing = ledger_->scheduler().workers_with_live_leases();
@@ -39,7 +40,8 @@ void Coordinator::forget_unused_workers() {
     if (outvoted_.count(id) || leasing.count(id)) continue;
     auto seen = last_seen_.find(id);
     double last = seen != last_seen_.end() ? seen->second : w.registered_at;
-    if (now() - std::max(last, w.registered_at) <= expiry) continue;
+    if (now() - std::max(last, w.registered_at) <= (w.used ? silent_expiry : unused_expiry))
+      continue;
     gone.push_back(id);
     silent += w.used;
   }
@@ -50,8 +52,8 @@ void Coordinator::forget_unused_workers() {
     journal_->append({store::DeleteWorker{id}});
   }
   if (!gone.empty())
-    spdlog::info("forgot {} worker registrations ({} unused, {} silent) not heard from for {:g} s",
-                 gone.size(), gone.size() - silent, silent, expiry);
+    spdlog::info("forgot {} worker registrations: {} unused for {:g} s, {} silent for {:g} s",
+                 gone.size(), gone.size() - silent, unused_expiry, silent, silent_expiry);
 }
 
 Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& caller) {

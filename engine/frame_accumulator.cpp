@@ -15,9 +15,13 @@ BufferView view_of(const std::variant<SampleBuffer, EncodedBuffer>& task) {
 
 }  // namespace
 
-FrameAccumulator::FrameAccumulator(const BufferHeader& base, std::vector<Rect> tiles, bool splats,
+FrameAccumulator::FrameAccumulator(const BufferHeader& base, TileGrid tiles, bool splats,
                                    const ProgressiveOptions& options)
-    : base_(base), tiles_(std::move(tiles)), splats_(splats), options_(options) {
+    : base_(base), tiles_(tiles), splats_(splats), options_(options) {
+  if (tiles_.width() != base_.width || tiles_.height() != base_.height)
+    throw MergeError("a grid of " + std::to_string(tiles_.width()) + "x" +
+                     std::to_string(tiles_.height()) + " for a frame of " +
+                     std::to_string(base_.width) + "x" + std::to_string(base_.height));
   base_.passes = PassSet{};
   base_.core_seconds = 0;
   frame_ = SampleBuffer(base_, Rect{0, 0, base_.width, base_.height}, splats_);
@@ -25,12 +29,12 @@ FrameAccumulator::FrameAccumulator(const BufferHeader& base, std::vector<Rect> t
 }
 
 size_t FrameAccumulator::tile_index(const Rect& rect) const {
-  auto it = std::find(tiles_.begin(), tiles_.end(), rect);
-  if (it == tiles_.end())
+  std::optional<size_t> i = tiles_.index_of(rect);
+  if (!i)
     throw MergeError("rect " + std::to_string(rect.x0) + "," + std::to_string(rect.y0) + " " +
                      std::to_string(rect.w) + "x" + std::to_string(rect.h) +
                      " is not a tile of this frame");
-  return size_t(it - tiles_.begin());
+  return *i;
 }
 
 bool FrameAccumulator::task_needed(const Rect& rect, uint32_t pass) const {
@@ -38,7 +42,7 @@ bool FrameAccumulator::task_needed(const Rect& rect, uint32_t pass) const {
       pass >= options_.first_pass + options_.pass_count)
     return false;
   auto it = pending_.find(pass);
-  return it == pending_.end() || !it->second.tiles[tile_index(rect)];
+  return it == pending_.end() || !it->second.tiles.count(tile_index(rect));
 }
 
 FrameAccumulator::AddResult FrameAccumulator::add(SampleBuffer task) {
@@ -67,16 +71,8 @@ FrameAccumulator::AddResult FrameAccumulator::add_task(Task task) {
   if (pass < options_.first_pass + merged_) return AddResult::Duplicate;
   if (done_) return AddResult::Dropped;
 
-  auto it = pending_.find(pass);
-  if (it == pending_.end())
-    it = pending_
-             .emplace(pass,
-                      PendingPass{std::vector<std::optional<Task>>(tiles_.size()), tiles_.size()})
-             .first;
-  PendingPass& pp = it->second;
-  if (pp.tiles[ti]) return AddResult::Duplicate;
-  pp.tiles[ti] = std::move(task);
-  --pp.remaining;
+  PendingPass& pp = pending_[pass];
+  if (!pp.tiles.try_emplace(ti, std::move(task)).second) return AddResult::Duplicate;
   size_t before = merged_;
   merge_ready_passes();
   return merged_ > before ? AddResult::Merged : AddResult::Pending;
@@ -84,7 +80,7 @@ FrameAccumulator::AddResult FrameAccumulator::add_task(Task task) {
 
 double FrameAccumulator::prefix_rel_mse() const {
   double total = 0;
-  for (const Rect& t : tiles_) total += rel_mse_sum(frame_, t);
+  for (size_t t = 0; t < tiles_.size(); ++t) total += rel_mse_sum(frame_, tiles_[t]);
   double area = double(frame_.rect.area());
   return area > 0 ? total / (3.0 * area) : 0.0;
 }
@@ -129,14 +125,14 @@ void FrameAccumulator::merge_ready_passes() {
   while (!done_) {
     const uint32_t pass = options_.first_pass + merged_;
     auto it = pending_.find(pass);
-    if (it == pending_.end() || it->second.remaining != 0) return;
+    if (it == pending_.end() || it->second.tiles.size() != tiles_.size()) return;
     frame_.header.passes.add(PassSet::range(pass, pass + 1));  // the variance counts it
     double rel = 0;
-    for (size_t t = 0; t < tiles_.size(); ++t) {
-      BufferView tile = view_of(*it->second.tiles[t]);
+    for (const auto& [t, task] : it->second.tiles) {  // in tile order
+      BufferView tile = view_of(task);
       add_tile(frame_, tile);  // checked when it was added: cannot throw
       samples_ += tile.total_samples();
-      rel += rel_mse_sum(frame_, tiles_[t]);
+      rel += rel_mse_sum(frame_, tile.rect);
     }
     pending_.erase(it);
     ++merged_;

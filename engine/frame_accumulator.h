@@ -28,9 +28,9 @@ struct ProgressiveOptions {
 
 class FrameAccumulator {
  public:
-  // `base` is the header every task buffer carries (its passes field is ignored); `tiles` are the
-  // rects a pass is split into (they must tile the frame).
-  FrameAccumulator(const BufferHeader& base, std::vector<Rect> tiles, bool splats,
+  // `base` is the header every task buffer carries (its passes field is ignored); `tiles` is how
+  // a pass is split (the grid of the frame's size).
+  FrameAccumulator(const BufferHeader& base, TileGrid tiles, bool splats,
                    const ProgressiveOptions& options);
 
   enum class AddResult { Merged, Pending, Duplicate, Dropped };
@@ -67,13 +67,12 @@ class FrameAccumulator {
   void decide_after(uint32_t merged);
 
   BufferHeader base_;
-  std::vector<Rect> tiles_;
+  TileGrid tiles_;
   bool splats_;
   ProgressiveOptions options_;
   SampleBuffer frame_;
   struct PendingPass {
-    std::vector<std::optional<Task>> tiles;  // by tile index
-    size_t remaining;
+    std::map<size_t, Task> tiles;  // by tile index: the ones arrived (a grid may have millions)
   };
   std::map<uint32_t, PendingPass> pending_;
   uint32_t merged_ = 0;

@@ -18,7 +18,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   const Scene& scene = renderer.scene();
   uint32_t total_passes = scene.render.passes;
   uint32_t count = opt.pass_count ? opt.pass_count : total_passes - opt.first_pass;
-  std::vector<Rect> tiles = renderer.tiles(opt.tile_size);
+  TileGrid tiles = renderer.tiles(opt.tile_size);
   ProgressiveOptions popt{opt.first_pass, count, opt.noise_target};
   FrameAccumulator acc(renderer.header(opt.frame, PassSet{}), tiles, renderer.splats(), popt);
 

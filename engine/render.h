@@ -49,7 +49,7 @@ class Renderer {
   // Header of every buffer this scene's frame produces, for the given passes.
   BufferHeader header(FrameNumber frame, const PassSet& passes) const;
   // The task rects of a frame (work_units).
-  std::vector<Rect> tiles(int tile_size) const { return work_units(scene_, tile_size); }
+  TileGrid tiles(int tile_size) const { return work_units(scene_, tile_size); }
 
   // Renders one task into a one-pass sample buffer. With parallel = true its rows (or light
   // paths) are spread over TBB's threads (a worker rendering one task on all cores); the pixels

@@ -5,7 +5,9 @@
 // buffer_merge.h, the .rfb encoding in buffer_file.h.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -31,6 +33,61 @@ struct Rect {
   bool operator==(const Rect&) const = default;
 };
 std::string to_string(const Rect& r);  // "WxH at (X,Y)"
+
+// How a frame is split into tasks' rects (work_units): tiles of `tile` pixels in rows from the
+// top left, the last column and row clipped at the border, numbered row-major; or, with tile 0,
+// the whole frame as one. Three numbers however many tiles: a 16384x16384 frame in 8-pixel tiles
+// (4 million rects) is described, indexed and looked up in O(1).
+class TileGrid {
+ public:
+  TileGrid() = default;
+  // tile <= 0, or a tile covering the frame: one rect.
+  TileGrid(int width, int height, int tile)
+      : width_(width),
+        height_(height),
+        tile_(tile <= 0 || (tile >= width && tile >= height) ? 0 : tile) {}
+  size_t columns() const { return tile_ ? size_t((width_ + tile_ - 1) / tile_) : 1; }
+  size_t rows() const { return tile_ ? size_t((height_ + tile_ - 1) / tile_) : 1; }
+  size_t size() const { return columns() * rows(); }
+  Rect operator[](size_t i) const {
+    if (!tile_) return {0, 0, width_, height_};
+    int x = int(i % columns()) * tile_, y = int(i / columns()) * tile_;
+    return {x, y, std::min(tile_, width_ - x), std::min(tile_, height_ - y)};
+  }
+  // The index of rect r, if r is one of the grid's rects (exactly).
+  std::optional<size_t> index_of(const Rect& r) const {
+    if (!tile_) return r == Rect{0, 0, width_, height_} ? std::optional<size_t>(0) : std::nullopt;
+    if (r.x0 < 0 || r.y0 < 0 || r.x0 % tile_ || r.y0 % tile_ || r.x0 >= width_ || r.y0 >= height_)
+      return std::nullopt;
+    size_t i = size_t(r.y0 / tile_) * columns() + size_t(r.x0 / tile_);
+    return (*this)[i] == r ? std::optional<size_t>(i) : std::nullopt;
+  }
+  int width() const { return width_; }
+  int height() const { return height_; }
+  int tile() const { return tile_; }  // 0: one rect
+  bool operator==(const TileGrid&) const = default;
+
+  // The rects in index order (range-for; each made on the fly).
+  class Iterator {
+   public:
+    Iterator(const TileGrid* grid, size_t i) : grid_(grid), i_(i) {}
+    Rect operator*() const { return (*grid_)[i_]; }
+    Iterator& operator++() {
+      ++i_;
+      return *this;
+    }
+    bool operator==(const Iterator& o) const { return i_ == o.i_; }
+
+   private:
+    const TileGrid* grid_;
+    size_t i_;
+  };
+  Iterator begin() const { return {this, 0}; }
+  Iterator end() const { return {this, size()}; }
+
+ private:
+  int width_ = 0, height_ = 0, tile_ = 0;
+};
 
 // pbrt-v4's relative squared error, the noise figure's convention everywhere (relMSE of a render,
 // `rayfarm compare`): a squared error (or variance) over reference^2 + 0.01.

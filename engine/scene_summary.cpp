@@ -24,14 +24,8 @@ SceneSummary summarize(const Scene& scene) {
   return s;
 }
 
-std::vector<Rect> work_units(const SceneSummary& scene, int tile_size) {
-  int w = scene.width, h = scene.height;
-  if (scene.splats || tile_size <= 0) return {Rect{0, 0, w, h}};
-  std::vector<Rect> out;
-  for (int y = 0; y < h; y += tile_size)
-    for (int x = 0; x < w; x += tile_size)
-      out.push_back({x, y, std::min(tile_size, w - x), std::min(tile_size, h - y)});
-  return out;
+TileGrid work_units(const SceneSummary& scene, int tile_size) {
+  return TileGrid(scene.width, scene.height, scene.splats ? 0 : tile_size);
 }
 
 BufferHeader frame_header(const SceneSummary& scene, FrameNumber frame, const PassSet& passes) {

@@ -34,7 +34,7 @@ SceneSummary summarize(const Scene& scene);
 
 // The rects a frame is split into: tiles of tile_size (row-major, clipped at the border), or the
 // whole frame for splatting integrators (and for tile_size <= 0).
-std::vector<Rect> work_units(const SceneSummary& scene, int tile_size);
+TileGrid work_units(const SceneSummary& scene, int tile_size);
 // The header every buffer of this scene's frame carries, for the given passes: scene digest,
 // seed, frame, integrator and settings text, resolution, this build and CPU kind.
 BufferHeader frame_header(const SceneSummary& scene, FrameNumber frame, const PassSet& passes);

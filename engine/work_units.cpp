@@ -4,7 +4,7 @@
 
 namespace rf {
 
-std::vector<Rect> work_units(const Scene& scene, int tile_size) {
+TileGrid work_units(const Scene& scene, int tile_size) {
   return work_units(summarize(scene), tile_size);
 }
 

@@ -22,7 +22,7 @@ struct TaskKey {
 
 // The rects a frame is split into: tiles of tile_size (row-major, clipped at the border), or the
 // whole frame for splatting integrators (and for tile_size <= 0).
-std::vector<Rect> work_units(const Scene& scene, int tile_size);
+TileGrid work_units(const Scene& scene, int tile_size);
 
 // The header every buffer of this scene's frame carries, for the given passes: scene digest,
 // seed, frame, integrator and settings text, resolution, this build and CPU kind.

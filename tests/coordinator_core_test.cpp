@@ -1032,11 +1032,12 @@ TEST(CoordinatorCore, AJobThatCannotBeRestoredIsFailedAndTheOthersAreServed) {
 
 // A registration that no call uses for 10 minutes (10 lease times if longer) is forgotten at a
 // later registration, in memory and in the store: registrations of a client that never leases
-// do not pile up. So is a worker that leased and then fell silent that long with no live lease
-// (killed: the soak's workers come and go by the thousand). A worker that keeps calling stays;
-// a forgotten one that comes back is NotFound (and registers again).
+// do not pile up. So is a worker that leased and then fell silent for 10 lease times (at least a
+// minute) with no live lease: killed (the soak's workers come and go by the thousand), since a
+// live one calls at least once a lease time. A worker that keeps calling stays; a forgotten one
+// that comes back is NotFound (and registers again).
 TEST(CoordinatorCore, RegistrationsThatAreNeverUsedOrFallSilentExpire) {
-  CoreBench bench("core-registrations");
+  CoreBench bench("core-registrations");  // lease 10 s: silent for 100 s is gone
   Coordinator& core = bench.core();
   std::vector<std::string> idle;
   for (int i = 0; i < 200; ++i)
@@ -1047,15 +1048,22 @@ TEST(CoordinatorCore, RegistrationsThatAreNeverUsedOrFallSilentExpire) {
   EXPECT_TRUE(core.lease(busy).task);
   EXPECT_TRUE(core.lease(killed).task);  // and never heard from again: its lease expires
   EXPECT_EQ(core.metrics().workers_registered, 202u);
-  bench.now += 599;
+  bench.now = 99;
   core.lease(busy);  // still calling
   core.register_worker({"late", 1, "b", "i"});
-  EXPECT_EQ(core.metrics().workers_registered, 203u) << "not yet ten minutes";
-  bench.now += 62;
+  EXPECT_EQ(core.metrics().workers_registered, 203u) << "nobody silent for 100 s yet";
+  bench.now = 161;
+  core.lease(busy);
   core.register_worker({"later", 1, "b", "i"});
-  EXPECT_EQ(core.metrics().workers_registered, 3u) << "busy, late and later";
-  EXPECT_EQ(refusal([&] { core.lease(idle[7]); }), ErrorCode::NotFound);
+  EXPECT_EQ(core.metrics().workers_registered, 203u) << "killed gone, later came";
   EXPECT_EQ(refusal([&] { core.lease(killed); }), ErrorCode::NotFound);
+  bench.now = 650;
+  core.lease(busy);
+  bench.now = 700;
+  core.register_worker({"last", 1, "b", "i"});
+  EXPECT_EQ(core.metrics().workers_registered, 3u)
+      << "busy, later and last: idle and late unused for over 10 minutes";
+  EXPECT_EQ(refusal([&] { core.lease(idle[7]); }), ErrorCode::NotFound);
   EXPECT_EQ(refusal([&] { core.lease(busy); }), std::nullopt);
   bench.start("B");
   EXPECT_EQ(bench.core().metrics().workers_registered, 3u) << "the store forgot them too";

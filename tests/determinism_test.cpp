@@ -77,7 +77,7 @@ TEST(Determinism, PassesInAnyOrderAndGroupingMergeToTheSameImage) {
 TEST(Determinism, ProgressiveMergerIgnoresArrivalOrder) {
   Scene s = test::cornell_box({"", 40, 1, 6});
   Renderer r(s);
-  std::vector<Rect> tiles = r.tiles(16);
+  TileGrid tiles = r.tiles(16);
   std::vector<SampleBuffer> tasks;
   for (uint32_t p = 0; p < 6; ++p)
     for (const Rect& t : tiles) tasks.push_back(r.render(TaskKey{0, t, p}, false));

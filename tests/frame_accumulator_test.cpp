@@ -21,12 +21,68 @@ SampleBuffer random_pass(uint32_t pass, Rect rect, uint64_t seed) {
 }
 using test::expect_bit_identical;
 
-const std::vector<Rect> kTiles = {{0, 0, 4, 4}, {4, 0, 4, 4}, {0, 4, 4, 4}, {4, 4, 4, 4}};
+const TileGrid kTiles(8, 8, 4);  // {0,0,4,4}, {4,0,4,4}, {0,4,4,4}, {4,4,4,4}
 
 // Feeds passes [from, to) tile by tile (tiles in reverse order) until the accumulator is done.
 void feed(FrameAccumulator& acc, uint32_t from, uint32_t to) {
   for (uint32_t p = from; p < to && !acc.done(); ++p)
     for (size_t t = kTiles.size(); t-- > 0;) acc.add(random_pass(p, kTiles[t], 1000 * p + t));
+}
+
+// The grid is the splitter's rects, row-major and clipped at the border (the loop work_units ran
+// before it was a TileGrid), and index_of finds each of them and nothing else.
+TEST(TileGrid, RectsAreTheSplittersAndIndexOfFindsEachAndNothingElse) {
+  struct Case {
+    int w, h, tile;
+  };
+  for (Case c : {Case{37, 21, 8}, Case{32, 32, 16}, Case{5, 7, 0}, Case{5, 7, 8}, Case{1, 1, 1},
+                 Case{64, 3, 16}}) {
+    TileGrid grid(c.w, c.h, c.tile);
+    std::vector<Rect> want;
+    if (c.tile <= 0 || (c.tile >= c.w && c.tile >= c.h)) {
+      want = {{0, 0, c.w, c.h}};
+    } else {
+      for (int y = 0; y < c.h; y += c.tile)
+        for (int x = 0; x < c.w; x += c.tile)
+          want.push_back({x, y, std::min(c.tile, c.w - x), std::min(c.tile, c.h - y)});
+    }
+    ASSERT_EQ(grid.size(), want.size()) << c.w << "x" << c.h << " in " << c.tile;
+    size_t i = 0;
+    for (Rect r : grid) {
+      EXPECT_TRUE(r == want[i]) << i << ": " << to_string(r) << " vs " << to_string(want[i]);
+      EXPECT_EQ(grid.index_of(r), std::optional<size_t>(i)) << to_string(r);
+      ++i;
+    }
+  }
+  TileGrid grid(37, 21, 8);
+  EXPECT_FALSE(grid.index_of({0, 0, 8, 7})) << "a part of a tile";
+  EXPECT_FALSE(grid.index_of({4, 0, 8, 8})) << "off the grid";
+  EXPECT_FALSE(grid.index_of({32, 16, 8, 8})) << "past the border (the tile there is 5x5)";
+  EXPECT_FALSE(grid.index_of({40, 0, 8, 8}));
+  EXPECT_FALSE(grid.index_of({-8, 0, 8, 8}));
+  TileGrid big(16384, 16384, 8);  // 4 million tiles, three numbers
+  EXPECT_EQ(big.size(), 4194304u);
+  EXPECT_TRUE(big[big.size() - 1] == (Rect{16376, 16376, 8, 8}));
+  EXPECT_EQ(big.index_of({16376, 16376, 8, 8}), std::optional<size_t>(big.size() - 1));
+}
+
+// A frame of many tiles: the accumulator keeps the tiles of a pass that arrived, not a slot per
+// tile (512x512 in 1-pixel tiles: 262,144 of them).
+TEST(FrameAccumulator, APassOfManyTilesHoldsOnlyTheTilesThatArrived) {
+  BufferHeader h = test::test_header({}, 512, 512);
+  TileGrid grid(512, 512, 1);
+  FrameAccumulator acc(h, grid, false, ProgressiveOptions{0, 2, 0});
+  Rect last = grid[grid.size() - 1];
+  EXPECT_TRUE(acc.task_needed(last, 0));
+  EXPECT_EQ(acc.add(test::random_pass(0, last, false, 7, 512, 512)),
+            FrameAccumulator::AddResult::Pending);
+  EXPECT_FALSE(acc.task_needed(last, 0));
+  EXPECT_TRUE(acc.task_needed(grid[0], 0));
+  EXPECT_EQ(acc.tile_index(last), grid.size() - 1);
+  EXPECT_THROW(acc.tile_index(Rect{0, 0, 2, 1}), MergeError);
+  EXPECT_THROW(FrameAccumulator(h, TileGrid(256, 512, 1), false, ProgressiveOptions{0, 2, 0}),
+               MergeError)
+      << "a grid of another size than the frame";
 }
 
 TEST(FrameAccumulator, ResumedFromEncodedPrefixIsBitIdentical) {

@@ -360,7 +360,7 @@ TEST(IrPpmDeterminism, PassStateIsBuiltOncePerPass) {
       s.render.integrator.as<PpmIntegrator>().photons = 20000;
     auto pass_rays = [&](bool parallel_tiles) {
       Renderer r(s);
-      std::vector<Rect> tiles = r.tiles(4);
+      TileGrid tiles = r.tiles(4);
       std::vector<uint64_t> rays(tiles.size());
       auto one = [&](size_t i) { rays[i] = r.render(TaskKey{0, tiles[i], 1}, false).rays; };
       if (parallel_tiles)

@@ -97,7 +97,7 @@ std::shared_ptr<JobRecord> make_job(const std::string& id, uint32_t frames = 1,
   auto job = std::make_shared<JobRecord>();
   job->id = id;
   job->passes = passes;
-  job->tiles = {{0, 0, 8, 8}, {8, 0, 8, 8}, {0, 8, 8, 8}, {8, 8, 8, 8}};
+  job->tiles = TileGrid(16, 16, 8);  // {0,0,8,8}, {8,0,8,8}, {0,8,8,8}, {8,8,8,8}
   for (uint32_t n = 1; n <= frames; ++n) {
     auto f = std::make_unique<FrameRecord>();
     f->number = n;

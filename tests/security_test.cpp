@@ -514,9 +514,9 @@ TEST(Security, AHugeJobAdmittedByRaisedLimitsIsHeldInBoundedMemory) {
   long restarted = rss_kib(farm.coordinator().pid());
   EXPECT_EQ(farm.client("status " + job).exit_code, 0);
   EXPECT_EQ(check_health(farm.address()), "SERVING");
-  // The bound: the job's 4.2 million tile rectangles (16 bytes each, 64 MiB) held once, with
-  // room for a transient second copy while the frame is planned; nothing per task.
-  const long bound = 160 * 1024;
+  // The bound: nothing per tile (the split is a TileGrid, three numbers: the 4.2 million tile
+  // rectangles of 16 bytes each took 65-67 MiB when a job held them) and nothing per task.
+  const long bound = 32 * 1024;
   std::ostringstream figures;
   figures << "RSS KiB: start " << before << ", submitted " << submitted << ", 300 leases " << leased
           << ", cancelled " << cancelled << ", restarted " << restarted;
