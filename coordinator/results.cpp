@@ -43,9 +43,10 @@ std::set<FrameNumber> core_detail::named_frames(const JobRecord& job, const std:
 void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
   if (f.acc) f.progress = frame_progress(*f.acc, job.passes, job.noise_target, -1);
   if (f.progress.done) ledger_->frame_done(job, f, f.progress.passes_merged);
-  bool all_done = true;
+  bool all_done = f.progress.done;  // an unfinished frame: no need to look at the others
   std::vector<FrameNumber> held;
   for (auto& g : job.frames) {
+    if (!all_done) break;  // (a job of 10,000 frames looked at each at every result)
     if (g->held && !g->progress.done)
       held.push_back(g->number);
     else
