@@ -90,16 +90,28 @@ void warn_nonfinite(const SampleBuffer& b) {
     spdlog::warn("{} NaN/Inf samples were dropped (counted as zero radiance)", b.nonfinite_samples);
 }
 
-void print_summary(const SampleBuffer& frame, double seconds, uint64_t rays) {
-  double spp = samples_per_pixel(frame);
-  double samples = spp * double(frame.rect.area());
+void print_summary(const FrameBands& frame, double seconds, uint64_t rays) {
+  const SampleBuffer& info = frame.info();
+  const double pixels = double(info.rect.area());
+  const uint64_t n = frame.total_samples() ? frame.total_samples() : info.light_paths;
+  double spp = pixels > 0 ? double(n) / pixels : 0.0;
+  double samples = spp * pixels;
   std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n", spp,
               seconds, human(samples / seconds).c_str(), human(double(rays) / seconds).c_str(),
-              frame.rel_mse(), frame.header.passes.count());
+              frame.rel_mse(), info.header.passes.count());
+}
+
+// The default of render --memory: a quarter of the machine's memory (a frame held whole may need
+// about twice its size with a pass of results in flight).
+uint64_t default_memory_budget() {
+  long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  if (pages <= 0 || page <= 0) return uint64_t(4) << 30;
+  return uint64_t(pages) * uint64_t(page) / 4;
 }
 
 struct RenderArgs {
-  std::string scene, output, partial, pass_range, frames;
+  std::string scene, output, partial, pass_range, frames, spill_dir;
+  uint64_t memory = 0;  // 0: default_memory_budget()
   OverrideArgs overrides;
   std::optional<FrameNumber> frame;
   double time_budget = 0;
@@ -156,6 +168,14 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
   }
   if (a.partial.empty()) opt.noise_target = scene.render.noise_target;
   opt.time_budget_s = a.time_budget;
+  opt.memory_budget = a.memory ? a.memory : default_memory_budget();
+  // Beside the output by default: /tmp is often a RAM disk, which would defeat the point.
+  opt.spill_dir = a.spill_dir;
+  if (opt.spill_dir.empty()) {
+    std::filesystem::path beside =
+        std::filesystem::path(f.output.empty() ? f.partial : f.output).parent_path();
+    opt.spill_dir = beside.empty() ? "." : beside.string();
+  }
   ProgressPrinter printer(a.quiet);
   opt.progress = [&](const LocalProgress& p) { printer(p); };
   if (name_frame && !a.quiet) std::fprintf(stderr, "frame %d\n", f.frame);
@@ -163,12 +183,15 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
   try {
     res = render_local(renderer, opt);
   } catch (const std::bad_alloc&) {
-    double gib = double(scene.film.width) * double(scene.film.height) * 104.0 / double(1 << 30);
-    char buf[160];
+    double gib = double(scene.film.width) * double(scene.film.height) *
+                 double(FrameAccumulator::bytes_per_pixel(scene.render.aovs)) / double(1 << 30);
+    char buf[240];
     std::snprintf(buf, sizeof buf,
-                  "out of memory rendering a %dx%d film (about %.1f GiB at 104 "
-                  "bytes per pixel for the frame, more per pass in flight)",
-                  scene.film.width, scene.film.height, gib);
+                  "out of memory rendering a %dx%d film (about %.1f GiB for the frame, held "
+                  "whole up to --memory %.1f GiB; give a smaller --memory to keep it in tiles "
+                  "on disk)",
+                  scene.film.width, scene.film.height, gib,
+                  double(opt.memory_budget) / double(1 << 30));
     throw std::runtime_error(f.scene + ": " + buf);
   }
   if (res.passes_merged == 0 && res.stopped_on_time)
@@ -178,17 +201,19 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
         std::to_string(scene.render.spp_per_pass()) +
         " samples per pixel); nothing is written. Give more --passes, fewer --spp or more time");
   warn_nonfinite(res.frame);
+  const WholeFrame whole(res.frame);
+  const FrameBands& image = res.tiles ? static_cast<const FrameBands&>(*res.tiles) : whole;
   for (const std::string& path : {f.partial, f.output})  // out/shot.####.exr: out/ made here
     if (std::filesystem::path parent = std::filesystem::path(path).parent_path(); !parent.empty())
       std::filesystem::create_directories(parent);
   if (!f.partial.empty()) {
-    write_buffer_file(f.partial, res.frame);
+    write_buffer_file(f.partial, image);
     std::fprintf(stderr, "wrote %s (passes %s)\n", f.partial.c_str(),
                  res.frame.header.passes.to_string().c_str());
   }
   if (!f.output.empty()) {
-    write_exr(f.output, res.frame);
-    write_png(png_path_for(f.output), res.frame, a.exposure);
+    write_exr(f.output, image);
+    write_png(png_path_for(f.output), image, a.exposure);
     std::fprintf(stderr, "wrote %s and %s\n", f.output.c_str(), png_path_for(f.output).c_str());
   }
   if (res.stopped_on_target)
@@ -197,7 +222,7 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
   if (res.stopped_on_time)
     std::fprintf(stderr, "time budget %.1f s reached after %u of %u passes\n", a.time_budget,
                  res.passes_merged, scene.render.passes);
-  print_summary(res.frame, res.seconds, res.rays);
+  print_summary(image, res.seconds, res.rays);
 }
 
 // A frame, or a frame range: frames of one scene file share its parse and its BVH (a frame only
@@ -362,6 +387,18 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   render->add_option("--pass-range", ra->pass_range, "render only passes FIRST-LAST (inclusive)");
   render->add_option("--partial", ra->partial, "write the sample buffer (.rfb) of the pass range");
   render->add_option("--tile-size", ra->tile, "tile size in pixels")->check(finite_in(1, 65536));
+  render->add_option_function<std::string>(
+      "--memory",
+      [ra](const std::string& v) {
+        ra->memory = byte_size_option("--memory", v);
+        if (ra->memory < (uint64_t(1) << 20))
+          throw CLI::ValidationError("--memory", "'" + v + "' is less than 1M");
+      },
+      "bytes of frame held in memory (512M, 8G); a larger frame is kept in tiles on disk "
+      "(default: a quarter of the machine's memory)");
+  render->add_option("--spill-dir", ra->spill_dir,
+                     "where a frame kept in tiles goes (unlinked files; default: the output's "
+                     "directory)");
   render->add_option("--exposure", ra->exposure, "PNG exposure in stops")
       ->check(finite_in(-64, 64));
   render->add_flag("-q,--quiet", ra->quiet, "no progress output");

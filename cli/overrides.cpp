@@ -1,6 +1,7 @@
 // The scene overrides `render` and `submit` share, and the checks every command's flags use.
 #include <sys/stat.h>
 
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -23,6 +24,27 @@ std::pair<int, int> parse_resolution(const std::string& s) {
 }
 
 }  // namespace
+
+uint64_t byte_size_option(const std::string& name, const std::string& v) {
+  size_t end = 0;
+  unsigned long long n = 0;
+  bool ok = !v.empty() && std::isdigit(static_cast<unsigned char>(v[0]));
+  try {
+    if (ok) n = std::stoull(v, &end);
+  } catch (const std::exception&) {
+    ok = false;
+  }
+  const std::string unit = ok ? v.substr(end) : "";
+  const int shift = unit.empty()  ? 0
+                    : unit == "K" ? 10
+                    : unit == "M" ? 20
+                    : unit == "G" ? 30
+                    : unit == "T" ? 40
+                                  : -1;
+  if (!ok || shift < 0 || (shift > 0 && n > (~0ull >> shift)))
+    throw CLI::ValidationError(name, "'" + v + "' is not a size (bytes, or 512M, 20G, 1T)");
+  return uint64_t(n) << shift;
+}
 
 CLI::Validator finite_in(double lo, double hi) {
   char desc[96];

@@ -61,28 +61,6 @@ double duration_option(const std::string& name, const std::string& v, bool never
   return n * scale;
 }
 
-// A size in bytes, with an optional binary unit (K, M, G, T).
-uint64_t byte_size_option(const std::string& name, const std::string& v) {
-  size_t end = 0;
-  unsigned long long n = 0;
-  bool ok = !v.empty() && std::isdigit(static_cast<unsigned char>(v[0]));
-  try {
-    if (ok) n = std::stoull(v, &end);
-  } catch (const std::exception&) {
-    ok = false;
-  }
-  const std::string unit = ok ? v.substr(end) : "";
-  const int shift = unit.empty()  ? 0
-                    : unit == "K" ? 10
-                    : unit == "M" ? 20
-                    : unit == "G" ? 30
-                    : unit == "T" ? 40
-                                  : -1;
-  if (!ok || shift < 0 || (shift > 0 && n > (~0ull >> shift)))
-    throw CLI::ValidationError(name, "'" + v + "' is not a size (bytes, or 512M, 20G, 1T)");
-  return uint64_t(n) << shift;
-}
-
 }  // namespace
 
 void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {

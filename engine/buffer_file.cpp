@@ -34,11 +34,14 @@
 #include "engine/buffer_file.h"
 
 #include <malloc.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <bit>
+#include <cerrno>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string_view>
 
@@ -390,6 +393,76 @@ void write_buffer_file(const std::string& path, const SampleBuffer& buf) {
   try {
     write_file_atomic(path, bytes);
   } catch (const std::runtime_error& e) {
+    throw BufferFileError(e.what());  // already names the path
+  }
+}
+
+void write_buffer_file(const std::string& path, const FrameBands& frame) {
+  const SampleBuffer& info = frame.info();
+  if (frame.band_height() >= info.rect.h) {  // one band: the buffer itself
+    write_buffer_file(path, frame.band(info.rect.y0));
+    return;
+  }
+  // Band by band: each band's rows of each plane written where they lie in the file (a plane is
+  // row-major over the whole rect), then the checksum over the file as written.
+  if (!info.splat.empty() || info.light_paths)
+    throw std::invalid_argument("write_buffer_file: a splatting frame comes in one band");
+  std::string head(kMagic, sizeof kMagic);
+  std::string header = header_json(info).dump();
+  header.append((8 - (kPreambleBytes + header.size()) % 8) % 8, ' ');
+  put_u32(head, kFormatVersion);
+  put_u32(head, uint32_t(header.size()));
+  head += header;
+  const uint64_t area = uint64_t(info.rect.area());
+  const uint64_t na = uint64_t(info.header.aovs.channels());
+  const uint64_t per_pixel[7] = {1, 3, 3, 3, 3, na, 0};  // per pixel, in file order
+  auto put = [&](int fd, const void* p, size_t n, uint64_t at) {
+    const char* c = static_cast<const char*>(p);
+    while (n > 0) {
+      ssize_t w = ::pwrite(fd, c, n, off_t(at));
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) throw BufferFileError(path + ": write failed: " + std::strerror(errno));
+      c += w, n -= size_t(w), at += uint64_t(w);
+    }
+  };
+  try {
+    write_file_atomic(path, [&](int fd) {
+      put(fd, head.data(), head.size(), 0);
+      for (int y0 = info.rect.y0; y0 < info.rect.y1(); y0 += frame.band_height()) {
+        const SampleBuffer& band = frame.band(y0);
+        if (band.rect.x0 != info.rect.x0 || band.rect.w != info.rect.w || band.rect.y0 != y0 ||
+            !band.planes_match_rect())
+          throw std::invalid_argument("write_buffer_file: a band is not the frame's rows");
+        const uint64_t first = uint64_t(y0 - info.rect.y0) * uint64_t(info.rect.w);
+        uint64_t plane_at = head.size();
+        int p = 0;
+        for_each_plane(band, [&](const auto& plane) {
+          put(fd, plane.data(), 8 * plane.size(), plane_at + 8 * per_pixel[p] * first);
+          plane_at += 8 * per_pixel[p] * area;
+          ++p;
+        });
+      }
+      // The checksum of everything before it, read back in 8 MiB pieces.
+      XXH3_state_t* state = XXH3_createState();
+      if (!state) throw std::bad_alloc();
+      std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> owner(state, XXH3_freeState);
+      XXH3_128bits_reset(state);
+      const uint64_t end = head.size() + 8 * area * (13 + na);
+      std::string piece(size_t(8) << 20, '\0');
+      for (uint64_t at = 0; at < end;) {
+        size_t n = size_t(std::min<uint64_t>(piece.size(), end - at));
+        ssize_t r = ::pread(fd, piece.data(), n, off_t(at));
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) throw BufferFileError(path + ": cannot read back: " + std::strerror(errno));
+        XXH3_128bits_update(state, piece.data(), size_t(r));
+        at += uint64_t(r);
+      }
+      XXH128_canonical_t c;
+      XXH128_canonicalFromHash(&c, XXH3_128bits_digest(state));
+      put(fd, &c, sizeof c, end);
+    });
+  } catch (const std::runtime_error& e) {
+    if (dynamic_cast<const BufferFileError*>(&e)) throw;
     throw BufferFileError(e.what());  // already names the path
   }
 }

@@ -18,6 +18,9 @@ struct BufferFileError : std::runtime_error {
 // BufferFileError naming the file and what is wrong.
 void write_buffer_file(const std::string& path, const SampleBuffer& buf);
 SampleBuffer read_buffer_file(const std::string& path);
+// The same, written a band of rows at a time (a frame kept in tiles on disk is never whole in
+// memory): the same bytes as write_buffer_file of the whole frame.
+void write_buffer_file(const std::string& path, const FrameBands& frame);
 
 // The same encoding in memory (for the wire and for checkpoints).
 std::string encode_buffer(const SampleBuffer& buf);

@@ -69,13 +69,13 @@ void add_values(T* __restrict dst, const T* __restrict src, size_t n) {
   for (size_t i = 0; i < n; ++i) dst[i] += src[i];
 }
 
+}  // namespace
+
 void combine_provenance(BufferHeader& dst, const BufferHeader& src) {
   dst.build_id = combine_ids(dst.build_id, src.build_id, "builds");
   dst.isa = combine_ids(dst.isa, src.isa, "CPU kinds");
   dst.core_seconds += src.core_seconds;
 }
-
-}  // namespace
 
 std::string merge_incompatibility(const BufferHeader& a, const BufferHeader& b) {
   if (std::string why = identity_difference(a, b); !why.empty()) return why;

@@ -29,6 +29,10 @@ void merge_into(SampleBuffer& dst, const BufferView& src);
 // the rect and planes and throws MergeError.
 void add_tile(SampleBuffer& dst, const BufferView& tile);
 
+// Adds src's provenance to dst: build ids and CPU kinds as sets (one id, or "mixed:..." with a
+// warning when a new one joins), core-seconds summed.
+void combine_provenance(BufferHeader& dst, const BufferHeader& src);
+
 // Copies a tile's buffer into a larger buffer of the same pass set (assembling one pass of a
 // frame from its tiles). Throws MergeError if the tile is outside dst.rect or headers differ.
 void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile);

@@ -1,6 +1,7 @@
 // SHA-256 digests (OpenSSL) for content addressing: scene bundles, buffer checksums.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <string_view>
 
@@ -29,5 +30,8 @@ std::string read_file_bytes(const std::string& path);
 // Writes bytes to path atomically: temporary file in the same directory, fsync, rename, fsync of
 // the directory. Throws std::runtime_error naming the path.
 void write_file_atomic(const std::string& path, std::string_view bytes);
+// The same, the content written by fill(fd) (an fd open for reading and writing at offset 0);
+// an exception from fill removes the temporary file and passes on.
+void write_file_atomic(const std::string& path, const std::function<void(int fd)>& fill);
 
 }  // namespace rf

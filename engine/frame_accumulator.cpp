@@ -1,16 +1,212 @@
 #include "engine/frame_accumulator.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <list>
+#include <stdexcept>
+#include <unordered_map>
 
 #include "engine/progress.h"
 
 namespace rf {
 
+// A tiled frame's storage (ProgressiveOptions::memory_budget): every tile's planes at a fixed
+// place in one unlinked file (tile i after the pixels of tiles 0..i-1, planes in .rfb order), the
+// most recently used tiles cached up to a byte budget and written back when evicted; and, per
+// pass, an unlinked file of the results waiting for that pass that did not fit in memory.
+// Unlinked at creation, the files go with the process however it ends.
+class TileSpill {
+ public:
+  TileSpill(const std::string& dir, const TileGrid& grid, const BufferHeader& header,
+            uint64_t cache_budget)
+      : dir_(dir), grid_(grid), header_(header), budget_(cache_budget) {
+    header_.passes = PassSet{};
+    header_.core_seconds = 0;
+    fd_ = open_unlinked();
+  }
+  ~TileSpill() {
+    ::close(fd_);
+    for (auto& [pass, f] : parked_) ::close(f.fd);
+  }
+  TileSpill(const TileSpill&) = delete;
+  TileSpill& operator=(const TileSpill&) = delete;
+
+  // Tile i with the frame's current passes; `stored`: its planes are in the file (a prefix was
+  // merged), else it starts at zero. The reference lives until the next call.
+  SampleBuffer& tile(size_t i, bool stored, const PassSet& passes) {
+    auto it = cache_.find(i);
+    if (it != cache_.end()) {
+      lru_.splice(lru_.begin(), lru_, it->second.lru);
+    } else {
+      SampleBuffer b(header_, grid_[i], false);
+      if (stored) read_planes(b, tile_offset(i));
+      lru_.push_front(i);
+      it = cache_.emplace(i, Cached{std::move(b), false, lru_.begin()}).first;
+      cached_bytes_ += tile_bytes(i);
+      peak_cached_bytes_ = std::max(peak_cached_bytes_, cached_bytes_);
+      evict_beyond_budget(i);
+    }
+    it->second.buf.header.passes = passes;
+    return it->second.buf;
+  }
+  void mark_dirty(size_t i) { cache_.at(i).dirty = true; }
+  uint64_t tile_bytes(size_t i) const { return uint64_t(grid_[i].area()) * bpp(); }
+  uint64_t cached_bytes() const { return cached_bytes_; }
+  uint64_t peak_cached_bytes() const { return peak_cached_bytes_; }
+
+  // A waiting result of `pass` written to that pass's file; its bytes read back.
+  std::pair<uint64_t, uint64_t> park(uint32_t pass, std::string_view bytes) {
+    auto it = parked_.find(pass);
+    if (it == parked_.end()) it = parked_.emplace(pass, ParkFile{open_unlinked(), 0}).first;
+    uint64_t at = it->second.end;
+    write_all(it->second.fd, bytes.data(), bytes.size(), at);
+    it->second.end += bytes.size();
+    return {at, bytes.size()};
+  }
+  std::string unpark(uint32_t pass, uint64_t offset, uint64_t length) const {
+    std::string bytes(length, '\0');
+    read_all(parked_.at(pass).fd, bytes.data(), length, offset);
+    return bytes;
+  }
+  void drop_parked(uint32_t pass) {
+    auto it = parked_.find(pass);
+    if (it == parked_.end()) return;
+    ::close(it->second.fd);
+    parked_.erase(it);
+  }
+  // Passes with parked results up to `last` (inclusive).
+  void drop_parked_up_to(uint32_t last) {
+    while (!parked_.empty() && parked_.begin()->first <= last) drop_parked(parked_.begin()->first);
+  }
+  void drop_all_parked() {
+    while (!parked_.empty()) drop_parked(parked_.begin()->first);
+  }
+
+ private:
+  struct Cached {
+    SampleBuffer buf;
+    bool dirty = false;
+    std::list<size_t>::iterator lru;
+  };
+  struct ParkFile {
+    int fd;
+    uint64_t end;
+  };
+
+  uint64_t bpp() const { return FrameAccumulator::bytes_per_pixel(header_.aovs); }
+  uint64_t tile_offset(size_t i) const {
+    const uint64_t t = uint64_t(grid_.tile()), w = uint64_t(grid_.width());
+    if (t == 0) return 0;
+    const uint64_t row = i / grid_.columns(), col = i % grid_.columns();
+    const uint64_t row_h = std::min<uint64_t>(t, uint64_t(grid_.height()) - row * t);
+    return (row * t * w + col * t * row_h) * bpp();
+  }
+  template <class F>
+  static void for_each_plane(SampleBuffer& b, F&& f) {
+    f(b.count.data(), b.count.size() * 8);
+    for (auto* v : {&b.sum, &b.sum_sq, &b.batch_sum, &b.batch_sum_sq, &b.aov})
+      f(v->data(), v->size() * 8);
+  }
+  void read_planes(SampleBuffer& b, uint64_t at) const {
+    for_each_plane(b, [&](void* p, size_t n) {
+      read_all(fd_, p, n, at);
+      at += n;
+    });
+  }
+  void write_planes(SampleBuffer& b, uint64_t at) const {
+    for_each_plane(b, [&](void* p, size_t n) {
+      write_all(fd_, p, n, at);
+      at += n;
+    });
+  }
+  void evict_beyond_budget(size_t keep) {
+    while (cached_bytes_ > budget_ && lru_.size() > 1) {
+      size_t victim = lru_.back();
+      if (victim == keep) break;
+      Cached& c = cache_.at(victim);
+      if (c.dirty) write_planes(c.buf, tile_offset(victim));
+      cached_bytes_ -= tile_bytes(victim);
+      lru_.pop_back();
+      cache_.erase(victim);
+    }
+  }
+  int open_unlinked() const {
+    int fd = ::open(dir_.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+    if (fd < 0 && (errno == EOPNOTSUPP || errno == EISDIR || errno == EINVAL)) {
+      std::string path = dir_ + "/.rayfarm-spill-XXXXXX";
+      fd = ::mkostemp(path.data(), O_CLOEXEC);
+      if (fd >= 0) ::unlink(path.c_str());
+    }
+    if (fd < 0) fail("cannot create a spill file");
+    return fd;
+  }
+  [[noreturn]] void fail(const std::string& what) const {
+    throw std::runtime_error(what + " in " + dir_ +
+                             " (the frame's tiles kept on disk): " + std::strerror(errno));
+  }
+  void write_all(int fd, const void* p, size_t n, uint64_t at) const {
+    const char* c = static_cast<const char*>(p);
+    while (n > 0) {
+      ssize_t w = ::pwrite(fd, c, n, off_t(at));
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) fail("cannot write a spill file");
+      c += w, n -= size_t(w), at += uint64_t(w);
+    }
+  }
+  void read_all(int fd, void* p, size_t n, uint64_t at) const {
+    char* c = static_cast<char*>(p);
+    while (n > 0) {
+      ssize_t r = ::pread(fd, c, n, off_t(at));
+      if (r < 0 && errno == EINTR) continue;
+      if (r <= 0) {
+        if (r == 0) errno = EIO;
+        fail("cannot read a spill file");
+      }
+      c += r, n -= size_t(r), at += uint64_t(r);
+    }
+  }
+
+  std::string dir_;
+  TileGrid grid_;
+  BufferHeader header_;
+  uint64_t budget_;
+  int fd_ = -1;
+  std::unordered_map<size_t, Cached> cache_;
+  std::list<size_t> lru_;  // most recently used first
+  uint64_t cached_bytes_ = 0, peak_cached_bytes_ = 0;
+  std::map<uint32_t, ParkFile> parked_;
+};
+
 namespace {
 
-BufferView view_of(const std::variant<SampleBuffer, EncodedBuffer>& task) {
+// A held result's view (not a parked one: the caller reads that back first).
+template <class Task>
+BufferView view_of(const Task& task) {
   if (const SampleBuffer* b = std::get_if<SampleBuffer>(&task)) return BufferView(*b);
   return std::get<EncodedBuffer>(task).view();
+}
+
+// Copies the pixels of `r` (inside both rects) from src to dst, every per-pixel plane.
+void copy_pixels(const SampleBuffer& src, SampleBuffer& dst, const Rect& r) {
+  const size_t w = size_t(r.w), na = size_t(src.header.aovs.channels());
+  for (int y = r.y0; y < r.y1(); ++y) {
+    const size_t s = src.pixel_index(r.x0, y), d = dst.pixel_index(r.x0, y);
+    std::copy_n(src.count.begin() + s, w, dst.count.begin() + d);
+    std::copy_n(src.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
+    std::copy_n(src.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
+    std::copy_n(src.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
+    std::copy_n(src.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
+    std::copy_n(src.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
+  }
+}
+
+uint64_t held_bytes(const BufferView& v) {
+  return 8 * (v.count.size() + v.sum.size() + v.sum_sq.size() + v.batch_sum.size() +
+              v.batch_sum_sq.size() + v.splat.size() + v.aov.size());
 }
 
 }  // namespace
@@ -24,8 +220,28 @@ FrameAccumulator::FrameAccumulator(const BufferHeader& base, TileGrid tiles, boo
                      std::to_string(base_.width) + "x" + std::to_string(base_.height));
   base_.passes = PassSet{};
   base_.core_seconds = 0;
-  frame_ = SampleBuffer(base_, Rect{0, 0, base_.width, base_.height}, splats_);
+  const Rect whole{0, 0, base_.width, base_.height};
+  const uint64_t frame_bytes = uint64_t(whole.area()) * bytes_per_pixel(base_.aovs);
+  if (options_.memory_budget > 0 && frame_bytes > options_.memory_budget && !splats_ &&
+      tiles_.size() > 1) {
+    spill_ =
+        std::make_unique<TileSpill>(options_.spill_dir, tiles_, base_, options_.memory_budget / 2);
+    frame_ = SampleBuffer();  // header and counters only
+    frame_.header = base_;
+    frame_.rect = whole;
+  } else {
+    frame_ = SampleBuffer(base_, whole, splats_);
+  }
   if (options_.pass_count == 0) done_ = true;
+}
+
+FrameAccumulator::~FrameAccumulator() = default;
+FrameAccumulator::FrameAccumulator(FrameAccumulator&&) noexcept = default;
+FrameAccumulator& FrameAccumulator::operator=(FrameAccumulator&&) noexcept = default;
+
+const SampleBuffer& FrameAccumulator::frame() const {
+  if (spill_) throw std::logic_error("FrameAccumulator::frame(): the frame is kept in tiles");
+  return frame_;
 }
 
 size_t FrameAccumulator::tile_index(const Rect& rect) const {
@@ -72,7 +288,24 @@ FrameAccumulator::AddResult FrameAccumulator::add_task(Task task) {
   if (done_) return AddResult::Dropped;
 
   PendingPass& pp = pending_[pass];
-  if (!pp.tiles.try_emplace(ti, std::move(task)).second) return AddResult::Duplicate;
+  if (pp.tiles.count(ti)) return AddResult::Duplicate;
+  if (spill_) {
+    // Beyond half the budget, a waiting result goes to its pass's spill file.
+    const uint64_t bytes = held_bytes(v);
+    if (waiting_bytes_ + bytes > options_.memory_budget / 2) {
+      std::pair<uint64_t, uint64_t> at;
+      if (const EncodedBuffer* e = std::get_if<EncodedBuffer>(&task))
+        at = spill_->park(pass, e->bytes());
+      else
+        at = spill_->park(pass, encode_buffer(std::get<SampleBuffer>(task)));
+      task = Parked{at.first, at.second};
+      ++parked_;
+    } else {
+      waiting_bytes_ += bytes;
+    }
+    peak_waiting_ = std::max(peak_waiting_, waiting_bytes_);
+  }
+  pp.tiles.emplace(ti, std::move(task));
   size_t before = merged_;
   merge_ready_passes();
   return merged_ > before ? AddResult::Merged : AddResult::Pending;
@@ -80,7 +313,14 @@ FrameAccumulator::AddResult FrameAccumulator::add_task(Task task) {
 
 double FrameAccumulator::prefix_rel_mse() const {
   double total = 0;
-  for (size_t t = 0; t < tiles_.size(); ++t) total += rel_mse_sum(frame_, tiles_[t]);
+  for (size_t t = 0; t < tiles_.size(); ++t) {
+    if (spill_) {
+      const SampleBuffer& tile = spill_->tile(t, merged_ > 0, frame_.header.passes);
+      total += rel_mse_sum(tile, tile.rect);
+    } else {
+      total += rel_mse_sum(frame_, tiles_[t]);
+    }
+  }
   double area = double(frame_.rect.area());
   return area > 0 ? total / (3.0 * area) : 0.0;
 }
@@ -106,15 +346,29 @@ void FrameAccumulator::resume_from(SampleBuffer prefix) {
       k > options_.pass_count)
     throw MergeError("checkpoint holds passes " + prefix.header.passes.to_string() +
                      ", not a prefix of this frame's passes");
-  if (!(prefix.rect == frame_.rect) || prefix.splat.size() != frame_.splat.size() ||
-      !prefix.planes_match_rect() || prefix.aov.size() != frame_.aov.size())
+  if (!(prefix.rect == frame_.rect) || prefix.splat.empty() == splats_ ||
+      !prefix.planes_match_rect() ||
+      prefix.aov.size() != size_t(prefix.rect.area()) * size_t(base_.aovs.channels()))
     throw MergeError("checkpoint has another frame size or planes");
-  frame_ = std::move(prefix);
+  samples_ = prefix.total_samples();
+  if (spill_) {  // cut into the tiles
+    for (size_t t = 0; t < tiles_.size(); ++t) {
+      SampleBuffer& tile = spill_->tile(t, false, prefix.header.passes);
+      copy_pixels(prefix, tile, tile.rect);
+      spill_->mark_dirty(t);
+    }
+    frame_.header = prefix.header;
+    frame_.light_paths = prefix.light_paths;
+    frame_.nonfinite_samples = prefix.nonfinite_samples;
+    frame_.rays = prefix.rays;
+  } else {
+    frame_ = std::move(prefix);
+  }
   merged_ = k;
   // Only the last value is known; it is the one that decides.
   rel_mse_history_.assign(k, prefix_rel_mse());
-  samples_ = frame_.total_samples();
-  spp_ = rf::samples_per_pixel(frame_);
+  const double area = double(frame_.rect.area());
+  spp_ = area > 0 ? double(samples_ ? samples_ : frame_.light_paths) / area : 0.0;
   decide_after(merged_);
 }
 
@@ -128,11 +382,15 @@ void FrameAccumulator::merge_ready_passes() {
     if (it == pending_.end() || it->second.tiles.size() != tiles_.size()) return;
     frame_.header.passes.add(PassSet::range(pass, pass + 1));  // the variance counts it
     double rel = 0;
-    for (const auto& [t, task] : it->second.tiles) {  // in tile order
-      BufferView tile = view_of(task);
-      add_tile(frame_, tile);  // checked when it was added: cannot throw
-      samples_ += tile.total_samples();
-      rel += rel_mse_sum(frame_, tile.rect);
+    if (spill_) {
+      merge_pass_tiled(it->second.tiles, pass, &rel);
+    } else {
+      for (const auto& [t, task] : it->second.tiles) {  // in tile order
+        BufferView tile = view_of(task);
+        add_tile(frame_, tile);  // checked when it was added: cannot throw
+        samples_ += tile.total_samples();
+        rel += rel_mse_sum(frame_, tile.rect);
+      }
     }
     pending_.erase(it);
     ++merged_;
@@ -140,7 +398,76 @@ void FrameAccumulator::merge_ready_passes() {
     spp_ = area > 0 ? double(samples_ ? samples_ : frame_.light_paths) / area : 0.0;
     decide_after(merged_);
   }
-  if (done_) pending_.clear();  // passes beyond the prefix are dropped
+  if (done_) {  // passes beyond the prefix are dropped
+    pending_.clear();
+    if (spill_) {
+      spill_->drop_all_parked();
+      waiting_bytes_ = 0;
+    }
+  }
+}
+
+// The same per tile as above, each tile read from (and written back to) the spill file: the
+// same sums in the same order, so the same bits as a frame held whole.
+void FrameAccumulator::merge_pass_tiled(std::map<size_t, Task>& tiles, uint32_t pass, double* rel) {
+  for (auto& [t, task] : tiles) {  // in tile order
+    if (const Parked* p = std::get_if<Parked>(&task)) {
+      // Read back; its checksum is checked again (the spill file is storage like any other).
+      task = EncodedBuffer(spill_->unpark(pass, p->offset, p->length), "a result kept on disk");
+    } else {
+      waiting_bytes_ -= held_bytes(view_of(task));
+    }
+    BufferView v = view_of(task);
+    SampleBuffer& tile = spill_->tile(t, merged_ > 0, frame_.header.passes);
+    tile.header.build_id = v.header->build_id;  // the frame's provenance is combined below,
+    tile.header.isa = v.header->isa;            // once (a mixed build warns once)
+    add_tile(tile, v);
+    spill_->mark_dirty(t);
+    frame_.light_paths += v.light_paths;
+    frame_.nonfinite_samples += v.nonfinite_samples;
+    frame_.rays += v.rays;
+    combine_provenance(frame_.header, *v.header);
+    samples_ += v.total_samples();
+    *rel += rel_mse_sum(tile, tile.rect);
+    task = SampleBuffer();  // merged: its memory goes now
+  }
+  spill_->drop_parked(pass);
+}
+
+int FrameAccumulator::band_height() const {
+  if (!spill_) return std::max(frame_.rect.h, 1);
+  return tiles_.tile();
+}
+
+const SampleBuffer& FrameAccumulator::band(int y0) const {
+  if (!spill_) return frame_;
+  const int h = std::min(tiles_.tile(), frame_.rect.h - y0);
+  const Rect rows{0, y0, frame_.rect.w, h};
+  if (!(band_.rect == rows) || band_.count.size() != size_t(rows.area())) {
+    band_ = SampleBuffer(base_, rows, false);
+  } else {
+    std::fill(band_.count.begin(), band_.count.end(), 0);
+    for (auto* v : {&band_.sum, &band_.sum_sq, &band_.batch_sum, &band_.batch_sum_sq, &band_.aov})
+      std::fill(v->begin(), v->end(), 0.0);
+  }
+  band_.header = frame_.header;
+  band_.light_paths = frame_.light_paths;
+  band_.nonfinite_samples = frame_.nonfinite_samples;
+  band_.rays = frame_.rays;
+  if (merged_ > 0) {
+    const size_t row = size_t(y0 / tiles_.tile());
+    for (size_t c = 0; c < tiles_.columns(); ++c) {
+      const SampleBuffer& tile =
+          spill_->tile(row * tiles_.columns() + c, true, frame_.header.passes);
+      copy_pixels(tile, band_, tile.rect);
+    }
+  }
+  return band_;
+}
+
+FrameAccumulator::SpillUse FrameAccumulator::spill_use() const {
+  if (!spill_) return {};
+  return {spill_->peak_cached_bytes(), peak_waiting_, parked_};
 }
 
 }  // namespace rf

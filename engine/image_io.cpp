@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <vector>
 
@@ -44,11 +45,11 @@ void fsync_path(const fs::path& p, int flags) {
   }
 }
 
-// Writes `pixels` (spec.format, spec.nchannels interleaved) through OIIO's `format` plugin into a
-// temporary file, then fsync + rename + fsync of the directory: readers see the old file or the
-// whole new one.
+// Writes an image through OIIO's `format` plugin into a temporary file (`body` writes its pixels,
+// returning false on failure), then fsync + rename + fsync of the directory: readers see the old
+// file or the whole new one.
 void write_image_atomic(const std::string& path, const char* format, const ImageSpec& spec,
-                        const void* pixels) {
+                        const std::function<bool(ImageOutput&)>& body) {
   static std::atomic<uint64_t> counter{0};
   fs::path target(path);
   fs::path tmp =
@@ -58,9 +59,15 @@ void write_image_atomic(const std::string& path, const char* format, const Image
   if (!out) {
     throw ImageIOError(path + ": cannot create " + format + " writer: " + OIIO::geterror());
   }
-  bool ok = out->open(tmp.string(), spec) && out->write_image(spec.format, pixels) && out->close();
+  bool ok = false;
+  std::string err;
+  try {
+    ok = out->open(tmp.string(), spec) && body(*out) && out->close();
+  } catch (const std::exception& e) {
+    err = e.what();
+  }
   if (!ok) {
-    std::string err = out->geterror();
+    if (err.empty()) err = out->geterror();
     out.reset();
     std::error_code ec;
     fs::remove(tmp, ec);
@@ -77,9 +84,30 @@ void write_image_atomic(const std::string& path, const char* format, const Image
   fsync_path(target.parent_path(), O_RDONLY | O_DIRECTORY);
 }
 
-void check_writable(const std::string& path, const SampleBuffer& frame) {
-  if (frame.rect.area() <= 0) throw ImageIOError(path + ": nothing to write (empty rect)");
-  if (frame.count.size() != size_t(frame.rect.area())) {
+// Calls write_rows(band) for each band of the frame in order, with `pixels` sized for the band's
+// rows; each band's rows go out as scanlines, so the image is never whole in memory.
+template <class T, class F>
+bool write_bands(ImageOutput& out, const FrameBands& frame, int channels, F&& write_rows) {
+  const Rect& r = frame.info().rect;
+  std::vector<T> pixels;
+  for (int y0 = r.y0; y0 < r.y1(); y0 += frame.band_height()) {
+    const SampleBuffer& band = frame.band(y0);
+    int y1 = std::min(r.y1(), y0 + frame.band_height());
+    pixels.clear();
+    pixels.reserve(size_t(y1 - y0) * size_t(r.w) * size_t(channels));
+    write_rows(band, y0, y1, pixels);
+    if (!out.write_scanlines(y0, y1, 0, TypeDesc(OIIO::BaseTypeFromC<T>::value), pixels.data()))
+      return false;
+  }
+  return true;
+}
+
+void check_writable(const std::string& path, const FrameBands& frame) {
+  const SampleBuffer& info = frame.info();
+  if (info.rect.area() <= 0) throw ImageIOError(path + ": nothing to write (empty rect)");
+  const SampleBuffer& first = frame.band(info.rect.y0);
+  if (first.count.size() != size_t(first.rect.area()) || first.rect.x0 != info.rect.x0 ||
+      first.rect.w != info.rect.w) {
     throw ImageIOError(path + ": sample buffer planes do not match its rect");
   }
 }
@@ -97,8 +125,9 @@ void double_attribute(ImageSpec& spec, const std::string& name, double v) {
   spec.attribute(name, TypeDesc::DOUBLE, &v);
 }
 
-void provenance_attributes(ImageSpec& spec, const SampleBuffer& frame, const Attributes& extra) {
+void provenance_attributes(ImageSpec& spec, const FrameBands& bands, const Attributes& extra) {
   for (const auto& [k, v] : extra) spec.attribute("rayfarm:" + k, v);
+  const SampleBuffer& frame = bands.info();
   const BufferHeader& h = frame.header;
   spec.attribute("rayfarm:scene_digest", h.scene_digest);
   spec.attribute("rayfarm:seed", std::to_string(h.seed));  // u64 does not fit an EXR int
@@ -109,7 +138,7 @@ void provenance_attributes(ImageSpec& spec, const SampleBuffer& frame, const Att
   spec.attribute("rayfarm:passes", h.passes.to_string());
   // Splatting integrators take no camera samples: their "spp" is light paths per pixel.
   uint64_t pixels = uint64_t(frame.rect.area());
-  uint64_t samples = frame.total_samples() ? frame.total_samples() : frame.light_paths;
+  uint64_t samples = bands.total_samples() ? bands.total_samples() : frame.light_paths;
   if (samples % pixels == 0) {
     count_attribute(spec, "rayfarm:spp", samples / pixels);
   } else {
@@ -119,7 +148,7 @@ void provenance_attributes(ImageSpec& spec, const SampleBuffer& frame, const Att
   spec.attribute("rayfarm:isa", h.isa);
   spec.attribute("rayfarm:writer_build_id", build_id());
   double_attribute(spec, "rayfarm:core_seconds", h.core_seconds);
-  double_attribute(spec, "rayfarm:rel_mse", frame.rel_mse());
+  double_attribute(spec, "rayfarm:rel_mse", bands.rel_mse());
   uint32_t n = h.passes.count();
   spec.attribute("rayfarm:variance_estimator",
                  n >= 2 ? "batch means over " + std::to_string(n) + " passes"
@@ -137,9 +166,13 @@ uint8_t srgb8(double linear) {
 }  // namespace
 
 void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra) {
+  write_exr(path, WholeFrame(frame), extra);
+}
+
+void write_exr(const std::string& path, const FrameBands& frame, const Attributes& extra) {
   check_writable(path, frame);
-  const Rect& r = frame.rect;
-  const AovSet& aovs = frame.header.aovs;
+  const Rect& r = frame.info().rect;
+  const AovSet& aovs = frame.info().header.aovs;
   std::vector<std::string> names = {"R", "G", "B", "A", "variance.R", "variance.G", "variance.B"};
   if (aovs.albedo) names.insert(names.end(), {"albedo.R", "albedo.G", "albedo.B"});
   if (aovs.normal) names.insert(names.end(), {"N.X", "N.Y", "N.Z"});
@@ -150,47 +183,55 @@ void write_exr(const std::string& path, const SampleBuffer& frame, const Attribu
   spec.y = r.y0;
   spec.full_x = 0;
   spec.full_y = 0;
-  spec.full_width = frame.header.width;
-  spec.full_height = frame.header.height;
+  spec.full_width = frame.info().header.width;
+  spec.full_height = frame.info().header.height;
   spec.channelnames = names;
   spec.alpha_channel = 3;
   spec.attribute("compression", "zip");
   spec.attribute("oiio:ColorSpace", "Linear");
   provenance_attributes(spec, frame, extra);
 
-  std::vector<float> pixels;
-  pixels.reserve(size_t(r.area()) * size_t(nch));
-  for (int y = r.y0; y < r.y1(); ++y) {
-    for (int x = r.x0; x < r.x1(); ++x) {
-      RGB e = frame.estimate(x, y), v = frame.variance_of_mean(x, y);
-      pixels.insert(pixels.end(), {e.x, e.y, e.z, 1.0f, v.x, v.y, v.z});
-      if (!aovs.any()) continue;
-      float coverage = 0;
-      AovSample m = frame.aov_mean(x, y, &coverage);
-      if (aovs.albedo) pixels.insert(pixels.end(), {m.albedo.x, m.albedo.y, m.albedo.z});
-      if (aovs.normal) pixels.insert(pixels.end(), {m.normal.x, m.normal.y, m.normal.z});
-      if (aovs.depth) pixels.insert(pixels.end(), {m.depth, coverage});
-    }
-  }
-  write_image_atomic(path, "openexr", spec, pixels.data());
+  write_image_atomic(path, "openexr", spec, [&](ImageOutput& out) {
+    return write_bands<float>(
+        out, frame, nch, [&](const SampleBuffer& band, int y0, int y1, std::vector<float>& pixels) {
+          for (int y = y0; y < y1; ++y) {
+            for (int x = r.x0; x < r.x1(); ++x) {
+              RGB e = band.estimate(x, y), v = band.variance_of_mean(x, y);
+              pixels.insert(pixels.end(), {e.x, e.y, e.z, 1.0f, v.x, v.y, v.z});
+              if (!aovs.any()) continue;
+              float coverage = 0;
+              AovSample m = band.aov_mean(x, y, &coverage);
+              if (aovs.albedo) pixels.insert(pixels.end(), {m.albedo.x, m.albedo.y, m.albedo.z});
+              if (aovs.normal) pixels.insert(pixels.end(), {m.normal.x, m.normal.y, m.normal.z});
+              if (aovs.depth) pixels.insert(pixels.end(), {m.depth, coverage});
+            }
+          }
+        });
+  });
 }
 
 void write_png(const std::string& path, const SampleBuffer& frame, float exposure_stops) {
+  write_png(path, WholeFrame(frame), exposure_stops);
+}
+
+void write_png(const std::string& path, const FrameBands& frame, float exposure_stops) {
   check_writable(path, frame);
-  const Rect& r = frame.rect;
+  const Rect& r = frame.info().rect;
   ImageSpec spec(r.w, r.h, 3, TypeDesc::UINT8);
   spec.attribute("oiio:ColorSpace", "sRGB");
   spec.attribute("Software", build_id());
   double scale = std::exp2(double(exposure_stops));
-  std::vector<uint8_t> pixels;
-  pixels.reserve(size_t(r.area()) * 3);
-  for (int y = r.y0; y < r.y1(); ++y) {
-    for (int x = r.x0; x < r.x1(); ++x) {
-      RGB e = frame.estimate(x, y);
-      for (int c = 0; c < 3; ++c) pixels.push_back(srgb8(double(e[c]) * scale));
-    }
-  }
-  write_image_atomic(path, "png", spec, pixels.data());
+  write_image_atomic(path, "png", spec, [&](ImageOutput& out) {
+    return write_bands<uint8_t>(
+        out, frame, 3, [&](const SampleBuffer& band, int y0, int y1, std::vector<uint8_t>& pixels) {
+          for (int y = y0; y < y1; ++y) {
+            for (int x = r.x0; x < r.x1(); ++x) {
+              RGB e = band.estimate(x, y);
+              for (int c = 0; c < 3; ++c) pixels.push_back(srgb8(double(e[c]) * scale));
+            }
+          }
+        });
+  });
 }
 
 RgbImage read_rgb(const std::string& path) {

@@ -24,9 +24,13 @@ using Attributes = std::map<std::string, std::string>;
 // Writes the frame accumulator as float EXR. Written to a temporary file then renamed, so a
 // reader never sees half a file. Throws ImageIOError naming the path.
 void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra = {});
+// The same, a band of rows at a time (scanlines), so a frame kept in tiles on disk is never
+// whole in memory.
+void write_exr(const std::string& path, const FrameBands& frame, const Attributes& extra = {});
 
 // sRGB-encoded 8-bit PNG of the estimate scaled by 2^exposure_stops (clamped), written atomically.
 void write_png(const std::string& path, const SampleBuffer& frame, float exposure_stops = 0.0f);
+void write_png(const std::string& path, const FrameBands& frame, float exposure_stops = 0.0f);
 
 // An image's RGB as floats, row-major, 3 per pixel.
 struct RgbImage {

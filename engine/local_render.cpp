@@ -20,12 +20,18 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   uint32_t count = opt.pass_count ? opt.pass_count : total_passes - opt.first_pass;
   TileGrid tiles = renderer.tiles(opt.tile_size);
   ProgressiveOptions popt{opt.first_pass, count, opt.noise_target};
-  FrameAccumulator acc(renderer.header(opt.frame, PassSet{}), tiles, renderer.splats(), popt);
+  popt.memory_budget = opt.memory_budget;
+  popt.spill_dir = opt.spill_dir;
+  auto acc_owner = std::make_unique<FrameAccumulator>(renderer.header(opt.frame, PassSet{}), tiles,
+                                                      renderer.splats(), popt);
+  FrameAccumulator& acc = *acc_owner;
 
   // Passes are rendered in windows of passes whose tasks run in parallel (each task also spreads
-  // its rows over threads: TBB balances the nesting), merged in (pass, tile) order after each
-  // window; the stop tests run after every pass. A window of one pass when a pass has enough
-  // tiles keeps the stop decisions (noise target, time budget) fine-grained.
+  // its rows over threads: TBB balances the nesting); each result goes to the accumulator as it
+  // is made, which merges in (pass, tile) order, so no window's results are ever held together
+  // beyond the accumulator's memory budget. The stop tests run after every pass. A window of one
+  // pass when a pass has enough tiles keeps the stop decisions (noise target, time budget)
+  // fine-grained.
   int threads = tbb::this_task_arena::max_concurrency();
   uint32_t window = tiles.size() >= size_t(threads) ? 1u : 2u;
   auto start = clock::now();
@@ -47,7 +53,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
     if (opt.progress) opt.progress(p);
   };
   // Over the time budget, the tasks in flight are stopped where they are (a pass may be long),
-  // and their window of passes is dropped: the image is the prefix completed before.
+  // and the passes they belong to are dropped: the image is the prefix completed before.
   auto over_budget = [&] {
     return opt.time_budget_s > 0 &&
            std::chrono::duration<double>(clock::now() - start).count() >= opt.time_budget_s;
@@ -74,21 +80,20 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
       }
       uint32_t p1 = std::min(opt.first_pass + count, p0 + window);
       size_t n = size_t(p1 - p0) * tiles.size();
-      std::vector<SampleBuffer> results(n);
+      std::mutex acc_mu;
       try {
         tbb::parallel_for(size_t(0), n, [&](size_t i) {
           TaskKey task{opt.frame, tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size())};
-          results[i] = renderer.render(task, /*parallel=*/true);  // nested: TBB balances
+          SampleBuffer r = renderer.render(task, /*parallel=*/true);  // nested: TBB balances
           ++tasks_done;
+          const uint64_t r_rays = r.rays;
+          std::lock_guard<std::mutex> lock(acc_mu);
+          if (acc.add(std::move(r)) != FrameAccumulator::AddResult::Dropped) rays += r_rays;
         });
       } catch (const RenderStopped&) {
         renderer.resume();
         stopped_on_time = true;
         break;
-      }
-      for (auto& r : results) {
-        uint64_t r_rays = r.rays;
-        if (acc.add(std::move(r)) != FrameAccumulator::AddResult::Dropped) rays += r_rays;
       }
       std::lock_guard<std::mutex> lock(mu);
       prog.passes_merged = acc.passes_merged();
@@ -112,7 +117,12 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   report();
 
   LocalRenderResult res;
-  res.frame = acc.frame();
+  if (acc.tiled()) {
+    res.frame = acc.info();  // header and counters; the pixels stay in the tiles
+    res.tiles = std::move(acc_owner);
+  } else {
+    res.frame = acc.frame();
+  }
   res.passes_merged = acc.passes_merged();
   res.stopped_on_target = acc.stopped_on_target();
   res.stopped_on_time = stopped_on_time;

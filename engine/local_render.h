@@ -5,8 +5,11 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
+#include <string>
 
 #include "engine/frame.h"
+#include "engine/frame_accumulator.h"
 #include "engine/render.h"
 #include "engine/sample_buffer.h"
 
@@ -30,12 +33,17 @@ struct LocalRenderOptions {
   // reproducible one; meant for equal-time comparisons. No pass completed: passes_merged is 0.
   double time_budget_s = 0;
   int tile_size = 32;
+  // Bytes of frame and waiting results held in memory (0: no bound); a larger frame is kept in
+  // tiles in unlinked files in spill_dir (ProgressiveOptions::memory_budget).
+  uint64_t memory_budget = 0;
+  std::string spill_dir = "/tmp";
   // Called from a monitor thread about every 200 ms and once at the end.
   std::function<void(const LocalProgress&)> progress;
 };
 
 struct LocalRenderResult {
-  SampleBuffer frame;        // the merged completed prefix
+  SampleBuffer frame;  // the merged completed prefix (kept in tiles: its header and counters)
+  std::unique_ptr<FrameAccumulator> tiles;  // the prefix, when kept in tiles on disk
   uint32_t passes_merged = 0;
   bool stopped_on_target = false;
   bool stopped_on_time = false;

@@ -216,6 +216,38 @@ struct BufferView {
   SampleBuffer copy() const;  // an owning copy
 };
 
+// A merged frame read a band of rows at a time, so that the writers (EXR, PNG, .rfb) need not hold
+// it whole: a SampleBuffer (WholeFrame), or a frame accumulator that keeps its frame in tiles on
+// disk (frame_accumulator.h).
+class FrameBands {
+ public:
+  virtual ~FrameBands() = default;
+  // The frame's header and counters (passes, provenance, light paths, rays, non-finite samples);
+  // its rect is the whole frame, its planes may be empty.
+  virtual const SampleBuffer& info() const = 0;
+  virtual int band_height() const = 0;  // rows per band, 1 to the frame's height
+  // Rows [y0, min(y0 + band_height(), rect.y1())) of info().rect, y0 = rect.y0 + k *
+  // band_height(): a buffer whose rect is those rows over the rect's width (with a splat plane,
+  // the whole frame's). Valid until the next call.
+  virtual const SampleBuffer& band(int y0) const = 0;
+  virtual uint64_t total_samples() const = 0;  // camera samples over the frame
+  virtual double rel_mse() const = 0;          // the frame's noise figure (SampleBuffer::rel_mse)
+};
+
+// A SampleBuffer as one band.
+class WholeFrame final : public FrameBands {
+ public:
+  explicit WholeFrame(const SampleBuffer& frame) : frame_(frame) {}
+  const SampleBuffer& info() const override { return frame_; }
+  int band_height() const override { return std::max(frame_.rect.h, 1); }
+  const SampleBuffer& band(int) const override { return frame_; }
+  uint64_t total_samples() const override { return frame_.total_samples(); }
+  double rel_mse() const override { return frame_.rel_mse(); }
+
+ private:
+  const SampleBuffer& frame_;
+};
+
 // The sum over `region`'s pixels (inside b's rect) and RGB of relative_error(variance of the mean,
 // estimate): rel_mse() is this over the rect, divided by 3 x its area. Row-major over the region.
 double rel_mse_sum(const SampleBuffer& b, const Rect& region);

@@ -312,7 +312,12 @@ void deformed_vertices(const Mesh& m, double time, std::vector<Vec3>& positions,
                        std::vector<Vec3>& normals);
 
 // Names and defaults every format maps onto.
-inline constexpr int kMaxResolution = 16384;
+// A film's width and height: every pixel index fits a signed 32-bit int (2^30 pixels), and a raster
+// position keeps 9 bits below the pixel. Frames beyond memory are kept in tiles on disk
+// (FrameAccumulator, ProgressiveOptions::memory_budget), at 104 bytes a pixel.
+inline constexpr int kMaxResolution = 32768;
+// Splatting integrators (light, bdpt) carry a whole-frame splat plane in every task.
+inline constexpr uint64_t kMaxSplatPixels = uint64_t(4096) * 4096;
 const std::vector<std::string>& known_filters();   // box, triangle, gaussian
 FilterType filter_type(const std::string& name);    // one of known_filters()
 float default_filter_radius(FilterType type);       // box 0.5, triangle 1, gaussian 1.5 pixels

@@ -5,10 +5,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "engine/buffer_file.h"
+#include "engine/digest.h"
 #include "tests/support/fixtures.h"
 
 namespace rf {
@@ -199,6 +201,152 @@ TEST(FrameAccumulator, EncodedAndOwnedTasksInAnyOrderGiveThePassOrderFrame) {
     // The published figures, kept as passes merged, are the frame's.
     EXPECT_NEAR(acc.rel_mse(), expected.rel_mse(), 1e-12 * expected.rel_mse());
     EXPECT_DOUBLE_EQ(acc.samples_per_pixel(), 12.0);  // 3 samples a pass
+  }
+}
+
+// A frame kept in tiles on disk (ProgressiveOptions::memory_budget) is the frame held whole, bit
+// for bit: the same tasks in any order, with AOVs, tiles clipped at the border, results parked
+// in spill files, a stop on a noise target, and a resume; read back a band at a time and
+// written as .rfb band by band, the same bytes. Its memory stays within the budget plus a tile.
+TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
+  const int W = 37, H = 21;
+  const TileGrid grid(W, H, 8);  // 5 x 3 tiles, the last column and row clipped
+  AovSet aovs;
+  aovs.albedo = aovs.depth = true;
+  BufferHeader base = test::test_header({}, W, H);
+  base.aovs = aovs;
+  const size_t na = size_t(aovs.channels());
+  auto task = [&](uint32_t p, size_t t) {
+    SampleBuffer b = test::random_pass(p, grid[t], false, 1000 * p + t, W, H);
+    b.header.aovs = aovs;
+    b.aov.resize(size_t(b.rect.area()) * na);
+    for (size_t i = 0; i < b.aov.size(); ++i) b.aov[i] = double((i * 7919 + p * 31 + t) % 97) / 8;
+    return b;
+  };
+  std::vector<std::pair<uint32_t, size_t>> order;
+  for (uint32_t p = 0; p < 8; ++p)
+    for (size_t t = 0; t < grid.size(); ++t) order.push_back({p, t});
+  std::mt19937 rng(5);
+  std::shuffle(order.begin(), order.end(), rng);
+
+  const uint64_t tile_bytes = 64 * FrameAccumulator::bytes_per_pixel(aovs);
+  const std::string dir = ::testing::TempDir();
+  auto feed_all = [&](FrameAccumulator& acc, uint32_t from) {
+    for (size_t i = 0; i < order.size(); ++i) {
+      auto [p, t] = order[i];
+      if (p < from) continue;
+      SampleBuffer b = task(p, t);
+      if (i % 2)
+        acc.add(EncodedBuffer(encode_buffer(b), "task"));
+      else
+        acc.add(std::move(b));
+    }
+  };
+  auto bands_of = [&](const FrameAccumulator& acc) {
+    SampleBuffer out(acc.info().header, Rect{0, 0, W, H}, false);
+    out.light_paths = acc.info().light_paths;
+    out.nonfinite_samples = acc.info().nonfinite_samples;
+    out.rays = acc.info().rays;
+    for (int y0 = 0; y0 < H; y0 += acc.band_height()) {
+      const SampleBuffer& band = acc.band(y0);
+      EXPECT_EQ(band.rect, (Rect{0, y0, W, std::min(8, H - y0)}));
+      for (int y = band.rect.y0; y < band.rect.y1(); ++y)
+        for (int x = 0; x < W; ++x) {
+          size_t s = band.pixel_index(x, y), d = out.pixel_index(x, y);
+          out.count[d] = band.count[s];
+          for (int c = 0; c < 3; ++c) {
+            out.sum[3 * d + c] = band.sum[3 * s + c];
+            out.sum_sq[3 * d + c] = band.sum_sq[3 * s + c];
+            out.batch_sum[3 * d + c] = band.batch_sum[3 * s + c];
+            out.batch_sum_sq[3 * d + c] = band.batch_sum_sq[3 * s + c];
+          }
+          for (size_t c = 0; c < na; ++c) out.aov[na * d + c] = band.aov[na * s + c];
+        }
+    }
+    return out;
+  };
+  auto check_same = [&](const FrameAccumulator& tiled, const FrameAccumulator& whole) {
+    ASSERT_TRUE(tiled.tiled());
+    ASSERT_FALSE(whole.tiled());
+    EXPECT_EQ(tiled.passes_merged(), whole.passes_merged());
+    EXPECT_EQ(tiled.rel_mse_history(), whole.rel_mse_history()) << "the same sums, same order";
+    EXPECT_EQ(tiled.stopped_on_target(), whole.stopped_on_target());
+    EXPECT_EQ(tiled.total_samples(), whole.total_samples());
+    EXPECT_EQ(tiled.samples_per_pixel(), whole.samples_per_pixel());
+    SampleBuffer read = bands_of(tiled);
+    expect_bit_identical(read, whole.frame());
+    EXPECT_TRUE(test::bits_equal(read.aov, whole.frame().aov));
+    EXPECT_THROW(tiled.frame(), std::logic_error);
+    // Written band by band, the bytes of the whole frame's file.
+    write_buffer_file(dir + "/tiled.rfb", tiled);
+    write_buffer_file(dir + "/whole.rfb", whole.frame());
+    EXPECT_EQ(read_file_bytes(dir + "/tiled.rfb"), read_file_bytes(dir + "/whole.rfb"));
+    // Within the budget: half for tiles (plus the one being read), half for waiting results;
+    // the rest of the waiting results were parked on disk.
+    FrameAccumulator::SpillUse use = tiled.spill_use();
+    EXPECT_LE(use.peak_tile_bytes, 3 * tile_bytes + tile_bytes);
+    EXPECT_GE(use.peak_tile_bytes, 3 * tile_bytes) << "the cache is used";
+    EXPECT_LE(use.peak_waiting_bytes, 3 * tile_bytes);
+    EXPECT_GT(use.parked_results, 0u);
+  };
+
+  for (double target : {0.0, -1.0}) {
+    SCOPED_TRACE(target == 0 ? "all passes" : "stopped on a noise target");
+    ProgressiveOptions whole_opt;
+    whole_opt.pass_count = 8;
+    FrameAccumulator probe(base, grid, false, whole_opt);
+    feed_all(probe, 0);
+    ASSERT_EQ(probe.passes_merged(), 8u);
+    // A target the prefix of 5 passes meets (or the smallest after 4: the stop needs 4 passes).
+    if (target < 0)
+      whole_opt.noise_target = *std::min_element(probe.rel_mse_history().begin() + 3,
+                                                 probe.rel_mse_history().begin() + 6);
+    ProgressiveOptions tiled_opt = whole_opt;
+    tiled_opt.memory_budget = 6 * tile_bytes;  // the frame needs 15 tiles' worth
+    tiled_opt.spill_dir = dir;
+    FrameAccumulator whole(base, grid, false, whole_opt), tiled(base, grid, false, tiled_opt);
+    feed_all(whole, 0);
+    feed_all(tiled, 0);
+    ASSERT_TRUE(whole.done() && tiled.done());
+    if (target < 0) ASSERT_TRUE(whole.stopped_on_target());
+    check_same(tiled, whole);
+  }
+
+  // Resumed from a prefix of 3 passes, in tiles.
+  ProgressiveOptions opt;
+  opt.pass_count = 8;
+  FrameAccumulator first(base, grid, false, opt), whole(base, grid, false, opt);
+  feed_all(whole, 0);
+  for (auto [p, t] : order)
+    if (p < 3) first.add(task(p, t));
+  ASSERT_EQ(first.passes_merged(), 3u);
+  opt.memory_budget = 6 * tile_bytes;
+  opt.spill_dir = dir;
+  FrameAccumulator resumed(base, grid, false, opt);
+  resumed.resume_from(decode_buffer(encode_buffer(first.frame()), "prefix"));
+  feed_all(resumed, 3);
+  ASSERT_TRUE(resumed.done());
+  EXPECT_TRUE(same_samples(bands_of(resumed), whole.frame()));
+}
+
+// A frame that fits the budget, one tile, or a splat plane is held whole.
+TEST(FrameAccumulator, IsHeldWholeWhenItFitsOrCannotBeCut) {
+  ProgressiveOptions opt;
+  opt.pass_count = 2;
+  opt.memory_budget = 64 * 104;
+  opt.spill_dir = ::testing::TempDir();
+  EXPECT_FALSE(FrameAccumulator(make_header({}), kTiles, false, opt).tiled()) << "64 pixels fit";
+  BufferHeader big = test::test_header({}, 64, 64);
+  EXPECT_TRUE(FrameAccumulator(big, TileGrid(64, 64, 16), false, opt).tiled());
+  EXPECT_FALSE(FrameAccumulator(big, TileGrid(64, 64, 0), false, opt).tiled()) << "one tile";
+  EXPECT_FALSE(FrameAccumulator(big, TileGrid(64, 64, 16), true, opt).tiled()) << "splats";
+  opt.spill_dir = "/nonexistent-rayfarm-dir";
+  try {
+    FrameAccumulator(big, TileGrid(64, 64, 16), false, opt);
+    ADD_FAILURE() << "a spill directory that does not exist";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent-rayfarm-dir"), std::string::npos)
+        << e.what();
   }
 }
 

@@ -12,6 +12,7 @@
 #include "engine/integrators/common.h"
 #include "engine/integrators/drivers.h"
 #include "engine/integrators/path/path_tracer.h"
+#include "engine/integrators/registry.h"
 #include "engine/local_render.h"
 #include "engine/render.h"
 #include "engine/scene.h"
@@ -269,6 +270,28 @@ TEST(LightTracing, AgreesWithPathOnCornellBox) {
   test::ImageStats light = test::render_stats(test::cornell_box({"light", 32, 8, 32, 5}), 32, 4);
   test::ImageStats path = test::render_stats(test::cornell_box({"path", 32, 8, 32, 6}), 32, 4);
   expect_agree(light, path, "light vs path (4x4 blocks)");
+}
+
+// Splatting integrators carry a whole-frame splat plane in every task, so their frames cannot be
+// kept in tiles: above 4096x4096 they are refused with the reason; the others are not.
+TEST(LightTracing, SplattingIntegratorsRefuseFramesTheyCannotTile) {
+  for (const char* name : {"light", "bdpt"}) {
+    Scene s = test::cornell_box({name, 8, 1, 1});
+    s.film.width = 4097;
+    s.film.height = 4096;
+    try {
+      check_renderable(s);
+      ADD_FAILURE() << name << " accepted a 4097x4096 film";
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find("4097x4096"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("whole frame"), std::string::npos) << e.what();
+    }
+    s.film.width = 4096;
+    EXPECT_NO_THROW(check_renderable(s)) << name << " at the bound";
+  }
+  Scene path = test::cornell_box({"path", 8, 1, 1});
+  path.film.width = path.film.height = kMaxResolution;
+  EXPECT_NO_THROW(check_renderable(path));
 }
 
 // The determinism contract for every integrator of the registry: a pass is the same whole or in

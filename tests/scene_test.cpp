@@ -477,7 +477,7 @@ TEST(Overrides, ValidatedAndNamedByFlag) {
                                       join_names(known_integrators()) + ")");
   o = {};
   o.width = 0;
-  EXPECT_EQ(override_error(s, o), "--res: width must be between 1 and 16384, got 0");
+  EXPECT_EQ(override_error(s, o), "--res: width must be between 1 and 32768, got 0");
   o = {};
   o.max_depth = -1;
   EXPECT_EQ(override_error(s, o), "--max-depth: must be at least 0, got -1");
@@ -730,9 +730,9 @@ const std::vector<BadScene>& bad_scenes() {
        }),
        "film.resolution[1]", "must be at least 1, got 0"},
       {"HugeResolution", edit([](json& j) {
-         j["film"]["resolution"] = {20000, 24};
+         j["film"]["resolution"] = {40000, 24};
        }),
-       "film.resolution[0]", "must be at most 16384, got 20000"},
+       "film.resolution[0]", "must be at most 32768, got 40000"},
       // JSON has no NaN: a "NaN" string is a type error at its path...
       {"NaNStringInMatrix", with_matrix(R"([1, 0, 0, 0, 0, "NaN", 0, 0, 0, 0, 1, 0, 0, 0, 0, 1])"),
        "shapes[0].transform[1].matrix[5]", "expected a number, got string \"NaN\""},

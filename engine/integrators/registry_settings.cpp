@@ -207,6 +207,17 @@ void check_renderable(const Scene& scene) {
   std::visit(
       [&](const auto& integrator) {
         using Module = std::decay_t<decltype(integrator)>;
+        const uint64_t pixels = uint64_t(scene.film.width) * uint64_t(scene.film.height);
+        if (Module::kSplats && pixels > kMaxSplatPixels)
+          throw SceneError(
+              scene.path + ": film " + std::to_string(scene.film.width) + "x" +
+              std::to_string(scene.film.height) + ": the " + std::string(Module::kName) +
+              " integrator splats light paths over the whole frame, so every task carries a "
+              "plane of the whole frame (24 bytes a pixel) and the frame cannot be kept in "
+              "tiles; it renders at most " +
+              std::to_string(kMaxSplatPixels) +
+              " pixels (4096x4096). Path, direct, ao and whitted render up to " +
+              std::to_string(kMaxResolution) + "x" + std::to_string(kMaxResolution));
         if (!Module::kMovingGeometry)
           for (size_t i = 0; i < scene.instances.size(); ++i)
             if (scene.instances[i].moves())
