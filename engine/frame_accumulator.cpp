@@ -8,11 +8,29 @@
 #include <cstring>
 #include <list>
 #include <stdexcept>
+#include <type_traits>
 #include <unordered_map>
 
 #include "engine/progress.h"
 
 namespace rf {
+
+namespace {
+// Copies the pixels of `r` (inside both rects) from src to dst, every per-pixel plane.
+void copy_pixels(const SampleBuffer& src, SampleBuffer& dst, const Rect& r) {
+  const size_t w = size_t(r.w), na = size_t(src.header.aovs.channels());
+  for (int y = r.y0; y < r.y1(); ++y) {
+    const size_t s = src.pixel_index(r.x0, y), d = dst.pixel_index(r.x0, y);
+    std::copy_n(src.count.begin() + s, w, dst.count.begin() + d);
+    std::copy_n(src.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
+    std::copy_n(src.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
+    std::copy_n(src.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
+    std::copy_n(src.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
+    std::copy_n(src.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
+  }
+}
+
+}  // namespace
 
 // A tiled frame's storage (ProgressiveOptions::memory_budget): every tile's planes at a fixed
 // place in one unlinked file (tile i after the pixels of tiles 0..i-1, planes in .rfb order), the
@@ -57,6 +75,37 @@ class TileSpill {
   uint64_t tile_bytes(size_t i) const { return uint64_t(grid_[i].area()) * bpp(); }
   uint64_t cached_bytes() const { return cached_bytes_; }
   uint64_t peak_cached_bytes() const { return peak_cached_bytes_; }
+  // Rows [y0, y1) of tile i (stored) into `out`, whose rect holds them: from the cache if the
+  // tile is there, else straight from the file (not cached: a band is read once).
+  void read_rows(size_t i, int y0, int y1, SampleBuffer& out) {
+    const Rect tr = grid_[i];
+    const Rect rows{tr.x0, y0, tr.w, y1 - y0};
+    if (auto it = cache_.find(i); it != cache_.end()) {
+      copy_pixels(it->second.buf, out, rows);
+      return;
+    }
+    const uint64_t area = uint64_t(tr.area()), first = uint64_t(y0 - tr.y0) * uint64_t(tr.w);
+    const uint64_t n = uint64_t(rows.area());
+    uint64_t plane_at = tile_offset(i);
+    const size_t na = size_t(header_.aovs.channels());
+    auto plane = [&](auto* dst_plane, size_t k) {  // k values per pixel
+      using T = std::remove_reference_t<decltype((*dst_plane)[0])>;
+      scratch_.resize(size_t(k * n));
+      read_all(fd_, scratch_.data(), 8 * k * n, plane_at + 8 * k * first);
+      for (int y = y0; y < y1; ++y) {
+        const size_t d = out.pixel_index(tr.x0, y), s = size_t(y - y0) * size_t(tr.w);
+        std::memcpy(dst_plane->data() + k * d, scratch_.data() + k * s, 8 * k * size_t(tr.w));
+      }
+      static_assert(sizeof(T) == 8);
+      plane_at += 8 * k * area;
+    };
+    plane(&out.count, 1);
+    plane(&out.sum, 3);
+    plane(&out.sum_sq, 3);
+    plane(&out.batch_sum, 3);
+    plane(&out.batch_sum_sq, 3);
+    if (na) plane(&out.aov, na);
+  }
 
   // A waiting result of `pass` written to that pass's file; its bytes read back.
   std::pair<uint64_t, uint64_t> park(uint32_t pass, std::string_view bytes) {
@@ -179,6 +228,7 @@ class TileSpill {
   std::list<size_t> lru_;  // most recently used first
   uint64_t cached_bytes_ = 0, peak_cached_bytes_ = 0;
   std::map<uint32_t, ParkFile> parked_;
+  std::vector<uint64_t> scratch_;  // read_rows
 };
 
 namespace {
@@ -188,20 +238,6 @@ template <class Task>
 BufferView view_of(const Task& task) {
   if (const SampleBuffer* b = std::get_if<SampleBuffer>(&task)) return BufferView(*b);
   return std::get<EncodedBuffer>(task).view();
-}
-
-// Copies the pixels of `r` (inside both rects) from src to dst, every per-pixel plane.
-void copy_pixels(const SampleBuffer& src, SampleBuffer& dst, const Rect& r) {
-  const size_t w = size_t(r.w), na = size_t(src.header.aovs.channels());
-  for (int y = r.y0; y < r.y1(); ++y) {
-    const size_t s = src.pixel_index(r.x0, y), d = dst.pixel_index(r.x0, y);
-    std::copy_n(src.count.begin() + s, w, dst.count.begin() + d);
-    std::copy_n(src.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
-    std::copy_n(src.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
-    std::copy_n(src.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
-    std::copy_n(src.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
-    std::copy_n(src.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
-  }
 }
 
 uint64_t held_bytes(const BufferView& v) {
@@ -434,14 +470,18 @@ void FrameAccumulator::merge_pass_tiled(std::map<size_t, Task>& tiles, uint32_t 
   spill_->drop_parked(pass);
 }
 
+// Tiled: rows of up to an eighth of the budget (at least one, at most a tile's height), so a
+// band and the writer's pixels of it stay within a quarter of it.
 int FrameAccumulator::band_height() const {
   if (!spill_) return std::max(frame_.rect.h, 1);
-  return tiles_.tile();
+  const uint64_t row = uint64_t(frame_.rect.w) * bytes_per_pixel(base_.aovs);
+  const uint64_t rows = options_.memory_budget / 8 / std::max<uint64_t>(row, 1);
+  return int(std::clamp<uint64_t>(rows, 1, uint64_t(tiles_.tile())));
 }
 
 const SampleBuffer& FrameAccumulator::band(int y0) const {
   if (!spill_) return frame_;
-  const int h = std::min(tiles_.tile(), frame_.rect.h - y0);
+  const int h = std::min(band_height(), frame_.rect.h - y0);
   const Rect rows{0, y0, frame_.rect.w, h};
   if (!(band_.rect == rows) || band_.count.size() != size_t(rows.area())) {
     band_ = SampleBuffer(base_, rows, false);
@@ -454,13 +494,14 @@ const SampleBuffer& FrameAccumulator::band(int y0) const {
   band_.light_paths = frame_.light_paths;
   band_.nonfinite_samples = frame_.nonfinite_samples;
   band_.rays = frame_.rays;
-  if (merged_ > 0) {
-    const size_t row = size_t(y0 / tiles_.tile());
-    for (size_t c = 0; c < tiles_.columns(); ++c) {
-      const SampleBuffer& tile =
-          spill_->tile(row * tiles_.columns() + c, true, frame_.header.passes);
-      copy_pixels(tile, band_, tile.rect);
-    }
+  if (merged_ > 0) {  // the rows of each tile the band crosses
+    const int t = tiles_.tile(), y1 = y0 + h;
+    for (size_t row = size_t(y0 / t); row <= size_t((y1 - 1) / t); ++row)
+      for (size_t c = 0; c < tiles_.columns(); ++c) {
+        const size_t i = row * tiles_.columns() + c;
+        const Rect tr = tiles_[i];
+        spill_->read_rows(i, std::max(y0, tr.y0), std::min(y1, tr.y1()), band_);
+      }
   }
   return band_;
 }

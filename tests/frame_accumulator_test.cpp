@@ -210,7 +210,7 @@ TEST(FrameAccumulator, EncodedAndOwnedTasksInAnyOrderGiveThePassOrderFrame) {
 // written as .rfb band by band, the same bytes. Its memory stays within the budget plus a tile.
 TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
   const int W = 37, H = 21;
-  const TileGrid grid(W, H, 8);  // 5 x 3 tiles, the last column and row clipped
+  const TileGrid grid(W, H, 5);  // 8 x 5 tiles, the last column and row clipped
   AovSet aovs;
   aovs.albedo = aovs.depth = true;
   BufferHeader base = test::test_header({}, W, H);
@@ -229,7 +229,10 @@ TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
   std::mt19937 rng(5);
   std::shuffle(order.begin(), order.end(), rng);
 
-  const uint64_t tile_bytes = 64 * FrameAccumulator::bytes_per_pixel(aovs);
+  const uint64_t tile_bytes = 25 * FrameAccumulator::bytes_per_pixel(aovs);
+  // Budgets of 6 tiles (bands of 1 row) and 24 (bands of 2 rows, crossing the tiles' rows); the
+  // frame needs 31 tiles' worth.
+  uint64_t budget = 0;
   const std::string dir = ::testing::TempDir();
   auto feed_all = [&](FrameAccumulator& acc, uint32_t from) {
     for (size_t i = 0; i < order.size(); ++i) {
@@ -249,7 +252,7 @@ TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
     out.rays = acc.info().rays;
     for (int y0 = 0; y0 < H; y0 += acc.band_height()) {
       const SampleBuffer& band = acc.band(y0);
-      EXPECT_EQ(band.rect, (Rect{0, y0, W, std::min(8, H - y0)}));
+      EXPECT_EQ(band.rect, (Rect{0, y0, W, std::min(acc.band_height(), H - y0)}));
       for (int y = band.rect.y0; y < band.rect.y1(); ++y)
         for (int x = 0; x < W; ++x) {
           size_t s = band.pixel_index(x, y), d = out.pixel_index(x, y);
@@ -284,14 +287,17 @@ TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
     // Within the budget: half for tiles (plus the one being read), half for waiting results;
     // the rest of the waiting results were parked on disk.
     FrameAccumulator::SpillUse use = tiled.spill_use();
-    EXPECT_LE(use.peak_tile_bytes, 3 * tile_bytes + tile_bytes);
-    EXPECT_GE(use.peak_tile_bytes, 3 * tile_bytes) << "the cache is used";
-    EXPECT_LE(use.peak_waiting_bytes, 3 * tile_bytes);
+    EXPECT_LE(use.peak_tile_bytes, budget / 2 + tile_bytes);
+    EXPECT_GE(use.peak_tile_bytes, budget / 2) << "the cache is used";
+    EXPECT_LE(use.peak_waiting_bytes, budget / 2);
+    EXPECT_EQ(tiled.band_height(), budget == 6 * tile_bytes ? 1 : 2);
     EXPECT_GT(use.parked_results, 0u);
   };
 
-  for (double target : {0.0, -1.0}) {
+  for (double target : {0.0, -1.0, 0.5}) {
     SCOPED_TRACE(target == 0 ? "all passes" : "stopped on a noise target");
+    budget = (target == 0.5 ? 24 : 6) * tile_bytes;
+    if (target > 0) target = 0;
     ProgressiveOptions whole_opt;
     whole_opt.pass_count = 8;
     FrameAccumulator probe(base, grid, false, whole_opt);
@@ -302,7 +308,7 @@ TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
       whole_opt.noise_target = *std::min_element(probe.rel_mse_history().begin() + 3,
                                                  probe.rel_mse_history().begin() + 6);
     ProgressiveOptions tiled_opt = whole_opt;
-    tiled_opt.memory_budget = 6 * tile_bytes;  // the frame needs 15 tiles' worth
+    tiled_opt.memory_budget = budget;
     tiled_opt.spill_dir = dir;
     FrameAccumulator whole(base, grid, false, whole_opt), tiled(base, grid, false, tiled_opt);
     feed_all(whole, 0);
