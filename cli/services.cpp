@@ -84,6 +84,13 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
       ->default_str("7d");
   coord
       ->add_option_function<std::string>(
+          "--frame-memory",
+          [co](const std::string& v) { co->frame_memory = byte_size_option("--frame-memory", v); },
+          "bytes of a frame's merged prefix and waiting results held in memory; a larger frame "
+          "is kept in tiles in unlinked files in its checkpoint folder (0: every frame whole)")
+      ->default_str("1G");
+  coord
+      ->add_option_function<std::string>(
           "--blob-grace",
           [co](const std::string& v) {
             co->blob_grace_seconds = duration_option("--blob-grace", v, false);

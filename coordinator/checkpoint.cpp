@@ -142,9 +142,9 @@ void FrameCheckpoint::save_task(uint32_t pass, uint32_t tile, std::string_view e
   }
 }
 
-void FrameCheckpoint::save_prefix(const SampleBuffer& frame) const {
+void FrameCheckpoint::save_prefix(const FrameBands& frame) const {
   write_buffer_file(dir_ + "/prefix.rfb", frame);
-  uint32_t k = frame.header.passes.count();
+  uint32_t k = frame.info().header.passes.count();
   for (const auto& e : fs::directory_iterator(dir_)) {  // task files of builds before the log
     unsigned pass = 0, tile = 0;
     char tail[8] = {};
@@ -185,7 +185,7 @@ void FrameCheckpoint::save_prefix(const SampleBuffer& frame) const {
   if (d.fd >= 0) ::fsync(d.fd);
 }
 
-FrameCheckpoint::Loaded FrameCheckpoint::load() const {
+FrameCheckpoint::Loaded FrameCheckpoint::load(uint64_t band_bytes) const {
   Loaded out;
   auto set_aside = [&](const fs::path& p, const std::string& why) {
     out.problems.push_back(p.string() + ": " + why);
@@ -201,18 +201,17 @@ FrameCheckpoint::Loaded FrameCheckpoint::load() const {
                    std::string(tail) == ".rfb";
     if (!is_prefix && !is_task) continue;  // temporaries of an interrupted write, set-aside files
     try {
-      SampleBuffer b = read_buffer_file(e.path().string());
       if (is_prefix)
-        out.prefix = std::move(b);
+        out.prefix = std::make_unique<BufferFileBands>(e.path().string(), band_bytes);
       else
-        out.tasks.push_back({pass, tile, std::move(b)});
+        out.tasks.push_back({pass, tile, read_buffer_file(e.path().string())});
     } catch (const std::exception& ex) {
       set_aside(e.path(), ex.what());
     }
   }
   // The log's records of passes not in the prefix; the first of a task's results counts (a
   // later one is another worker's result of the same task, written while the first was flushed).
-  const uint32_t k = out.prefix ? out.prefix->header.passes.count() : 0;
+  const uint32_t k = out.prefix ? out.prefix->info().header.passes.count() : 0;
   std::set<std::pair<uint32_t, uint32_t>> have;
   for (const TaskResult& t : out.tasks) have.insert({t.pass, t.tile});
   uint64_t end = 0, size = 0;

@@ -18,11 +18,13 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "engine/buffer_file.h"
 #include "engine/sample_buffer.h"
 
 namespace rf {
@@ -39,18 +41,19 @@ class FrameCheckpoint {
   // Writes the prefix (passes [0, k)), then drops the results of passes < k: the log is emptied
   // when none of its records is of a later pass, rewritten with those only (flushed) when they
   // are less than half of it; task files of passes < k are removed.
-  void save_prefix(const SampleBuffer& frame) const;
+  void save_prefix(const FrameBands& frame) const;  // written a band at a time
+  void save_prefix(const SampleBuffer& frame) const { save_prefix(WholeFrame(frame)); }
 
   struct TaskResult {
     uint32_t pass, tile;
     SampleBuffer buffer;
   };
   struct Loaded {
-    std::optional<SampleBuffer> prefix;
+    std::unique_ptr<BufferFileBands> prefix;  // prefix.rfb, checked, read a band at a time
     std::vector<TaskResult> tasks;      // in (pass, tile) order
     std::vector<std::string> problems;  // files set aside, and why
   };
-  Loaded load() const;
+  Loaded load(uint64_t band_bytes = uint64_t(64) << 20) const;
 
   const std::string& dir() const { return dir_; }
 

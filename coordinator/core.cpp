@@ -239,9 +239,9 @@ FrameImage Coordinator::fetch(const std::string& job_id, FrameNumber frame,
     image.status = frame_status(*job, *f);
   }
   std::lock_guard frame_lock(f->m);
-  if (f->acc && f->acc->passes_merged() > 0) {
+  if (f->acc && f->acc->passes_merged() > 0 && !f->acc->tiled()) {
     image.buffer = encode_buffer(f->acc->frame());
-  } else {
+  } else {  // its checkpoint (a frame kept in tiles saves its prefix at every pass merged)
     std::string path = f->checkpoint->dir() + "/prefix.rfb";
     if (!fs::exists(path))
       refuse(ErrorCode::FailedPrecondition, "frame " + std::to_string(f->number) + " of job " +

@@ -250,6 +250,10 @@ struct CoreOptions {
   // for ever), and a blob no job references this long after it was last stored or asked for.
   double keep_finished_seconds = 7 * 86400.0;
   double blob_grace_seconds = 3600;
+  // Bytes a frame's accumulator holds in memory (its merged prefix and the results waiting for
+  // their pass); a larger frame is kept in tiles in unlinked files in its checkpoint folder
+  // (ProgressiveOptions::memory_budget; 0: every frame whole).
+  uint64_t frame_memory = uint64_t(1) << 30;
   // The job store (job_store.h); empty: SQLite at STATE/jobs.sqlite. The core's tests and the
   // fuzzer give a memory store, kept across their restarts.
   std::shared_ptr<JobStore> store;
@@ -467,6 +471,10 @@ class Coordinator {
     std::vector<TaskRef> done;
   };
   LoadedFrame load_frame(const JobRecord& job, FrameRecord& f) const;
+  // A frame's accumulator: the job's merge options, held whole up to options_.frame_memory, else
+  // in tiles in the frame's checkpoint folder.
+  std::unique_ptr<FrameAccumulator> make_accumulator(const JobRecord& job,
+                                                     const FrameRecord& f) const;
   // The loaded state made the frame's: the scheduler learns its done tasks, its figures are
   // published. Under mu_ (and the frame's lock, or no merge can reach it).
   void adopt_frame(JobRecord& job, FrameRecord& f, LoadedFrame loaded);

@@ -174,6 +174,24 @@ void Coordinator::recover_folders() {
   }
 }
 
+std::unique_ptr<FrameAccumulator> Coordinator::make_accumulator(const JobRecord& job,
+                                                                const FrameRecord& f) const {
+  ProgressiveOptions options = job.merge_options();
+  options.memory_budget = options_.frame_memory;
+  options.spill_dir = f.checkpoint->dir();
+  auto acc = std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, options);
+  if (acc->tiled())
+    spdlog::info(
+        "job {} frame {}: {}x{} kept in tiles on disk ({:.1f} MiB of planes; "
+        "--frame-memory {:.1f} MiB)",
+        job.id, f.number, f.base.width, f.base.height,
+        double(uint64_t(f.base.width) * uint64_t(f.base.height) *
+               FrameAccumulator::bytes_per_pixel(f.base.aovs)) /
+            double(1 << 20),
+        double(options_.frame_memory) / double(1 << 20));
+  return acc;
+}
+
 // Rebuilds a frame's accumulator from its checkpoint.
 Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameRecord& f) const {
   LoadedFrame out;
@@ -181,15 +199,15 @@ Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameReco
   for (const std::string& p : loaded.problems)
     spdlog::warn("job {} frame {}: {} (its tasks will be rendered again)", job.id, f.number, p);
   if (!loaded.prefix && loaded.tasks.empty()) return out;
-  out.acc = std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+  out.acc = make_accumulator(job, f);
   if (loaded.prefix) {
     try {
-      out.acc->resume_from(std::move(*loaded.prefix));
+      out.acc->resume_from(*loaded.prefix);
     } catch (const std::exception& e) {
       spdlog::warn("job {} frame {}: checkpoint not used: {}", job.id, f.number, e.what());
-      out.acc =
-          std::make_unique<FrameAccumulator>(f.base, job.tiles, job.splats, job.merge_options());
+      out.acc = make_accumulator(job, f);
     }
+    loaded.prefix.reset();  // closed before it is rewritten
   }
   for (FrameCheckpoint::TaskResult& t : loaded.tasks) {
     if (t.tile >= job.tiles.size()) continue;
@@ -201,7 +219,7 @@ Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameReco
                    e.what());
     }
   }
-  if (out.acc->passes_merged() > 0) f.checkpoint->save_prefix(out.acc->frame());
+  if (out.acc->passes_merged() > 0) f.checkpoint->save_prefix(*out.acc);
   return out;
 }
 
@@ -268,7 +286,7 @@ void Coordinator::restore(const StoredJob& stored) {
       bool one = true;
       for (auto& f : job->frames) {
         if (!f->acc || f->acc->passes_merged() == 0) continue;
-        const std::string& k = f->acc->frame().header.isa;
+        const std::string& k = f->acc->info().header.isa;
         if (k.empty() || k.rfind("mixed:", 0) == 0 || (!kind.empty() && k != kind)) one = false;
         kind = k;
       }

@@ -332,8 +332,7 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
       // Merged and checkpointed already, or its job ended meanwhile.
       if (f->progress.done || ledger_->scheduler().settled(r.task)) return false;
     }
-    f->acc =
-        std::make_unique<FrameAccumulator>(f->base, job->tiles, job->splats, job->merge_options());
+    f->acc = make_accumulator(*job, *f);
   }
   if (!f->acc->task_needed(buffer.rect(), r.task.pass)) {  // merged already, or beyond the stop
     std::lock_guard lock(mu_);
@@ -400,7 +399,7 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
   bool merged = f->acc && f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
   if (merged) {
     try {  // the task files stay until a prefix holding them is durable
-      f->checkpoint->save_prefix(f->acc->frame());
+      f->checkpoint->save_prefix(*f->acc);
     } catch (const std::exception& e) {
       std::lock_guard lock(mu_);
       storage_failed(e.what());

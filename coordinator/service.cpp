@@ -708,6 +708,7 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   core.limits = o.limits;
   core.verify_fraction = o.verify_fraction;
   core.keep_finished_seconds = o.keep_finished_seconds;
+  core.frame_memory = o.frame_memory;
   core.blob_grace_seconds = o.blob_grace_seconds;
   core.scene_checker = child_scene_checker(o.scene_check_binary, o.limits.scene_check);
   impl_->core = std::make_unique<Coordinator>(core);

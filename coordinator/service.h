@@ -35,6 +35,7 @@ struct CoordinatorOptions {
   uint64_t max_buffer_bytes = 4ull << 30;  // one task's sample buffer
   // Retention (CoreOptions): --keep-finished (<= 0: for ever) and --blob-grace, in seconds.
   double keep_finished_seconds = 7 * 86400.0;
+  uint64_t frame_memory = uint64_t(1) << 30;  // CoreOptions::frame_memory
   double blob_grace_seconds = 3600;
   // The binary whose `check-scenes` command parses submitted scenes in child processes
   // (scene_check.h): this one.

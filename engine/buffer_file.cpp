@@ -33,7 +33,9 @@
 // agree, so a truncated or lying file costs an exception, never an out-of-bounds read.
 #include "engine/buffer_file.h"
 
+#include <fcntl.h>
 #include <malloc.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -240,12 +242,13 @@ Rect read_rect(const HeaderReader& r, const BufferHeader& h) {
   return rect;
 }
 
-// Checks everything before the JSON header is parsed; returns the header length and sets the
+// Checks the preamble of a buffer of n bytes whose first bytes are `head` (at least 16 of them
+// when n allows): magic, size, version, header length. Returns the header length and sets the
 // format version.
-size_t check_preamble(std::string_view bytes, const std::string& what, uint32_t& version) {
+size_t check_preamble(std::string_view head, uint64_t n, const std::string& what,
+                      uint32_t& version) {
   auto fail = [&](const std::string& why) { return BufferFileError(what + ": " + why); };
-  size_t n = bytes.size();
-  if (std::memcmp(bytes.data(), kMagic, std::min<size_t>(n, 8)) != 0) {
+  if (std::memcmp(head.data(), kMagic, size_t(std::min<uint64_t>(n, 8))) != 0) {
     throw fail("not a rayfarm sample buffer (bad magic)");
   }
   auto truncated = [&](size_t smallest) {
@@ -253,24 +256,23 @@ size_t check_preamble(std::string_view bytes, const std::string& what, uint32_t&
                 std::to_string(smallest) + ")");
   };
   if (n < kPreambleBytes + kChecksumBytes) throw truncated(kPreambleBytes + kChecksumBytes);
-  version = get_u32(bytes, 8);
+  version = get_u32(head, 8);
   if (version < kOldestReadableVersion || version > kFormatVersion) {
     throw fail("unsupported format version " + std::to_string(version) + " (this build reads " +
                std::to_string(kOldestReadableVersion) + " to " + std::to_string(kFormatVersion) + ")");
   }
   const size_t sum_bytes = checksum_bytes(version);
   if (n < kPreambleBytes + sum_bytes) throw truncated(kPreambleBytes + sum_bytes);
-  size_t header_len = get_u32(bytes, 12);
+  size_t header_len = get_u32(head, 12);
   if (header_len > n - kPreambleBytes - sum_bytes) {
     throw fail("header length " + std::to_string(header_len) +
                " runs past the end of the file (file is corrupt or truncated)");
   }
-  std::string_view body = bytes.substr(0, n - sum_bytes);
-  std::string expected = version >= 3 ? xxh3_raw(body) : sha256_raw(body);
-  if (expected != bytes.substr(n - sum_bytes)) {
-    throw fail("checksum mismatch (file is corrupt or truncated)");
-  }
   return header_len;
+}
+
+[[noreturn]] void checksum_mismatch(const std::string& what) {
+  throw BufferFileError(what + ": checksum mismatch (file is corrupt or truncated)");
 }
 
 // What decoding learns before reading the planes: everything checked, sizes matched.
@@ -282,11 +284,11 @@ struct Parsed {
   size_t planes_at = 0;
 };
 
-Parsed parse(std::string_view bytes, const std::string& what) {
-  uint32_t version = 0;
-  size_t header_len = check_preamble(bytes, what, version);
-  json j = json::parse(bytes.begin() + kPreambleBytes,
-                       bytes.begin() + std::ptrdiff_t(kPreambleBytes + header_len), nullptr,
+// The JSON header of a buffer of n bytes, checked against the sizes.
+Parsed parse_header(std::string_view header_bytes, uint32_t version, uint64_t n,
+                    const std::string& what) {
+  const size_t header_len = header_bytes.size();
+  json j = json::parse(header_bytes.begin(), header_bytes.end(), nullptr,
                        /*allow_exceptions=*/false);
   if (!j.is_object()) throw BufferFileError(what + ": header is not a JSON object");
   HeaderReader r{j, what};
@@ -299,7 +301,7 @@ Parsed parse(std::string_view bytes, const std::string& what) {
   // Sizes are bounded by kMaxDimension, so these products cannot overflow.
   uint64_t expected = 8 * ((13 + uint64_t(h.aovs.channels())) * uint64_t(p.rect.area()) +
                            (p.has_splats ? 3 * uint64_t(h.width) * uint64_t(h.height) : 0));
-  uint64_t actual = bytes.size() - kPreambleBytes - header_len - checksum_bytes(version);
+  uint64_t actual = n - kPreambleBytes - header_len - checksum_bytes(version);
   if (expected != actual) {
     throw BufferFileError(what + ": header describes " + std::to_string(expected) +
                           " bytes of planes (rect " + to_string(p.rect) +
@@ -312,6 +314,16 @@ Parsed parse(std::string_view bytes, const std::string& what) {
   p.rays = r.uint("rays");
   p.planes_at = kPreambleBytes + header_len;
   return p;
+}
+
+Parsed parse(std::string_view bytes, const std::string& what) {
+  uint32_t version = 0;
+  size_t header_len = check_preamble(bytes, bytes.size(), what, version);
+  const size_t sum_bytes = checksum_bytes(version);
+  std::string_view body = bytes.substr(0, bytes.size() - sum_bytes);
+  std::string expected = version >= 3 ? xxh3_raw(body) : sha256_raw(body);
+  if (expected != bytes.substr(bytes.size() - sum_bytes)) checksum_mismatch(what);
+  return parse_header(bytes.substr(kPreambleBytes, header_len), version, bytes.size(), what);
 }
 
 }  // namespace
@@ -465,6 +477,149 @@ void write_buffer_file(const std::string& path, const FrameBands& frame) {
     if (dynamic_cast<const BufferFileError*>(&e)) throw;
     throw BufferFileError(e.what());  // already names the path
   }
+}
+
+namespace {
+
+void pread_all(int fd, void* p, size_t n, uint64_t at, const std::string& path) {
+  char* c = static_cast<char*>(p);
+  while (n > 0) {
+    ssize_t r = ::pread(fd, c, n, off_t(at));
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0)
+      throw BufferFileError(
+          path + ": cannot read: " +
+          (r == 0 ? std::string("file shrank while read") : std::strerror(errno)));
+    c += r, n -= size_t(r), at += uint64_t(r);
+  }
+}
+
+}  // namespace
+
+BufferFileBands::BufferFileBands(const std::string& path, uint64_t band_bytes) : path_(path) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) throw BufferFileError(path + ": cannot open: " + std::strerror(errno));
+  try {
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode))
+      throw BufferFileError(path + ": not a regular file");
+    const uint64_t n = uint64_t(st.st_size);
+    std::string head(size_t(std::min<uint64_t>(n, kPreambleBytes)), '\0');
+    pread_all(fd_, head.data(), head.size(), 0, path);
+    uint32_t version = 0;
+    const size_t header_len = check_preamble(head, n, path, version);
+    const size_t sum_bytes = checksum_bytes(version);
+    std::string header(header_len, '\0');
+    pread_all(fd_, header.data(), header_len, kPreambleBytes, path);
+    // The checksum over everything before it (and the count plane summed on the way), before
+    // the header is believed.
+    const uint64_t body = n - sum_bytes;
+    const uint64_t count_at = kPreambleBytes + header_len;
+    std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(),
+                                                                   XXH3_freeState);
+    if (!state) throw std::bad_alloc();
+    XXH3_128bits_reset(state.get());
+    std::string piece(size_t(8) << 20, '\0');
+    std::string sha_body;    // versions 1 and 2: SHA-256 of the whole body (old, small files)
+    uint64_t count_end = 0;  // set once the header is parsed; the sum is taken after
+    for (uint64_t at = 0; at < body;) {
+      size_t len = size_t(std::min<uint64_t>(piece.size(), body - at));
+      pread_all(fd_, piece.data(), len, at, path);
+      if (version >= 3)
+        XXH3_128bits_update(state.get(), piece.data(), len);
+      else
+        sha_body.append(piece, 0, len);
+      at += len;
+    }
+    std::string stored(sum_bytes, '\0');
+    pread_all(fd_, stored.data(), sum_bytes, body, path);
+    std::string expected;
+    if (version >= 3) {
+      XXH128_canonical_t c;
+      XXH128_canonicalFromHash(&c, XXH3_128bits_digest(state.get()));
+      expected.assign(reinterpret_cast<const char*>(c.digest), sizeof c.digest);
+    } else {
+      expected = sha256_raw(sha_body);
+    }
+    if (expected != stored) checksum_mismatch(path);
+    Parsed p = parse_header(header, version, n, path);
+    planes_at_ = p.planes_at;
+    const uint64_t area = uint64_t(p.rect.area());
+    count_end = count_at + 8 * area;
+    if (p.has_splats) {  // the splat plane is the whole frame's: read whole
+      info_ = read_buffer_file(path);
+      band_height_ = std::max(info_.rect.h, 1);
+      total_samples_ = info_.total_samples();
+      band_ = info_;
+    } else {
+      info_.header = std::move(p.header);
+      info_.rect = p.rect;
+      info_.light_paths = p.light_paths;
+      info_.nonfinite_samples = p.nonfinite_samples;
+      info_.rays = p.rays;
+      const uint64_t row = uint64_t(p.rect.w) * 8 * (13 + uint64_t(info_.header.aovs.channels()));
+      band_height_ = int(std::clamp<uint64_t>(band_bytes / std::max<uint64_t>(row, 1), 1,
+                                              uint64_t(std::max(p.rect.h, 1))));
+      // Samples: the count plane, read again in pieces (it is the first plane).
+      for (uint64_t at = count_at; at < count_end;) {
+        size_t len = size_t(std::min<uint64_t>(piece.size(), count_end - at));
+        pread_all(fd_, piece.data(), len, at, path);
+        for (size_t i = 0; i + 8 <= len; i += 8) {
+          uint64_t v;
+          std::memcpy(&v, piece.data() + i, 8);
+          total_samples_ += v;
+        }
+        at += len;
+      }
+    }
+  } catch (...) {
+    ::close(fd_);
+    throw;
+  }
+}
+
+BufferFileBands::~BufferFileBands() { ::close(fd_); }
+
+const SampleBuffer& BufferFileBands::band(int y0) const {
+  if (!info_.splat.empty() || band_height_ >= info_.rect.h) {
+    if (band_.count.empty() && info_.rect.area() > 0) band_ = read_buffer_file(path_);
+    return band_;
+  }
+  const Rect& r = info_.rect;
+  const int h = std::min(band_height_, r.y1() - y0);
+  const Rect rows{r.x0, y0, r.w, h};
+  if (!(band_.rect == rows)) band_ = SampleBuffer(info_.header, rows, false);
+  band_.header = info_.header;
+  band_.light_paths = info_.light_paths;
+  band_.nonfinite_samples = info_.nonfinite_samples;
+  band_.rays = info_.rays;
+  const uint64_t area = uint64_t(r.area()), first = uint64_t(y0 - r.y0) * uint64_t(r.w);
+  const uint64_t n = uint64_t(rows.area());
+  uint64_t plane_at = planes_at_;
+  auto plane = [&](void* dst, uint64_t k) {  // k values per pixel
+    pread_all(fd_, dst, size_t(8 * k * n), plane_at + 8 * k * first, path_);
+    plane_at += 8 * k * area;
+  };
+  plane(band_.count.data(), 1);
+  plane(band_.sum.data(), 3);
+  plane(band_.sum_sq.data(), 3);
+  plane(band_.batch_sum.data(), 3);
+  plane(band_.batch_sum_sq.data(), 3);
+  if (!band_.aov.empty()) plane(band_.aov.data(), uint64_t(info_.header.aovs.channels()));
+  return band_;
+}
+
+double BufferFileBands::rel_mse() const {
+  if (!rel_mse_) {
+    const Rect& r = info_.rect;
+    double total = 0;
+    for (int y0 = r.y0; y0 < r.y1(); y0 += band_height_) {
+      const SampleBuffer& b = band(y0);
+      total = rel_mse_sum(b, b.rect, total);
+    }
+    rel_mse_ = r.area() > 0 ? total / (3.0 * double(r.area())) : 0.0;
+  }
+  return *rel_mse_;
 }
 
 SampleBuffer read_buffer_file(const std::string& path) {

@@ -2,6 +2,7 @@
 // coordinator checkpoints, and task results on the wire (docs/sample-buffer-format.md).
 #pragma once
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -25,6 +26,35 @@ void write_buffer_file(const std::string& path, const FrameBands& frame);
 // The same encoding in memory (for the wire and for checkpoints).
 std::string encode_buffer(const SampleBuffer& buf);
 SampleBuffer decode_buffer(const std::string& bytes, const std::string& what_for_errors);
+
+// An .rfb file read a band of rows at a time (FrameBands), so that a frame larger than memory is
+// written out (EXR, PNG) or cut into tiles without being whole in memory. Opening checks the file
+// as read_buffer_file does, the checksum over the file read in 8 MiB pieces; bands are rows of
+// at most band_bytes (at least one row). A buffer with a splat plane (the whole frame's) is read
+// whole, as one band. Throws BufferFileError naming the path.
+class BufferFileBands final : public FrameBands {
+ public:
+  BufferFileBands(const std::string& path, uint64_t band_bytes);
+  ~BufferFileBands() override;
+  BufferFileBands(const BufferFileBands&) = delete;
+  BufferFileBands& operator=(const BufferFileBands&) = delete;
+
+  const SampleBuffer& info() const override { return info_; }
+  int band_height() const override { return band_height_; }
+  const SampleBuffer& band(int y0) const override;
+  uint64_t total_samples() const override { return total_samples_; }
+  double rel_mse() const override;  // the first call reads every band
+
+ private:
+  std::string path_;
+  int fd_ = -1;
+  SampleBuffer info_;
+  uint64_t planes_at_ = 0;
+  int band_height_ = 1;
+  uint64_t total_samples_ = 0;
+  mutable SampleBuffer band_;
+  mutable std::optional<double> rel_mse_;
+};
 
 // A decoded buffer whose planes stay in its encoded bytes: decoding checks everything
 // decode_buffer checks and copies nothing, so the coordinator checks, stores and merges a

@@ -373,36 +373,83 @@ void FrameAccumulator::decide_after(uint32_t merged) {
 }
 
 void FrameAccumulator::resume_from(SampleBuffer prefix) {
-  if (merged_ != 0 || !pending_.empty())
-    throw MergeError("resume_from needs a fresh accumulator");
-  if (std::string why = merge_incompatibility(base_, prefix.header); !why.empty())
-    throw MergeError("checkpoint is of another image: " + why);
-  uint32_t k = prefix.header.passes.count();
-  if (!(prefix.header.passes == PassSet::range(options_.first_pass, options_.first_pass + k)) ||
-      k > options_.pass_count)
-    throw MergeError("checkpoint holds passes " + prefix.header.passes.to_string() +
-                     ", not a prefix of this frame's passes");
-  if (!(prefix.rect == frame_.rect) || prefix.splat.empty() == splats_ ||
-      !prefix.planes_match_rect() ||
+  if (!prefix.planes_match_rect() || prefix.splat.empty() == splats_ ||
       prefix.aov.size() != size_t(prefix.rect.area()) * size_t(base_.aovs.channels()))
     throw MergeError("checkpoint has another frame size or planes");
-  samples_ = prefix.total_samples();
-  if (spill_) {  // cut into the tiles
-    for (size_t t = 0; t < tiles_.size(); ++t) {
-      SampleBuffer& tile = spill_->tile(t, false, prefix.header.passes);
-      copy_pixels(prefix, tile, tile.rect);
-      spill_->mark_dirty(t);
-    }
-    frame_.header = prefix.header;
-    frame_.light_paths = prefix.light_paths;
-    frame_.nonfinite_samples = prefix.nonfinite_samples;
-    frame_.rays = prefix.rays;
-  } else {
+  if (!spill_) {
+    check_prefix(prefix);
     frame_ = std::move(prefix);
+    samples_ = frame_.total_samples();
+    resumed();
+    return;
   }
-  merged_ = k;
+  resume_from(WholeFrame(prefix));
+}
+
+void FrameAccumulator::resume_from(const FrameBands& bands) {
+  const SampleBuffer& info = bands.info();
+  check_prefix(info);
+  if (!spill_) {  // assembled whole
+    SampleBuffer whole(info.header, info.rect, splats_);
+    whole.light_paths = info.light_paths;
+    whole.nonfinite_samples = info.nonfinite_samples;
+    whole.rays = info.rays;
+    for (int y0 = info.rect.y0; y0 < info.rect.y1(); y0 += bands.band_height()) {
+      const SampleBuffer& band = bands.band(y0);
+      if (!band.planes_match_rect() || band.splat.size() != whole.splat.size() ||
+          band.aov.size() != size_t(band.rect.area()) * size_t(base_.aovs.channels()))
+        throw MergeError("checkpoint has another frame size or planes");
+      copy_pixels(band, whole, band.rect);
+      if (!whole.splat.empty()) whole.splat = band.splat;
+    }
+    frame_ = std::move(whole);
+    samples_ = frame_.total_samples();
+  } else {  // cut into the tiles: a tile row's tiles begin with the band holding its first row
+    const int t = tiles_.tile();
+    for (int y0 = info.rect.y0; y0 < info.rect.y1(); y0 += bands.band_height()) {
+      const SampleBuffer& band = bands.band(y0);
+      if (!band.planes_match_rect() || band.rect.x0 != 0 || band.rect.w != info.rect.w ||
+          band.aov.size() != size_t(band.rect.area()) * size_t(base_.aovs.channels()))
+        throw MergeError("checkpoint has another frame size or planes");
+      const int y1 = band.rect.y1();
+      for (size_t row = size_t(y0 / t); row <= size_t((y1 - 1) / t); ++row)
+        for (size_t c = 0; c < tiles_.columns(); ++c) {
+          const size_t i = row * tiles_.columns() + c;
+          const Rect tr = tiles_[i];
+          SampleBuffer& tile = spill_->tile(i, /*stored=*/tr.y0 < y0, info.header.passes);
+          copy_pixels(
+              band, tile,
+              Rect{tr.x0, std::max(y0, tr.y0), tr.w, std::min(y1, tr.y1()) - std::max(y0, tr.y0)});
+          spill_->mark_dirty(i);
+        }
+    }
+    frame_.header = info.header;
+    frame_.light_paths = info.light_paths;
+    frame_.nonfinite_samples = info.nonfinite_samples;
+    frame_.rays = info.rays;
+    samples_ = bands.total_samples();
+  }
+  resumed();
+}
+
+void FrameAccumulator::check_prefix(const SampleBuffer& info) const {
+  if (merged_ != 0 || !pending_.empty())
+    throw MergeError("resume_from needs a fresh accumulator");
+  if (std::string why = merge_incompatibility(base_, info.header); !why.empty())
+    throw MergeError("checkpoint is of another image: " + why);
+  uint32_t k = info.header.passes.count();
+  if (!(info.header.passes == PassSet::range(options_.first_pass, options_.first_pass + k)) ||
+      k > options_.pass_count)
+    throw MergeError("checkpoint holds passes " + info.header.passes.to_string() +
+                     ", not a prefix of this frame's passes");
+  if (!(info.rect == frame_.rect) || (info.light_paths > 0 && !splats_))
+    throw MergeError("checkpoint has another frame size or planes");
+}
+
+void FrameAccumulator::resumed() {
+  merged_ = frame_.header.passes.count();
   // Only the last value is known; it is the one that decides.
-  rel_mse_history_.assign(k, prefix_rel_mse());
+  rel_mse_history_.assign(merged_, prefix_rel_mse());
   const double area = double(frame_.rect.area());
   spp_ = area > 0 ? double(samples_ ? samples_ : frame_.light_paths) / area : 0.0;
   decide_after(merged_);

@@ -63,6 +63,9 @@ class FrameAccumulator final : public FrameBands {
   // first_pass + k)) into a fresh accumulator; the stop decision is taken again on it. Throws
   // MergeError if it does not belong to this frame or is not such a prefix.
   void resume_from(SampleBuffer prefix);
+  // The same from a prefix read a band at a time (a checkpoint file, BufferFileBands): a tiled
+  // accumulator never holds it whole.
+  void resume_from(const FrameBands& prefix);
 
   bool done() const { return done_; }
   bool stopped_on_target() const { return stopped_on_target_; }
@@ -104,6 +107,8 @@ class FrameAccumulator final : public FrameBands {
   double prefix_rel_mse() const;  // tile by tile
   void decide_after(uint32_t merged);
   void merge_pass_tiled(std::map<size_t, Task>& tiles, uint32_t pass, double* rel);
+  void check_prefix(const SampleBuffer& info) const;  // resume_from's checks
+  void resumed();                                     // after the prefix is in
 
   BufferHeader base_;
   TileGrid tiles_;

@@ -165,8 +165,7 @@ RGB SampleBuffer::estimate(int x, int y) const { return to_rgb(estimate_at(*this
 
 RGB SampleBuffer::variance_of_mean(int x, int y) const { return to_rgb(variance_at(*this, x, y)); }
 
-double rel_mse_sum(const SampleBuffer& b, const Rect& region) {
-  double total = 0.0;
+double rel_mse_sum(const SampleBuffer& b, const Rect& region, double total) {
   for (int y = region.y0; y < region.y1(); ++y) {
     for (int x = region.x0; x < region.x1(); ++x) {
       RGBd m = estimate_at(b, x, y), v = variance_at(b, x, y);

@@ -249,8 +249,9 @@ class WholeFrame final : public FrameBands {
 };
 
 // The sum over `region`'s pixels (inside b's rect) and RGB of relative_error(variance of the mean,
-// estimate): rel_mse() is this over the rect, divided by 3 x its area. Row-major over the region.
-double rel_mse_sum(const SampleBuffer& b, const Rect& region);
+// estimate): rel_mse() is this over the rect, divided by 3 x its area. Row-major over the region,
+// added onto `total` (so a frame read in bands sums in the order of the frame read whole).
+double rel_mse_sum(const SampleBuffer& b, const Rect& region, double total = 0.0);
 
 // Splats (DESIGN.md "Pixels, filters and splats"): light-path contributions that reach the
 // camera, recorded per chunk of paths and added to the splat plane in chunk order, so the sums do

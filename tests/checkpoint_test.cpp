@@ -59,7 +59,7 @@ TEST(FrameCheckpoint, PrefixAbsorbsTasksAndCorruptRecordsAreSkipped) {
   FrameCheckpoint::Loaded loaded = cp.load();
   EXPECT_TRUE(loaded.problems.empty());
   ASSERT_TRUE(loaded.prefix);
-  expect_bit_identical(*loaded.prefix, prefix);
+  expect_bit_identical(loaded.prefix->band(0), prefix);
   ASSERT_EQ(loaded.tasks.size(), 2u) << "the record of pass 0 is inside the prefix";
   EXPECT_EQ(loaded.tasks[0].pass, 1u);
   EXPECT_EQ(loaded.tasks[0].tile, 0u);

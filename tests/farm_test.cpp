@@ -248,6 +248,37 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
     expect_same_image(farm.fetched(job, f), farm.local(job_args, f));
 }
 
+// A frame larger than the coordinator's --frame-memory is kept in tiles in its checkpoint folder:
+// merged there, checkpointed from the tiles, restored into tiles after a SIGKILL, fetched from
+// its checkpoint, and equal to the local render.
+TEST(Farm, AFrameLargerThanTheCoordinatorsMemoryIsKeptInTilesAcrossAKill) {
+  Farm farm("farm-tiles", /*lease_seconds=*/3, "", {"--frame-memory", "1M"});
+  // 128x128: 1.6 MiB of planes. About 2 s of rendering: the kill lands mid-job.
+  const std::string job_args = kCornell + " --spp 256 --passes 32 --res 128x128";
+  std::string job = farm.submit(job_args + " --tile-size 32");
+  farm.worker();
+  farm.worker();
+  nlohmann::json s;
+  for (int i = 0; i < 3000; ++i) {
+    s = farm.status(job);
+    if (s["frames"][0]["passes_merged"].get<int>() >= 4) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 4);
+  ASSERT_NE(s["state"], "completed") << "the job ended before the kill; it needs to be longer";
+  // Mid-job, the fetch is the checkpointed prefix.
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/mid").exit_code, 0);
+  farm.restart_coordinator();
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  nlohmann::json done = farm.status(job);
+  EXPECT_EQ(done["frames"][0]["passes_merged"], 32);
+  EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 256.0);
+  ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
+  expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
+  const std::string log = farm.coordinator().log();
+  EXPECT_NE(log.find("128x128 kept in tiles on disk"), std::string::npos) << log;
+}
+
 // Every result acknowledged to a worker survives a SIGKILL of the coordinator: results are
 // acknowledged only once their record is flushed (a group commit covers the results that arrive
 // together). Three workers on tasks of a few milliseconds; the coordinator is killed while

@@ -333,6 +333,65 @@ TEST(FrameAccumulator, AFrameKeptInTilesOnDiskIsTheFrameHeldWhole) {
   feed_all(resumed, 3);
   ASSERT_TRUE(resumed.done());
   EXPECT_TRUE(same_samples(bands_of(resumed), whole.frame()));
+  // And from the checkpoint file read 3 rows at a time (bands crossing the tiles' rows), into
+  // tiles and whole.
+  write_buffer_file(dir + "/prefix.rfb", first.frame());
+  const uint64_t row = uint64_t(W) * FrameAccumulator::bytes_per_pixel(aovs);
+  for (uint64_t budget_now : {opt.memory_budget, uint64_t(0)}) {
+    BufferFileBands file(dir + "/prefix.rfb", 3 * row);
+    ASSERT_EQ(file.band_height(), 3);
+    EXPECT_EQ(file.total_samples(), first.frame().total_samples());
+    opt.memory_budget = budget_now;
+    FrameAccumulator from_file(base, grid, false, opt);
+    from_file.resume_from(file);
+    EXPECT_EQ(from_file.tiled(), budget_now > 0);
+    EXPECT_EQ(from_file.passes_merged(), 3u);
+    feed_all(from_file, 3);
+    ASSERT_TRUE(from_file.done());
+    EXPECT_TRUE(
+        same_samples(from_file.tiled() ? bands_of(from_file) : from_file.frame(), whole.frame()));
+  }
+}
+
+// An .rfb file read in bands is the file read whole: the rows, the samples, the relMSE (summed
+// in the same order), and the EXR written from it has the same pixels and noise figure.
+TEST(BufferFileBands, ReadsAFileABandAtATimeAsItReadsWhole) {
+  BufferHeader h = test::test_header(PassSet::range(0, 3), 37, 21);
+  SampleBuffer frame(h, Rect{0, 0, 37, 21}, false);
+  for (uint32_t p = 0; p < 3; ++p) {
+    SampleBuffer pass = test::random_pass(p, Rect{0, 0, 37, 21}, false, 77 + p, 37, 21);
+    pass.header.passes = PassSet{};
+    add_tile(frame, pass);
+  }
+  const std::string dir = ::testing::TempDir();
+  write_buffer_file(dir + "/f.rfb", frame);
+  for (uint64_t band_bytes : {uint64_t(1), uint64_t(4 * 37 * 104), uint64_t(1) << 30}) {
+    BufferFileBands file(dir + "/f.rfb", band_bytes);
+    EXPECT_EQ(file.band_height(), band_bytes == 1 ? 1 : band_bytes < 1000000 ? 4 : 21);
+    EXPECT_EQ(file.total_samples(), frame.total_samples());
+    EXPECT_EQ(file.rel_mse(), frame.rel_mse()) << "the same sum in the same order";
+    for (int y0 = 0; y0 < 21; y0 += file.band_height()) {
+      const SampleBuffer& b = file.band(y0);
+      for (int y = b.rect.y0; y < b.rect.y1(); ++y)
+        for (int x = 0; x < 37; ++x) {
+          ASSERT_EQ(b.count[b.pixel_index(x, y)], frame.count[frame.pixel_index(x, y)]);
+          for (int c = 0; c < 3; ++c)
+            ASSERT_EQ(b.batch_sum_sq[3 * b.pixel_index(x, y) + c],
+                      frame.batch_sum_sq[3 * frame.pixel_index(x, y) + c]);
+        }
+    }
+  }
+  // A damaged file is refused before a band is read.
+  std::string bytes = read_file_bytes(dir + "/f.rfb");
+  bytes[bytes.size() / 2] ^= 1;
+  write_file_atomic(dir + "/bad.rfb", bytes);
+  try {
+    BufferFileBands bad(dir + "/bad.rfb", 1 << 20);
+    ADD_FAILURE() << "a damaged file was opened";
+  } catch (const BufferFileError& e) {
+    EXPECT_NE(std::string(e.what()).find("checksum"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("bad.rfb"), std::string::npos) << e.what();
+  }
 }
 
 // A frame that fits the budget, one tile, or a splat plane is held whole.
