@@ -3,13 +3,16 @@
 // $RAYFARM_COORDINATOR, else 127.0.0.1:7070.
 #include "client/commands.h"
 
+#include <fcntl.h>
 #include <grpcpp/grpcpp.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <map>
@@ -511,10 +514,44 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     pb::FetchRequest req;
     req.set_job_id(job);
     req.set_frame(f.frame());
-    ChunkAssembler chunks(uint64_t(64) << 30);
+    char name[64];
+    std::snprintf(name, sizeof name, "%s.%04d", job.c_str(), f.frame());
+    const std::string exr = to_template ? expand_frame_pattern(out, f.frame(), true)
+                                        : (fs::path(out) / (std::string(name) + ".exr")).string();
+    const std::string png = fs::path(exr).replace_extension(".png").string();
+    if (fs::path parent = fs::path(exr).parent_path(); !parent.empty())
+      fs::create_directories(parent);
+    // The frame's .rfb goes to a hidden file beside the EXR as it arrives, then is read a band of
+    // rows at a time: a frame larger than memory is never whole here either.
+    const fs::path target(exr);
+    const std::string tmp = (target.parent_path() / ("." + target.filename().string() +
+                                                     ".rfb.tmp-" + std::to_string(::getpid())))
+                                .string();
+    struct Removed {
+      std::string path;
+      int fd = -1;
+      ~Removed() {
+        if (fd >= 0) ::close(fd);
+        ::unlink(path.c_str());
+      }
+    } spool{tmp};
+    auto sink = [&](std::string_view data, uint64_t offset) {
+      for (size_t done = 0; done < data.size();) {
+        ssize_t n =
+            ::pwrite(spool.fd, data.data() + done, data.size() - done, off_t(offset + done));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) throw FarmError(tmp + ": cannot write: " + std::strerror(errno), 1);
+        done += size_t(n);
+      }
+    };
+    // Digest::Optional: a frame kept in tiles comes without a SHA-256 (its .rfb checks itself).
+    ChunkAssembler chunks(uint64_t(1) << 40, ChunkAssembler::Digest::Optional, sink);
     std::string problem;
     grpc::Status fs = retry.run(600, [&](grpc::ClientContext& ctx) {
-      chunks = ChunkAssembler(uint64_t(64) << 30);
+      if (spool.fd >= 0) ::close(spool.fd);
+      spool.fd = ::open(tmp.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+      if (spool.fd < 0) throw FarmError(tmp + ": cannot create: " + std::strerror(errno), 1);
+      chunks = ChunkAssembler(uint64_t(1) << 40, ChunkAssembler::Digest::Optional, sink);
       problem.clear();
       auto reader = stub->FetchFrame(&ctx, req);
       pb::FetchResponse r;
@@ -527,19 +564,15 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     if (problem.empty() && chunks.finish() != ChunkAssembler::Status::Ok) problem = chunks.error();
     if (!problem.empty())
       throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
-    SampleBuffer frame = decode_buffer(chunks.take(), "frame " + std::to_string(f.frame()));
-    char name[64];
-    std::snprintf(name, sizeof name, "%s.%04d", job.c_str(), f.frame());
-    const std::string exr = to_template ? expand_frame_pattern(out, f.frame(), true)
-                                        : (fs::path(out) / (std::string(name) + ".exr")).string();
-    const std::string png = fs::path(exr).replace_extension(".png").string();
-    if (fs::path parent = fs::path(exr).parent_path(); !parent.empty())
-      fs::create_directories(parent);
+    BufferFileBands frame(tmp, uint64_t(64) << 20);
     write_exr(exr, frame, {{"job", job}});
     write_png(png, frame, exposure);
+    const SampleBuffer& info = frame.info();
+    const double pixels = double(info.rect.area());
+    const uint64_t samples = frame.total_samples() ? frame.total_samples() : info.light_paths;
     std::fprintf(stderr, "frame %d: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
-                 frame.header.passes.count(), samples_per_pixel(frame), frame.rel_mse(),
-                 exr.c_str());
+                 info.header.passes.count(), pixels > 0 ? double(samples) / pixels : 0.0,
+                 frame.rel_mse(), exr.c_str());
     ++written;
   }
   if (!wanted.empty() && written == 0)

@@ -6,7 +6,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 
 #include "engine/buffer_file.h"
@@ -246,9 +251,22 @@ FrameImage Coordinator::fetch(const std::string& job_id, FrameNumber frame,
     if (!fs::exists(path))
       refuse(ErrorCode::FailedPrecondition, "frame " + std::to_string(f->number) + " of job " +
                                                 job->id + " has no complete pass yet");
-    image.buffer = read_file_bytes(path);
+    auto file = std::make_shared<FrameImage::File>();
+    file->fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    struct stat st {};
+    if (file->fd < 0 || ::fstat(file->fd, &st) != 0)
+      refuse(ErrorCode::Unavailable, path + ": cannot read: " + std::strerror(errno));
+    file->size = uint64_t(st.st_size);
+    if (options_.frame_memory > 0 && file->size > options_.frame_memory)
+      image.file = std::move(file);
+    else
+      image.buffer = read_file_bytes(path);
   }
   return image;
+}
+
+FrameImage::File::~File() {
+  if (fd >= 0) ::close(fd);
 }
 
 std::string Coordinator::storage_problem() const {

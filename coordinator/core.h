@@ -84,9 +84,19 @@ struct JobStatus {
 
 // The current image of a frame: its merged prefix as an encoded sample buffer
 // (engine/buffer_file.h).
+// A frame's merged prefix as fetched: its encoded bytes, or for a checkpoint larger than
+// CoreOptions::frame_memory, its file opened (read by the caller in pieces, so a frame kept in
+// tiles is never whole in memory; the open file is the prefix of the moment, whatever is saved
+// after).
 struct FrameImage {
+  struct File {
+    int fd = -1;
+    uint64_t size = 0;
+    ~File();
+  };
   FrameStatus status;
   std::string buffer;
+  std::shared_ptr<const File> file;
 };
 
 struct WorkerInfo {

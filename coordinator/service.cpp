@@ -15,10 +15,13 @@
 #include <spdlog/spdlog.h>
 
 #include <sys/file.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <condition_variable>
+#include <cstring>
 #include <ctime>
 #include <mutex>
 #include <optional>
@@ -529,12 +532,38 @@ class JobServiceImpl final : public pb::JobService::Service {
                     grpc::ServerWriter<pb::FetchResponse>* w) override {
     return guarded(g_, ctx, Access::Client, "FetchFrame", [&](const Caller& caller) {
       FrameImage image = c_.fetch(r->job_id(), r->frame(), caller);
-      write_chunks(w, image.buffer, [&](pb::Chunk&& c, bool first) {
+      auto message = [&](pb::Chunk&& c, bool first) {
         pb::FetchResponse m;
         *m.mutable_chunk() = std::move(c);
         if (first) *m.mutable_status() = to_wire(image.status);
         return m;
-      });
+      };
+      if (!image.file) {
+        write_chunks(w, image.buffer, message);
+        return;
+      }
+      // A frame kept in tiles: its checkpoint read and sent a chunk at a time, without a
+      // SHA-256 (it would take a pass over the file first; the .rfb carries its own checksum,
+      // which the client checks).
+      for (uint64_t at = 0; at < image.file->size;) {  // an .rfb is never empty
+        pb::Chunk c;
+        const size_t n = size_t(std::min<uint64_t>(kChunkBytes, image.file->size - at));
+        std::string data(n, '\0');
+        for (size_t got = 0; got < n;) {
+          ssize_t r = ::pread(image.file->fd, data.data() + got, n - got, off_t(at + got));
+          if (r < 0 && errno == EINTR) continue;
+          if (r <= 0)
+            throw CoordinatorError(ErrorCode::Unavailable,
+                                   "cannot read the frame's checkpoint: " +
+                                       std::string(r == 0 ? "it shrank" : std::strerror(errno)));
+          got += size_t(r);
+        }
+        c.set_offset(at);
+        if (at == 0) c.set_total_size(image.file->size);
+        c.set_data(std::move(data));
+        if (!w->Write(message(std::move(c), at == 0))) return;
+        at += n;
+      }
     });
   }
 

@@ -23,6 +23,12 @@ void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::
   } while (offset < payload.size());
 }
 
+ChunkAssembler::ChunkAssembler(uint64_t max_bytes, Digest digest, Sink sink)
+    : max_bytes_(max_bytes), digest_(digest), sink_(std::move(sink)) {}
+ChunkAssembler::~ChunkAssembler() = default;
+ChunkAssembler::ChunkAssembler(ChunkAssembler&&) noexcept = default;
+ChunkAssembler& ChunkAssembler::operator=(ChunkAssembler&&) noexcept = default;
+
 ChunkAssembler::Status ChunkAssembler::add(const rayfarm::v1::Chunk& c) {
   if (!started_) {
     if (c.offset() != 0)
@@ -36,25 +42,34 @@ ChunkAssembler::Status ChunkAssembler::add(const rayfarm::v1::Chunk& c) {
     started_ = true;
     total_ = c.total_size();
     sha256_ = c.sha256();
-    data_.reserve(total_);
+    if (!sink_)
+      data_.reserve(total_);
+    else if (!sha256_.empty())
+      running_ = std::make_unique<Sha256>();
   }
-  if (c.offset() != data_.size())
+  if (c.offset() != received_)
     return fail(Status::InvalidArgument, "chunk at offset " + std::to_string(c.offset()) +
-                                             " where " + std::to_string(data_.size()) +
+                                             " where " + std::to_string(received_) +
                                              " was expected");
-  if (data_.size() + c.data().size() > total_)
+  if (received_ + c.data().size() > total_)
     return fail(Status::InvalidArgument,
                 "chunks run past the announced size of " + std::to_string(total_) + " bytes");
-  data_ += c.data();
+  if (sink_) {
+    sink_(c.data(), received_);
+    if (running_) running_->update(c.data());
+  } else {
+    data_ += c.data();
+  }
+  received_ += c.data().size();
   return Status::Ok;
 }
 
 ChunkAssembler::Status ChunkAssembler::finish() {
   if (!started_) return fail(Status::InvalidArgument, "no chunks");
-  if (data_.size() != total_)
-    return fail(Status::InvalidArgument, "payload ends at " + std::to_string(data_.size()) +
-                                             " of " + std::to_string(total_) + " bytes");
-  if (!sha256_.empty() && sha256_hex(data_) != sha256_)
+  if (received_ != total_)
+    return fail(Status::InvalidArgument, "payload ends at " + std::to_string(received_) + " of " +
+                                             std::to_string(total_) + " bytes");
+  if (!sha256_.empty() && (running_ ? running_->hex_digest() : sha256_hex(data_)) != sha256_)
     return fail(Status::DataLoss, "checksum mismatch");
   return Status::Ok;
 }

@@ -5,9 +5,11 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <string_view>
 
+#include "engine/digest.h"
 #include "proto/rayfarm.pb.h"
 
 namespace grpc {
@@ -39,6 +41,14 @@ class ChunkAssembler {
   enum class Digest { Required, Optional };
   explicit ChunkAssembler(uint64_t max_bytes, Digest digest = Digest::Required)
       : max_bytes_(max_bytes), digest_(digest) {}
+  // Chunks handed to `sink` (their bytes and offset) as they come instead of kept, so a payload
+  // larger than memory goes to a file; take() is then empty. A SHA-256 in the first chunk is
+  // computed as they pass. An exception from the sink passes on.
+  using Sink = std::function<void(std::string_view data, uint64_t offset)>;
+  ChunkAssembler(uint64_t max_bytes, Digest digest, Sink sink);
+  ~ChunkAssembler();
+  ChunkAssembler(ChunkAssembler&&) noexcept;
+  ChunkAssembler& operator=(ChunkAssembler&&) noexcept;
 
   // Adds the next chunk; on a problem returns it and keeps the message for error().
   Status add(const rayfarm::v1::Chunk& chunk);
@@ -54,8 +64,10 @@ class ChunkAssembler {
   }
   uint64_t max_bytes_;
   Digest digest_;
-  uint64_t total_ = 0;
+  uint64_t total_ = 0, received_ = 0;
   bool started_ = false;
+  Sink sink_;
+  std::unique_ptr<Sha256> running_;  // with a sink and a SHA-256
   std::string sha256_;
   std::string data_;
   std::string error_;

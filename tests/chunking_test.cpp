@@ -37,6 +37,33 @@ TEST(Chunking, RoundTripsAnySize) {
   EXPECT_EQ(chunks_of(payload(4'500'000), kChunkBytes).size(), 5u);
 }
 
+// With a sink, chunks pass through as they come (to a file, for a frame larger than memory):
+// the same bytes at their offsets, the SHA-256 computed on the way and a wrong one refused, out
+// of order chunks refused, nothing kept.
+TEST(Chunking, ASinkGetsTheBytesAsTheyComeAndTheDigestIsStillChecked) {
+  std::string p = payload(10001), got(p.size(), '\0');
+  auto sink = [&](std::string_view data, uint64_t at) { got.replace(at, data.size(), data); };
+  ChunkAssembler a(1 << 20, ChunkAssembler::Digest::Optional, sink);
+  for (auto& c : chunks_of(p, 1000)) ASSERT_EQ(a.add(c), Status::Ok) << a.error();
+  ASSERT_EQ(a.finish(), Status::Ok) << a.error();
+  EXPECT_TRUE(got == p);
+  EXPECT_TRUE(a.take().empty()) << "nothing kept";
+
+  auto cs = chunks_of(p, 1000);
+  cs[0].set_sha256(std::string(64, 'a'));
+  ChunkAssembler wrong(1 << 20, ChunkAssembler::Digest::Optional, sink);
+  for (auto& c : cs) ASSERT_EQ(wrong.add(c), Status::Ok);
+  EXPECT_EQ(wrong.finish(), Status::DataLoss);
+
+  cs = chunks_of(p, 1000);
+  ChunkAssembler gap(1 << 20, ChunkAssembler::Digest::Optional, sink);
+  ASSERT_EQ(gap.add(cs[0]), Status::Ok);
+  EXPECT_EQ(gap.add(cs[2]), Status::InvalidArgument) << "a chunk missing";
+  ChunkAssembler short_one(1 << 20, ChunkAssembler::Digest::Optional, sink);
+  ASSERT_EQ(short_one.add(cs[0]), Status::Ok);
+  EXPECT_EQ(short_one.finish(), Status::InvalidArgument) << "ends early";
+}
+
 TEST(Chunking, MalformedStreamsGetTheirStatus) {
   std::string p = payload(5000);
   auto cs = chunks_of(p, 1000);
