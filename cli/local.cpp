@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <regex>
 
 #include <spdlog/spdlog.h>
@@ -292,34 +293,23 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
     paths.push_back({"input " + in, in});
   }
   check_outputs(paths);  // also: -o names none of the inputs
-  // A buffer with non-finite sums or counts its header does not explain is refused: merged, it
-  // would make the image and its noise figure nonsense.
-  auto read_checked = [](const std::string& path) {
-    SampleBuffer b = read_buffer_file(path);
-    if (std::string why = buffer_problem(b); !why.empty())
-      throw std::runtime_error("merge: " + path + ": refused: " + why);
-    return b;
-  };
-  SampleBuffer acc = read_checked(inputs[0]);
-  for (size_t i = 1; i < inputs.size(); ++i) {
-    SampleBuffer b = read_checked(inputs[i]);
-    try {
-      merge_into(acc, b);
-    } catch (const MergeError& e) {
-      throw MergeError(inputs[i] + ": cannot merge into " + inputs[0] + " ...: " + e.what());
-    }
-  }
-  warn_nonfinite(acc);
-  std::string ext = std::filesystem::path(output).extension().string();
-  if (ext == ".rfb") {
-    write_buffer_file(output, acc);
+  std::vector<std::unique_ptr<FrameBands>> files;
+  for (const std::string& in : inputs)  // each checked whole (its checksum) as it opens
+    files.push_back(std::make_unique<BufferFileBands>(in, uint64_t(64) << 20));
+  MergedBands merged(std::move(files), inputs);
+  if (std::string ext = std::filesystem::path(output).extension().string(); ext == ".rfb") {
+    write_buffer_file(output, merged);
   } else {
-    write_exr(output, acc);
-    write_png(png_path_for(output), acc, exposure);
+    write_exr(output, merged);
+    write_png(png_path_for(output), merged, exposure);
   }
+  warn_nonfinite(merged.info());
+  const SampleBuffer& info = merged.info();
+  const double pixels = double(info.rect.area());
+  const uint64_t samples = merged.total_samples() ? merged.total_samples() : info.light_paths;
   std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
-               acc.header.passes.to_string().c_str(), samples_per_pixel(acc), acc.rel_mse(),
-               output.c_str());
+               info.header.passes.to_string().c_str(), pixels > 0 ? double(samples) / pixels : 0.0,
+               merged.rel_mse(), output.c_str());
   return 0;
 }
 

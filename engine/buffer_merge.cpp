@@ -169,5 +169,68 @@ void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile) {
   combine_provenance(dst.header, tile.header);
 }
 
+MergedBands::MergedBands(std::vector<std::unique_ptr<FrameBands>> in,
+                         std::vector<std::string> names)
+    : in_(std::move(in)), names_(std::move(names)) {
+  if (in_.empty() || names_.size() != in_.size())
+    throw std::invalid_argument("MergedBands: an input and a name for each");
+  info_ = in_[0]->info();
+  info_.count.clear();  // header and counters only: the inputs' planes stay where they are
+  for (auto* v :
+       {&info_.sum, &info_.sum_sq, &info_.batch_sum, &info_.batch_sum_sq, &info_.splat, &info_.aov})
+    v->clear();
+  for (size_t i = 1; i < in_.size(); ++i) {
+    const SampleBuffer& b = in_[i]->info();
+    std::string why = merge_incompatibility(info_.header, b.header);
+    if (why.empty() && !(b.rect == info_.rect)) why = "rects differ";
+    if (why.empty() && in_[i]->band_height() != in_[0]->band_height()) why = "their planes differ";
+    if (!why.empty())
+      throw MergeError(names_[i] + ": cannot merge into " + names_[0] + " ...: " + why);
+    info_.header.passes.add(b.header.passes);
+    combine_provenance(info_.header, b.header);
+    info_.light_paths += b.light_paths;
+    info_.nonfinite_samples += b.nonfinite_samples;
+    info_.rays += b.rays;
+  }
+  for (const auto& f : in_) samples_ += f->total_samples();
+}
+
+const SampleBuffer& MergedBands::checked(size_t i, int y0) const {
+  const SampleBuffer& b = in_[i]->band(y0);
+  if (std::string why = buffer_problem(b); !why.empty())
+    throw std::runtime_error("merge: " + names_[i] + ": refused: " + why);
+  return b;
+}
+
+const SampleBuffer& MergedBands::band(int y0) const {
+  band_ = checked(0, y0);
+  for (size_t i = 1; i < in_.size(); ++i) {
+    const SampleBuffer& b = checked(i, y0);
+    band_.header.build_id = b.header.build_id;  // provenance is info()'s, combined once
+    band_.header.isa = b.header.isa;
+    try {
+      merge_into(band_, b);
+    } catch (const MergeError& e) {
+      throw MergeError(names_[i] + ": cannot merge into " + names_[0] + " ...: " + e.what());
+    }
+  }
+  band_.header = info_.header;
+  band_.light_paths = info_.light_paths;
+  band_.nonfinite_samples = info_.nonfinite_samples;
+  band_.rays = info_.rays;
+  return band_;
+}
+
+double MergedBands::rel_mse() const {
+  if (!rel_mse_) {
+    double total = 0;
+    for (int y0 = info_.rect.y0; y0 < info_.rect.y1(); y0 += band_height()) {
+      const SampleBuffer& b = band(y0);
+      total = rel_mse_sum(b, b.rect, total);
+    }
+    rel_mse_ = info_.rect.area() > 0 ? total / (3.0 * double(info_.rect.area())) : 0.0;
+  }
+  return *rel_mse_;
+}
 
 }  // namespace rf

@@ -3,8 +3,11 @@
 // seed, frame, integrator, settings, resolution) with disjoint passes add up plane by plane.
 #pragma once
 
+#include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "engine/sample_buffer.h"
 
@@ -36,5 +39,31 @@ void combine_provenance(BufferHeader& dst, const BufferHeader& src);
 // Copies a tile's buffer into a larger buffer of the same pass set (assembling one pass of a
 // frame from its tiles). Throws MergeError if the tile is outside dst.rect or headers differ.
 void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile);
+
+// Buffers merged a band of rows at a time (FrameBands): each input read a band at a time (an .rfb
+// file through BufferFileBands) and the bands merged in the inputs' order, so no input is ever
+// whole in memory; per pixel the same sums in the same order as merging the inputs whole
+// (merge_into). The inputs' headers are checked at construction (MergeError naming the input by
+// `names`); each band of each input is checked with buffer_problem as it is read
+// (std::runtime_error "merge: NAME: refused: ...").
+class MergedBands final : public FrameBands {
+ public:
+  MergedBands(std::vector<std::unique_ptr<FrameBands>> inputs, std::vector<std::string> names);
+  const SampleBuffer& info() const override { return info_; }
+  int band_height() const override { return in_[0]->band_height(); }
+  const SampleBuffer& band(int y0) const override;
+  uint64_t total_samples() const override { return samples_; }
+  double rel_mse() const override;  // the first call reads every band
+
+ private:
+  const SampleBuffer& checked(size_t i, int y0) const;
+
+  std::vector<std::unique_ptr<FrameBands>> in_;
+  std::vector<std::string> names_;
+  SampleBuffer info_;
+  uint64_t samples_ = 0;
+  mutable SampleBuffer band_;
+  mutable std::optional<double> rel_mse_;
+};
 
 }  // namespace rf

@@ -70,7 +70,6 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
     }
   });
 
-  uint64_t rays = 0;
   bool stopped_on_time = false;
   try {
     for (uint32_t p0 = opt.first_pass; p0 < opt.first_pass + count && !acc.done(); p0 += window) {
@@ -86,9 +85,8 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
           TaskKey task{opt.frame, tiles[i % tiles.size()], p0 + uint32_t(i / tiles.size())};
           SampleBuffer r = renderer.render(task, /*parallel=*/true);  // nested: TBB balances
           ++tasks_done;
-          const uint64_t r_rays = r.rays;
           std::lock_guard<std::mutex> lock(acc_mu);
-          if (acc.add(std::move(r)) != FrameAccumulator::AddResult::Dropped) rays += r_rays;
+          acc.add(std::move(r));
         });
       } catch (const RenderStopped&) {
         renderer.resume();
@@ -127,7 +125,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   res.stopped_on_target = acc.stopped_on_target();
   res.stopped_on_time = stopped_on_time;
   res.seconds = std::chrono::duration<double>(clock::now() - start).count();
-  res.rays = rays;
+  res.rays = acc.info().rays;  // of the merged tasks
   return res;
 }
 

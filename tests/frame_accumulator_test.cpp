@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "engine/buffer_file.h"
+#include "engine/buffer_merge.h"
 #include "engine/digest.h"
 #include "tests/support/fixtures.h"
 
@@ -411,6 +412,54 @@ TEST(FrameAccumulator, IsHeldWholeWhenItFitsOrCannotBeCut) {
     ADD_FAILURE() << "a spill directory that does not exist";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent-rayfarm-dir"), std::string::npos)
+        << e.what();
+  }
+}
+
+// Partial results merged a band at a time from their files (rayfarm merge): the bytes the inputs
+// merged whole in the same order give, over bands of 2 rows; a bad input named.
+TEST(MergedBands, FilesMergedABandAtATimeAreTheFilesMergedWhole) {
+  const int W = 37, H = 21;
+  const std::string dir = ::testing::TempDir();
+  std::vector<SampleBuffer> parts;
+  // (merge checks each pixel's samples against the header's spp_per_pass: 3 in random_pass)
+  BufferHeader h = test::test_header({}, W, H);
+  h.settings += ";spp_per_pass=3";
+  for (uint32_t p0 : {0u, 2u, 5u}) {  // passes 0-1, 2-4, 5
+    SampleBuffer part(h, Rect{0, 0, W, H}, false);
+    for (uint32_t p = p0; p < (p0 == 0 ? 2u : p0 == 2 ? 5u : 6u); ++p) {
+      SampleBuffer pass = test::random_pass(p, Rect{0, 0, W, H}, false, 500 + p, W, H);
+      pass.header.settings = h.settings;
+      merge_into(part, pass);
+    }
+    parts.push_back(part);
+    write_buffer_file(dir + "/part" + std::to_string(p0) + ".rfb", part);
+  }
+  SampleBuffer whole = parts[0];
+  merge_into(whole, parts[1]);
+  merge_into(whole, parts[2]);
+  write_buffer_file(dir + "/whole.rfb", whole);
+  auto open_all = [&](const std::vector<std::string>& names) {
+    std::vector<std::unique_ptr<FrameBands>> in;
+    for (const std::string& n : names)
+      in.push_back(std::make_unique<BufferFileBands>(dir + "/" + n, 2 * W * 104));
+    return in;
+  };
+  const std::vector<std::string> names = {"part0.rfb", "part2.rfb", "part5.rfb"};
+  MergedBands merged(open_all(names), names);
+  ASSERT_EQ(merged.band_height(), 2);
+  EXPECT_EQ(merged.total_samples(), whole.total_samples());
+  EXPECT_EQ(merged.rel_mse(), whole.rel_mse()) << "the same sums in the same order";
+  write_buffer_file(dir + "/merged.rfb", merged);
+  EXPECT_TRUE(read_file_bytes(dir + "/merged.rfb") == read_file_bytes(dir + "/whole.rfb"));
+
+  const std::vector<std::string> twice = {"part0.rfb", "part2.rfb", "part0.rfb"};
+  try {
+    MergedBands bad(open_all(twice), twice);
+    ADD_FAILURE() << "overlapping passes were merged";
+  } catch (const MergeError& e) {
+    EXPECT_NE(std::string(e.what()).find("part0.rfb: cannot merge into part0.rfb"),
+              std::string::npos)
         << e.what();
   }
 }
