@@ -186,6 +186,19 @@ void FrameCheckpoint::save_prefix(const FrameBands& frame) const {
 }
 
 FrameCheckpoint::Loaded FrameCheckpoint::load(uint64_t band_bytes) const {
+  Loaded out = load_prefix(band_bytes);
+  const uint32_t k = out.prefix ? out.prefix->info().header.passes.count() : 0;
+  std::set<std::pair<uint32_t, uint32_t>> have;
+  for (const TaskResult& t : out.tasks) have.insert({t.pass, t.tile});
+  load_log(
+      k, std::move(have), [&](TaskResult&& t) { out.tasks.push_back(std::move(t)); }, out.problems);
+  std::sort(out.tasks.begin(), out.tasks.end(), [](const TaskResult& a, const TaskResult& b) {
+    return std::tie(a.pass, a.tile) < std::tie(b.pass, b.tile);
+  });
+  return out;
+}
+
+FrameCheckpoint::Loaded FrameCheckpoint::load_prefix(uint64_t band_bytes) const {
   Loaded out;
   auto set_aside = [&](const fs::path& p, const std::string& why) {
     out.problems.push_back(p.string() + ": " + why);
@@ -209,11 +222,14 @@ FrameCheckpoint::Loaded FrameCheckpoint::load(uint64_t band_bytes) const {
       set_aside(e.path(), ex.what());
     }
   }
-  // The log's records of passes not in the prefix; the first of a task's results counts (a
-  // later one is another worker's result of the same task, written while the first was flushed).
-  const uint32_t k = out.prefix ? out.prefix->info().header.passes.count() : 0;
-  std::set<std::pair<uint32_t, uint32_t>> have;
-  for (const TaskResult& t : out.tasks) have.insert({t.pass, t.tile});
+  return out;
+}
+
+// The log's records of passes not in the prefix; the first of a task's results counts (a later
+// one is another worker's result of the same task, written while the first was flushed).
+void FrameCheckpoint::load_log(uint32_t k, std::set<std::pair<uint32_t, uint32_t>> have,
+                               const std::function<void(TaskResult&&)>& each,
+                               std::vector<std::string>& problems) const {
   uint64_t end = 0, size = 0;
   std::vector<Record> records = scan_log(&end, &size);
   if (!records.empty()) {
@@ -225,27 +241,26 @@ FrameCheckpoint::Loaded FrameCheckpoint::load(uint64_t band_bytes) const {
                                std::to_string(r.tile) + " at byte " + std::to_string(r.offset) +
                                ")";
       bytes.resize(size_t(r.length));
+      TaskResult t{r.pass, r.tile, {}};
       try {
         if (in.fd < 0 || !read_at(in.fd, bytes.data(), bytes.size(), r.offset))
           throw BufferFileError(what + ": cannot read it");
-        out.tasks.push_back({r.pass, r.tile, decode_buffer(bytes, what)});
+        t.buffer = decode_buffer(bytes, what);
       } catch (const std::exception& ex) {
-        out.problems.push_back(std::string(ex.what()) + "; skipped");
+        problems.push_back(std::string(ex.what()) + "; skipped");
         have.erase({r.pass, r.tile});
+        continue;
       }
+      each(std::move(t));
     }
   }
   if (end < size) {  // a crash in the middle of an append: nothing after it was acknowledged
-    out.problems.push_back(log_path() + ": " + std::to_string(size - end) + " bytes after byte " +
-                           std::to_string(end) + " are not a whole record; cut off");
+    problems.push_back(log_path() + ": " + std::to_string(size - end) + " bytes after byte " +
+                       std::to_string(end) + " are not a whole record; cut off");
     if (::truncate(log_path().c_str(), off_t(end)) != 0)
-      out.problems.push_back(log_path() + ": cannot cut: " + std::strerror(errno));
+      problems.push_back(log_path() + ": cannot cut: " + std::strerror(errno));
   }
   log_checked_ = true;
-  std::sort(out.tasks.begin(), out.tasks.end(), [](const TaskResult& a, const TaskResult& b) {
-    return std::tie(a.pass, a.tile) < std::tie(b.pass, b.tile);
-  });
-  return out;
 }
 
 }  // namespace rf

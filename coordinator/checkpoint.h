@@ -18,8 +18,10 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -54,6 +56,13 @@ class FrameCheckpoint {
     std::vector<std::string> problems;  // files set aside, and why
   };
   Loaded load(uint64_t band_bytes = uint64_t(64) << 20) const;
+  // The same in two steps, so that a restart never holds a pass of results at once: the prefix
+  // and the task files of builds before the log (tasks unsorted), then the log's records of
+  // passes >= k not among `have`, each handed to `each` as it is read (its problems appended).
+  Loaded load_prefix(uint64_t band_bytes = uint64_t(64) << 20) const;
+  void load_log(uint32_t k, std::set<std::pair<uint32_t, uint32_t>> have,
+                const std::function<void(TaskResult&&)>& each,
+                std::vector<std::string>& problems) const;
 
   const std::string& dir() const { return dir_; }
 

@@ -195,12 +195,10 @@ std::unique_ptr<FrameAccumulator> Coordinator::make_accumulator(const JobRecord&
 // Rebuilds a frame's accumulator from its checkpoint.
 Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameRecord& f) const {
   LoadedFrame out;
-  FrameCheckpoint::Loaded loaded = f.checkpoint->load();
-  for (const std::string& p : loaded.problems)
-    spdlog::warn("job {} frame {}: {} (its tasks will be rendered again)", job.id, f.number, p);
-  if (!loaded.prefix && loaded.tasks.empty()) return out;
-  out.acc = make_accumulator(job, f);
+  // The prefix first, then each logged result as it is read: never a pass of results at once.
+  FrameCheckpoint::Loaded loaded = f.checkpoint->load_prefix();
   if (loaded.prefix) {
+    out.acc = make_accumulator(job, f);
     try {
       out.acc->resume_from(*loaded.prefix);
     } catch (const std::exception& e) {
@@ -209,8 +207,9 @@ Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameReco
     }
     loaded.prefix.reset();  // closed before it is rewritten
   }
-  for (FrameCheckpoint::TaskResult& t : loaded.tasks) {
-    if (t.tile >= job.tiles.size()) continue;
+  auto add = [&](FrameCheckpoint::TaskResult&& t) {
+    if (t.tile >= job.tiles.size()) return;
+    if (!out.acc) out.acc = make_accumulator(job, f);
     try {
       if (out.acc->add(std::move(t.buffer)) != FrameAccumulator::AddResult::Dropped)
         out.done.push_back(TaskRef{job.id, f.number, t.pass, t.tile});
@@ -218,7 +217,16 @@ Coordinator::LoadedFrame Coordinator::load_frame(const JobRecord& job, FrameReco
       spdlog::warn("job {} frame {} task {}/{}: not used: {}", job.id, f.number, t.pass, t.tile,
                    e.what());
     }
-  }
+  };
+  std::set<std::pair<uint32_t, uint32_t>> have;
+  for (const FrameCheckpoint::TaskResult& t : loaded.tasks) have.insert({t.pass, t.tile});
+  for (FrameCheckpoint::TaskResult& t : loaded.tasks) add(std::move(t));
+  loaded.tasks.clear();
+  f.checkpoint->load_log(out.acc ? out.acc->passes_merged() : 0, std::move(have), add,
+                         loaded.problems);
+  for (const std::string& p : loaded.problems)
+    spdlog::warn("job {} frame {}: {} (its tasks will be rendered again)", job.id, f.number, p);
+  if (!out.acc) return out;
   if (out.acc->passes_merged() > 0) f.checkpoint->save_prefix(*out.acc);
   return out;
 }
