@@ -47,6 +47,18 @@ using test::read_exr;
 
 const std::string kCornell = "scenes/cornell-box/scene.json";
 
+// The job's status once its first frame has merged `passes` passes (or after 3000 polls).
+nlohmann::json status_after_passes(const Farm& farm, const std::string& job, int passes,
+                                   int poll_ms = 10) {
+  nlohmann::json s;
+  for (int i = 0; i < 3000; ++i) {
+    s = farm.status(job);
+    if (s["frames"][0]["passes_merged"].get<int>() >= passes) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(poll_ms));
+  }
+  return s;
+}
+
 TEST(Farm, TwoWorkersRenderFramesEqualToLocalRendersTiledAndSplatting) {
   Farm farm("farm-e2e");
   const std::string tiled = kCornell + " --spp 16 --passes 16 --res 64x64";
@@ -224,12 +236,7 @@ TEST(Farm, CoordinatorKilledMidJobRestartsFromItsStateAndTheImageIsUnchanged) {
   std::string job = farm.submit(job_args + " --frames 1-2 --tile-size 32");
   farm.worker();
   farm.worker();
-  nlohmann::json s;
-  for (int i = 0; i < 3000; ++i) {
-    s = farm.status(job);
-    if (s["frames"][0]["passes_merged"].get<int>() >= 4) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  nlohmann::json s = status_after_passes(farm, job, 4);
   ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 4);
   ASSERT_NE(s["state"], "completed")
       << "the job ended before the kill; the test needs a longer job";
@@ -258,12 +265,7 @@ TEST(Farm, AFrameLargerThanTheCoordinatorsMemoryIsKeptInTilesAcrossAKill) {
   std::string job = farm.submit(job_args + " --tile-size 32");
   farm.worker();
   farm.worker();
-  nlohmann::json s;
-  for (int i = 0; i < 3000; ++i) {
-    s = farm.status(job);
-    if (s["frames"][0]["passes_merged"].get<int>() >= 4) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  nlohmann::json s = status_after_passes(farm, job, 4);
   ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 4);
   ASSERT_NE(s["state"], "completed") << "the job ended before the kill; it needs to be longer";
   // Mid-job, the fetch is the checkpointed prefix.
@@ -340,12 +342,7 @@ TEST(Farm, WorkersWaitThroughAGracefulCoordinatorStopAndGiveUpOnlyWhenTold) {
   Process& busy = farm.worker({});
   Process& idle = farm.worker({});
   Process& quitter = farm.worker({"--give-up-after", "2"});
-  nlohmann::json s;
-  for (int i = 0; i < 3000; ++i) {
-    s = farm.status(job);
-    if (s["frames"][0]["passes_merged"].get<int>() >= 2) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  nlohmann::json s = status_after_passes(farm, job, 2);
   ASSERT_NE(s["state"], "completed") << "the job ended before the stop; it needs to be longer";
   farm.restart_coordinator(SIGTERM, /*pause=*/4);
   EXPECT_EQ(quitter.wait(20), 1) << quitter.log();
@@ -634,12 +631,7 @@ TEST(Farm, FetchMidJobGivesAValidImageWithFewerSamplesAndMoreNoise) {
   std::string job = farm.submit(kCornell + " --spp " + std::to_string(spp) +
                                 " --passes 64 --res 64x64 --frames 1");
   Process& worker = farm.worker();
-  nlohmann::json s;
-  for (int i = 0; i < 3000; ++i) {
-    s = farm.status(job);
-    if (s["frames"][0]["passes_merged"].get<int>() >= 3) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  nlohmann::json s = status_after_passes(farm, job, 3, 20);
   ASSERT_GE(s["frames"][0]["passes_merged"].get<int>(), 3);
   EXPECT_GT(s["frames"][0]["eta_seconds"].get<double>(), 0.0);  // known after the first passes
   EXPECT_GT(s["frames"][0]["rel_mse"].get<double>(), 0.0);

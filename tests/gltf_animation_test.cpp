@@ -103,6 +103,24 @@ TEST(GltfAnimation, KeyframesEvaluateToTheirClosedForms) {
   EXPECT_TRUE(geometry_moves(s));
 }
 
+// A STEP track whose keys are closer than a float's step at the hold time: the hold just before
+// the last key (t1 - 1e-6 of the gap) rounds to the key as a float. It holds the first value
+// (the fuzzer found it reading past the keys; under ASan this test fails without the fix).
+TEST(GltfAnimation, AStepHoldJustBeforeTheLastKeyHoldsTheFirstValue) {
+  AnimatedFile f = triangle_file();
+  f.node({{"mesh", 0}});
+  f.j["scenes"] = {{{"nodes", {0}}}};
+  f.channel(0, "translation", "STEP", {1.0f, 1.001f}, {0, 0, 0, 4, 0, 0});
+  const Scene s = load_text(f.text());
+  ASSERT_EQ(s.instances.size(), 1u);
+  const Instance& step = s.instances[0];
+  ASSERT_TRUE(step.moves());
+  const double t1 = double(1.001f), hold = t1 - 1e-6 * (t1 - 1.0);
+  ASSERT_EQ(float(hold), 1.001f) << "the case needs a hold that rounds to the key";
+  expect_point(step.motion.at(hold), {0, 0, 0}, {0, 0, 0}, 1e-5f, "just before the last key");
+  expect_point(step.motion.at(t1), {0, 0, 0}, {4, 0, 0}, 1e-5f, "at the last key");
+}
+
 // A mesh placed once by a node whose track does not move is static world geometry, as without
 // the animation: the importer collapses the constant track.
 TEST(GltfAnimation, AConstantTrackStaysStaticGeometry) {

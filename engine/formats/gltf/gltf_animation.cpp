@@ -60,8 +60,12 @@ std::vector<double> evaluate(const Channel& ch, double t) {
   } else if (t >= ch.times.back()) {
     set(key_value(ch, n - 1));
   } else {
-    const size_t k =
-        size_t(std::upper_bound(ch.times.begin(), ch.times.end(), float(t)) - ch.times.begin()) - 1;
+    // Compared in double: t just below the last key (a STEP hold) may round up to it as a
+    // float, which would put k on the last key and k + 1 past the end.
+    const size_t k = size_t(std::upper_bound(ch.times.begin(), ch.times.end(), t,
+                                             [](double v, float key) { return v < double(key); }) -
+                            ch.times.begin()) -
+                     1;
     const double t0 = ch.times[k], t1 = ch.times[k + 1], td = t1 - t0, u = (t - t0) / td;
     if (ch.interp == Interp::Step) {
       set(key_value(ch, k));
