@@ -128,12 +128,14 @@ void for_each_plane(Buf& b, F&& f) {
   if (!b.splat.empty()) f(b.splat);
 }
 
-std::string sha256_raw(std::string_view bytes) {
-  std::string hex = sha256_hex(bytes), raw(hex.size() / 2, '\0');
+std::string raw_of_hex(const std::string& hex) {
+  std::string raw(hex.size() / 2, '\0');
   auto nib = [](char c) { return c <= '9' ? c - '0' : c - 'a' + 10; };
   for (size_t i = 0; i < raw.size(); ++i) raw[i] = char(nib(hex[2 * i]) << 4 | nib(hex[2 * i + 1]));
   return raw;
 }
+
+std::string sha256_raw(std::string_view bytes) { return raw_of_hex(sha256_hex(bytes)); }
 
 json header_json(const SampleBuffer& b) {
   const BufferHeader& h = b.header;
@@ -520,7 +522,7 @@ BufferFileBands::BufferFileBands(const std::string& path, uint64_t band_bytes) :
     if (!state) throw std::bad_alloc();
     XXH3_128bits_reset(state.get());
     std::string piece(size_t(8) << 20, '\0');
-    std::string sha_body;    // versions 1 and 2: SHA-256 of the whole body (old, small files)
+    Sha256 sha;              // versions 1 and 2
     uint64_t count_end = 0;  // set once the header is parsed; the sum is taken after
     for (uint64_t at = 0; at < body;) {
       size_t len = size_t(std::min<uint64_t>(piece.size(), body - at));
@@ -528,7 +530,7 @@ BufferFileBands::BufferFileBands(const std::string& path, uint64_t band_bytes) :
       if (version >= 3)
         XXH3_128bits_update(state.get(), piece.data(), len);
       else
-        sha_body.append(piece, 0, len);
+        sha.update(std::string_view(piece.data(), len));
       at += len;
     }
     std::string stored(sum_bytes, '\0');
@@ -539,7 +541,7 @@ BufferFileBands::BufferFileBands(const std::string& path, uint64_t band_bytes) :
       XXH128_canonicalFromHash(&c, XXH3_128bits_digest(state.get()));
       expected.assign(reinterpret_cast<const char*>(c.digest), sizeof c.digest);
     } else {
-      expected = sha256_raw(sha_body);
+      expected = raw_of_hex(sha.hex_digest());
     }
     if (expected != stored) checksum_mismatch(path);
     Parsed p = parse_header(header, version, n, path);
