@@ -93,10 +93,8 @@ void warn_nonfinite(const SampleBuffer& b) {
 
 void print_summary(const FrameBands& frame, double seconds, uint64_t rays) {
   const SampleBuffer& info = frame.info();
-  const double pixels = double(info.rect.area());
-  const uint64_t n = frame.total_samples() ? frame.total_samples() : info.light_paths;
-  double spp = pixels > 0 ? double(n) / pixels : 0.0;
-  double samples = spp * pixels;
+  double spp = samples_per_pixel(frame);
+  double samples = spp * double(info.rect.area());
   std::printf("spp %.0f | %.2f s | %ssamples/s | %srays/s | relMSE %.4g (%u passes)\n", spp,
               seconds, human(samples / seconds).c_str(), human(double(rays) / seconds).c_str(),
               frame.rel_mse(), info.header.passes.count());
@@ -304,11 +302,8 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
     write_png(png_path_for(output), merged, exposure);
   }
   warn_nonfinite(merged.info());
-  const SampleBuffer& info = merged.info();
-  const double pixels = double(info.rect.area());
-  const uint64_t samples = merged.total_samples() ? merged.total_samples() : info.light_paths;
   std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
-               info.header.passes.to_string().c_str(), pixels > 0 ? double(samples) / pixels : 0.0,
+               merged.info().header.passes.to_string().c_str(), samples_per_pixel(merged),
                merged.rel_mse(), output.c_str());
   return 0;
 }

@@ -536,13 +536,8 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
       }
     } spool{tmp};
     auto sink = [&](std::string_view data, uint64_t offset) {
-      for (size_t done = 0; done < data.size();) {
-        ssize_t n =
-            ::pwrite(spool.fd, data.data() + done, data.size() - done, off_t(offset + done));
-        if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) throw FarmError(tmp + ": cannot write: " + std::strerror(errno), 1);
-        done += size_t(n);
-      }
+      if (!pwrite_full(spool.fd, data.data(), data.size(), offset))
+        throw FarmError(tmp + ": cannot write: " + std::strerror(errno), 1);
     };
     // Digest::Optional: a frame kept in tiles comes without a SHA-256 (its .rfb checks itself).
     ChunkAssembler chunks(uint64_t(1) << 40, ChunkAssembler::Digest::Optional, sink);
@@ -567,12 +562,9 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     BufferFileBands frame(tmp, uint64_t(64) << 20);
     write_exr(exr, frame, {{"job", job}});
     write_png(png, frame, exposure);
-    const SampleBuffer& info = frame.info();
-    const double pixels = double(info.rect.area());
-    const uint64_t samples = frame.total_samples() ? frame.total_samples() : info.light_paths;
     std::fprintf(stderr, "frame %d: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
-                 info.header.passes.count(), pixels > 0 ? double(samples) / pixels : 0.0,
-                 frame.rel_mse(), exr.c_str());
+                 frame.info().header.passes.count(), samples_per_pixel(frame), frame.rel_mse(),
+                 exr.c_str());
     ++written;
   }
   if (!wanted.empty() && written == 0)

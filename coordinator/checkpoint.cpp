@@ -1,6 +1,7 @@
 #include "coordinator/checkpoint.h"
 
 #include "engine/buffer_file.h"
+#include "engine/digest.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -57,18 +58,6 @@ std::array<char, kHeadBytes> record_head(uint32_t pass, uint32_t tile, uint64_t 
 }
 
 // Reads exactly n bytes at offset; false at the end of the file.
-bool read_at(int fd, char* out, size_t n, uint64_t offset) {
-  while (n > 0) {
-    ssize_t got = ::pread(fd, out, n, off_t(offset));
-    if (got < 0 && errno == EINTR) continue;
-    if (got <= 0) return false;
-    out += got;
-    n -= size_t(got);
-    offset += uint64_t(got);
-  }
-  return true;
-}
-
 void write_all(int fd, const char* data, size_t n, const std::string& path) {
   while (n > 0) {
     ssize_t put = ::write(fd, data, n);
@@ -103,7 +92,7 @@ std::vector<FrameCheckpoint::Record> FrameCheckpoint::scan_log(uint64_t* end,
   *size = uint64_t(st.st_size);
   uint64_t at = 0;
   std::array<char, kHeadBytes> h{};
-  while (at + kHeadBytes <= *size && read_at(f.fd, h.data(), kHeadBytes, at)) {
+  while (at + kHeadBytes <= *size && pread_full(f.fd, h.data(), kHeadBytes, at)) {
     if (get32(h.data()) != kRecordMagic || get64(h.data() + 24) != XXH3_64bits(h.data(), 24)) break;
     uint64_t length = get64(h.data() + 16);
     if (length > *size - at - kHeadBytes) break;  // torn: the bytes did not all reach the file
@@ -175,7 +164,7 @@ void FrameCheckpoint::save_prefix(const FrameBands& frame) const {
   for (const Record& r : records) {
     if (r.pass < k) continue;
     bytes.resize(size_t(kHeadBytes + r.length));
-    if (!read_at(in.fd, bytes.data(), bytes.size(), r.offset - kHeadBytes))
+    if (!pread_full(in.fd, bytes.data(), bytes.size(), r.offset - kHeadBytes))
       throw std::runtime_error(path + ": cannot read a record back");
     write_all(out.fd, bytes.data(), bytes.size(), tmp);
   }
@@ -243,7 +232,7 @@ void FrameCheckpoint::load_log(uint32_t k, std::set<std::pair<uint32_t, uint32_t
       bytes.resize(size_t(r.length));
       TaskResult t{r.pass, r.tile, {}};
       try {
-        if (in.fd < 0 || !read_at(in.fd, bytes.data(), bytes.size(), r.offset))
+        if (in.fd < 0 || !pread_full(in.fd, bytes.data(), bytes.size(), r.offset))
           throw BufferFileError(what + ": cannot read it");
         t.buffer = decode_buffer(bytes, what);
       } catch (const std::exception& ex) {

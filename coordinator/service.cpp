@@ -549,15 +549,9 @@ class JobServiceImpl final : public pb::JobService::Service {
         pb::Chunk c;
         const size_t n = size_t(std::min<uint64_t>(kChunkBytes, image.file->size - at));
         std::string data(n, '\0');
-        for (size_t got = 0; got < n;) {
-          ssize_t r = ::pread(image.file->fd, data.data() + got, n - got, off_t(at + got));
-          if (r < 0 && errno == EINTR) continue;
-          if (r <= 0)
-            throw CoordinatorError(ErrorCode::Unavailable,
-                                   "cannot read the frame's checkpoint: " +
-                                       std::string(r == 0 ? "it shrank" : std::strerror(errno)));
-          got += size_t(r);
-        }
+        if (!pread_full(image.file->fd, data.data(), n, at))
+          throw CoordinatorError(ErrorCode::Unavailable, "cannot read the frame's checkpoint: " +
+                                                             std::string(std::strerror(errno)));
         c.set_offset(at);
         if (at == 0) c.set_total_size(image.file->size);
         c.set_data(std::move(data));

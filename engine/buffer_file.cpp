@@ -431,13 +431,8 @@ void write_buffer_file(const std::string& path, const FrameBands& frame) {
   const uint64_t na = uint64_t(info.header.aovs.channels());
   const uint64_t per_pixel[7] = {1, 3, 3, 3, 3, na, 0};  // per pixel, in file order
   auto put = [&](int fd, const void* p, size_t n, uint64_t at) {
-    const char* c = static_cast<const char*>(p);
-    while (n > 0) {
-      ssize_t w = ::pwrite(fd, c, n, off_t(at));
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) throw BufferFileError(path + ": write failed: " + std::strerror(errno));
-      c += w, n -= size_t(w), at += uint64_t(w);
-    }
+    if (!pwrite_full(fd, p, n, at))
+      throw BufferFileError(path + ": write failed: " + std::strerror(errno));
   };
   try {
     write_file_atomic(path, [&](int fd) {
@@ -484,16 +479,10 @@ void write_buffer_file(const std::string& path, const FrameBands& frame) {
 namespace {
 
 void pread_all(int fd, void* p, size_t n, uint64_t at, const std::string& path) {
-  char* c = static_cast<char*>(p);
-  while (n > 0) {
-    ssize_t r = ::pread(fd, c, n, off_t(at));
-    if (r < 0 && errno == EINTR) continue;
-    if (r <= 0)
-      throw BufferFileError(
-          path + ": cannot read: " +
-          (r == 0 ? std::string("file shrank while read") : std::strerror(errno)));
-    c += r, n -= size_t(r), at += uint64_t(r);
-  }
+  if (!pread_full(fd, p, n, at))
+    throw BufferFileError(
+        path + ": cannot read: " +
+        (errno == EIO ? std::string("file shrank while read") : std::strerror(errno)));
 }
 
 }  // namespace
@@ -612,15 +601,7 @@ const SampleBuffer& BufferFileBands::band(int y0) const {
 }
 
 double BufferFileBands::rel_mse() const {
-  if (!rel_mse_) {
-    const Rect& r = info_.rect;
-    double total = 0;
-    for (int y0 = r.y0; y0 < r.y1(); y0 += band_height_) {
-      const SampleBuffer& b = band(y0);
-      total = rel_mse_sum(b, b.rect, total);
-    }
-    rel_mse_ = r.area() > 0 ? total / (3.0 * double(r.area())) : 0.0;
-  }
+  if (!rel_mse_) rel_mse_ = rel_mse_of_bands(*this);
   return *rel_mse_;
 }
 

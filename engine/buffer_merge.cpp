@@ -135,6 +135,19 @@ void add_tile(SampleBuffer& dst, const BufferView& tile) {
   combine_provenance(dst.header, *tile.header);
 }
 
+void copy_pixels(const SampleBuffer& src, SampleBuffer& dst, const Rect& r) {
+  const size_t w = size_t(r.w), na = size_t(src.header.aovs.channels());
+  for (int y = r.y0; y < r.y1(); ++y) {
+    const size_t s = src.pixel_index(r.x0, y), d = dst.pixel_index(r.x0, y);
+    std::copy_n(src.count.begin() + s, w, dst.count.begin() + d);
+    std::copy_n(src.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
+    std::copy_n(src.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
+    std::copy_n(src.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
+    std::copy_n(src.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
+    std::copy_n(src.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
+  }
+}
+
 // Copies rows without arithmetic, so an assembled pass is bit-identical to a whole-frame render.
 // Assembling the same tile twice overwrites its pixels but counts its rays and time twice.
 void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile) {
@@ -153,17 +166,7 @@ void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile) {
   if (!dst.planes_match_rect() || !tile.planes_match_rect()) {
     throw fail("plane sizes do not match the rect");
   }
-  size_t w = size_t(tile.rect.w);
-  for (int y = tile.rect.y0; y < tile.rect.y1(); ++y) {
-    size_t s = tile.pixel_index(tile.rect.x0, y), d = dst.pixel_index(tile.rect.x0, y);
-    std::copy_n(tile.count.begin() + s, w, dst.count.begin() + d);
-    std::copy_n(tile.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
-    std::copy_n(tile.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
-    std::copy_n(tile.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
-    std::copy_n(tile.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
-    const size_t na = size_t(tile.header.aovs.channels());
-    std::copy_n(tile.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
-  }
+  copy_pixels(tile, dst, tile.rect);
   dst.rays += tile.rays;
   dst.nonfinite_samples += tile.nonfinite_samples;
   combine_provenance(dst.header, tile.header);
@@ -222,14 +225,7 @@ const SampleBuffer& MergedBands::band(int y0) const {
 }
 
 double MergedBands::rel_mse() const {
-  if (!rel_mse_) {
-    double total = 0;
-    for (int y0 = info_.rect.y0; y0 < info_.rect.y1(); y0 += band_height()) {
-      const SampleBuffer& b = band(y0);
-      total = rel_mse_sum(b, b.rect, total);
-    }
-    rel_mse_ = info_.rect.area() > 0 ? total / (3.0 * double(info_.rect.area())) : 0.0;
-  }
+  if (!rel_mse_) rel_mse_ = rel_mse_of_bands(*this);
   return *rel_mse_;
 }
 

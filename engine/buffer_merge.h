@@ -36,6 +36,11 @@ void add_tile(SampleBuffer& dst, const BufferView& tile);
 // warning when a new one joins), core-seconds summed.
 void combine_provenance(BufferHeader& dst, const BufferHeader& src);
 
+// Copies the pixels of `r` (inside both rects) from src to dst, every per-pixel plane (count,
+// sums, batch sums, AOVs), without arithmetic; no header, counter or splat. The caller checks the
+// rects and planes.
+void copy_pixels(const SampleBuffer& src, SampleBuffer& dst, const Rect& r);
+
 // Copies a tile's buffer into a larger buffer of the same pass set (assembling one pass of a
 // frame from its tiles). Throws MergeError if the tile is outside dst.rect or headers differ.
 void assemble_tile(SampleBuffer& dst, const SampleBuffer& tile);

@@ -63,6 +63,34 @@ void fsync_dir(const std::filesystem::path& dir) {
 }
 }  // namespace
 
+bool pread_full(int fd, void* out, size_t n, uint64_t offset) {
+  char* c = static_cast<char*>(out);
+  while (n > 0) {
+    ssize_t got = ::pread(fd, c, n, off_t(offset));
+    if (got < 0 && errno == EINTR) continue;
+    if (got <= 0) {
+      if (got == 0) errno = EIO;
+      return false;
+    }
+    c += got, n -= size_t(got), offset += uint64_t(got);
+  }
+  return true;
+}
+
+bool pwrite_full(int fd, const void* data, size_t n, uint64_t offset) {
+  const char* c = static_cast<const char*>(data);
+  while (n > 0) {
+    ssize_t put = ::pwrite(fd, c, n, off_t(offset));
+    if (put < 0 && errno == EINTR) continue;
+    if (put <= 0) {
+      if (put == 0) errno = EIO;
+      return false;
+    }
+    c += put, n -= size_t(put), offset += uint64_t(put);
+  }
+  return true;
+}
+
 void write_file_atomic(const std::string& path, std::string_view bytes) {
   write_file_atomic(path, [&](int fd) {
     size_t done = 0;

@@ -1,6 +1,8 @@
 // SHA-256 digests (OpenSSL) for content addressing: scene bundles, buffer checksums.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <string_view>
@@ -23,6 +25,11 @@ class Sha256 {
  private:
   void* ctx_;
 };
+
+// pread/pwrite of exactly n bytes at `offset`, through short counts and EINTR. False on failure,
+// errno set (EIO when the file ends first).
+bool pread_full(int fd, void* out, size_t n, uint64_t offset);
+bool pwrite_full(int fd, const void* data, size_t n, uint64_t offset);
 
 // Reads a whole file; throws std::runtime_error naming the path if it cannot.
 std::string read_file_bytes(const std::string& path);

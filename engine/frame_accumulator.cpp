@@ -11,26 +11,10 @@
 #include <type_traits>
 #include <unordered_map>
 
+#include "engine/digest.h"
 #include "engine/progress.h"
 
 namespace rf {
-
-namespace {
-// Copies the pixels of `r` (inside both rects) from src to dst, every per-pixel plane.
-void copy_pixels(const SampleBuffer& src, SampleBuffer& dst, const Rect& r) {
-  const size_t w = size_t(r.w), na = size_t(src.header.aovs.channels());
-  for (int y = r.y0; y < r.y1(); ++y) {
-    const size_t s = src.pixel_index(r.x0, y), d = dst.pixel_index(r.x0, y);
-    std::copy_n(src.count.begin() + s, w, dst.count.begin() + d);
-    std::copy_n(src.sum.begin() + 3 * s, 3 * w, dst.sum.begin() + 3 * d);
-    std::copy_n(src.sum_sq.begin() + 3 * s, 3 * w, dst.sum_sq.begin() + 3 * d);
-    std::copy_n(src.batch_sum.begin() + 3 * s, 3 * w, dst.batch_sum.begin() + 3 * d);
-    std::copy_n(src.batch_sum_sq.begin() + 3 * s, 3 * w, dst.batch_sum_sq.begin() + 3 * d);
-    std::copy_n(src.aov.begin() + na * s, na * w, dst.aov.begin() + na * d);
-  }
-}
-
-}  // namespace
 
 // A tiled frame's storage (ProgressiveOptions::memory_budget): every tile's planes at a fixed
 // place in one unlinked file (tile i after the pixels of tiles 0..i-1, planes in .rfb order), the
@@ -198,25 +182,10 @@ class TileSpill {
                              " (the frame's tiles kept on disk): " + std::strerror(errno));
   }
   void write_all(int fd, const void* p, size_t n, uint64_t at) const {
-    const char* c = static_cast<const char*>(p);
-    while (n > 0) {
-      ssize_t w = ::pwrite(fd, c, n, off_t(at));
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) fail("cannot write a spill file");
-      c += w, n -= size_t(w), at += uint64_t(w);
-    }
+    if (!pwrite_full(fd, p, n, at)) fail("cannot write a spill file");
   }
   void read_all(int fd, void* p, size_t n, uint64_t at) const {
-    char* c = static_cast<char*>(p);
-    while (n > 0) {
-      ssize_t r = ::pread(fd, c, n, off_t(at));
-      if (r < 0 && errno == EINTR) continue;
-      if (r <= 0) {
-        if (r == 0) errno = EIO;
-        fail("cannot read a spill file");
-      }
-      c += r, n -= size_t(r), at += uint64_t(r);
-    }
+    if (!pread_full(fd, p, n, at)) fail("cannot read a spill file");
   }
 
   std::string dir_;

@@ -15,6 +15,14 @@ double samples_per_pixel(const SampleBuffer& b) {
   return double(samples ? samples : b.light_paths) / pixels;
 }
 
+double samples_per_pixel(const FrameBands& frame) {
+  const SampleBuffer& info = frame.info();
+  double pixels = double(info.rect.area());
+  if (!(pixels > 0)) return 0;
+  uint64_t samples = frame.total_samples();
+  return double(samples ? samples : info.light_paths) / pixels;
+}
+
 double eta_seconds(uint32_t passes_merged, uint32_t passes_total, double rel_mse,
                    double noise_target, double seconds_so_far) {
   if (passes_merged >= passes_total) return 0;

@@ -15,6 +15,7 @@ class FrameAccumulator;
 // Samples per pixel of a buffer: its camera samples per pixel of its rect, or, for light
 // tracing (no camera samples), its light paths per pixel, the work a camera sample stands for.
 double samples_per_pixel(const SampleBuffer& buffer);
+double samples_per_pixel(const FrameBands& frame);  // the same, from its counts
 
 struct FrameProgress {
   uint32_t passes_merged = 0;  // length of the merged prefix

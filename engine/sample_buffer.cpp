@@ -175,6 +175,16 @@ double rel_mse_sum(const SampleBuffer& b, const Rect& region, double total) {
   return total;
 }
 
+double rel_mse_of_bands(const FrameBands& frame) {
+  const Rect& r = frame.info().rect;
+  double total = 0;
+  for (int y0 = r.y0; y0 < r.y1(); y0 += frame.band_height()) {
+    const SampleBuffer& b = frame.band(y0);
+    total = rel_mse_sum(b, b.rect, total);
+  }
+  return r.area() > 0 ? total / (3.0 * double(r.area())) : 0.0;
+}
+
 double SampleBuffer::rel_mse() const {
   if (rect.area() == 0) return 0.0;
   return rel_mse_sum(*this, rect) / (3.0 * double(rect.area()));

@@ -234,6 +234,10 @@ class FrameBands {
   virtual double rel_mse() const = 0;          // the frame's noise figure (SampleBuffer::rel_mse)
 };
 
+// The frame's relMSE read band by band, summed in the order of the frame read whole (the same
+// bits as SampleBuffer::rel_mse of it).
+double rel_mse_of_bands(const FrameBands& frame);
+
 // A SampleBuffer as one band.
 class WholeFrame final : public FrameBands {
  public:
