@@ -21,7 +21,10 @@
 //
 //   soak_load --coordinator HOST:PORT [--workers 200] [--first-index 0] [--seconds 600]
 //             [--kill 0.02] [--stall 0.01] [--corrupt 0.01] [--cache DIR] [--seed 1]
-//             [--timeline FILE] [--interval 5]
+//             [--timeline FILE] [--interval 5] [--batch 1]
+//
+// With --batch N each lease asks for up to N tasks and the results go up to N in one upload (the
+// worker's batched leases and uploads, docs/design.md).
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
@@ -79,6 +82,7 @@ struct Options {
   int first_index = 0;  // simulated worker names: sim-<first_index + i>
   std::string timeline;
   double interval = 5;
+  int batch = 1;  // tasks asked for per lease, and results per upload (at most)
 };
 
 // Lease latency per interval: a log-bucketed histogram (16 buckets per doubling).
@@ -203,6 +207,8 @@ class SimulatedWorker {
     worker_id_ = resp.worker_id();
     lease_seconds_ = resp.lease_seconds();
     keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
+    max_results_ = std::clamp<size_t>(resp.max_results_per_upload(), 1, size_t(o_.batch));
+    max_upload_bytes_ = resp.max_upload_bytes();
     return true;
   }
 
@@ -213,6 +219,7 @@ class SimulatedWorker {
       set_deadline(ctx, 5);
       pb::LeaseRequest req;
       req.set_worker_id(worker_id_);
+      req.set_max_tasks(uint32_t(o_.batch));
       pb::LeaseResponse resp;
       auto asked = Clock::now();
       grpc::Status s = stub_->LeaseTask(&ctx, req, &resp);
@@ -231,33 +238,49 @@ class SimulatedWorker {
         pause(0.5 + u(rng_));
         continue;
       }
-      ++g_count.leased;
-      const pb::Task& task = resp.task();
-      double r = u(rng_);
-      if (r < o_.kill) {
-        ++g_count.kills;
-        channel_.reset();  // the connection closes; the lease is left to expire
-        stub_.reset();
-        return;
+      std::vector<pb::Task> tasks{resp.task()};
+      tasks.insert(tasks.end(), resp.more().begin(), resp.more().end());
+      g_count.leased += tasks.size();
+      std::vector<Result> batch;  // uploaded together (one CompleteTask) when allowed
+      uint64_t batch_bytes = 0;
+      for (const pb::Task& task : tasks) {
+        double r = u(rng_);
+        if (r < o_.kill) {
+          ++g_count.kills;
+          channel_.reset();  // the connection closes; the leases are left to expire
+          stub_.reset();
+          return;
+        }
+        bool stall = r < o_.kill + o_.stall;
+        bool corrupt = !stall && r < o_.kill + o_.stall + o_.corrupt;
+        if (stall) {
+          ++g_count.stalls;
+          pause(lease_seconds_ + 1);
+        }
+        Result result{&task, {}, corrupt, stall};
+        try {
+          result.bytes = render(task, !stall);
+        } catch (const std::exception& e) {
+          spdlog::error("sim-{}: task {}: {}", index_, task.task_id(), e.what());
+          continue;
+        }
+        if (corrupt) {
+          ++g_count.corrupt;
+          damage(result.bytes);
+        }
+        if (stall) {
+          upload({result});  // late, alone
+          continue;
+        }
+        batch_bytes += result.bytes.size();
+        batch.push_back(std::move(result));
+        if (batch.size() >= max_results_ || batch_bytes >= max_upload_bytes_ / 2) {
+          upload(batch);
+          batch.clear();
+          batch_bytes = 0;
+        }
       }
-      bool stall = r < o_.kill + o_.stall;
-      bool corrupt = !stall && r < o_.kill + o_.stall + o_.corrupt;
-      if (stall) {
-        ++g_count.stalls;
-        pause(lease_seconds_ + 1);
-      }
-      std::string bytes;
-      try {
-        bytes = render(task, !stall);
-      } catch (const std::exception& e) {
-        spdlog::error("sim-{}: task {}: {}", index_, task.task_id(), e.what());
-        continue;
-      }
-      if (corrupt) {
-        ++g_count.corrupt;
-        damage(bytes);
-      }
-      upload(task, bytes, corrupt, stall);
+      if (!batch.empty()) upload(batch);
     }
   }
 
@@ -294,33 +317,59 @@ class SimulatedWorker {
     }
   }
 
-  void upload(const pb::Task& task, const std::string& bytes, bool corrupt, bool late) {
-    for (int attempt = 0; attempt < 5 && !g_stop; ++attempt) {
-      // The worker's own upload client (farm/upload.h).
-      rf::UploadAnswer answer = rf::upload_result(*stub_, worker_id_, task, bytes, 0.01, 60, false);
-      const grpc::Status& s = answer.status;
-      if (s.ok()) {
-        if (corrupt && answer.accepted) ++g_count.corrupt_accepted;
-        (answer.accepted ? g_count.merged : g_count.not_needed)++;
-        return;
+  struct Result {
+    const pb::Task* task;
+    std::string bytes;
+    bool corrupt, late;
+  };
+
+  // The worker's own upload client (farm/upload.h): the results in one call, each answered on
+  // its own; those not settled go again, up to five calls.
+  void upload(const std::vector<Result>& results) {
+    std::vector<const Result*> pending;
+    for (const Result& r : results) pending.push_back(&r);
+    for (int attempt = 0; attempt < 5 && !g_stop && !pending.empty(); ++attempt) {
+      if (attempt > 0) pause(0.5);
+      std::vector<rf::UploadItem> items;
+      for (const Result* r : pending) items.push_back({r->task, r->bytes, 0.01, {}});
+      rf::BatchAnswer answer = rf::upload_results(*stub_, worker_id_, items, 60, false);
+      if (!answer.status.ok()) {
+        if (pending.size() == 1 && settle(*pending[0], answer.status, false)) return;
+        ++g_count.upload_errors;
+        continue;
       }
-      switch (s.error_code()) {
-        case grpc::StatusCode::INVALID_ARGUMENT:
-        case grpc::StatusCode::DATA_LOSS:
-          ++g_count.refused;
-          if (!corrupt)
-            spdlog::error("sim-{}: task {}: a sound result refused: {}", index_, task.task_id(),
-                          s.error_message());
-          return;
-        case grpc::StatusCode::FAILED_PRECONDITION:
-        case grpc::StatusCode::NOT_FOUND:
-        case grpc::StatusCode::PERMISSION_DENIED:  // barred from the job after its refusals
-          (late ? g_count.late_refused : g_count.refused)++;
-          return;
-        default:
+      std::vector<const Result*> again;
+      for (size_t i = 0; i < pending.size(); ++i)
+        if (!settle(*pending[i], answer.results[i].status, answer.results[i].accepted)) {
           ++g_count.upload_errors;
-          pause(0.5);
-      }
+          again.push_back(pending[i]);
+        }
+      pending = std::move(again);
+    }
+  }
+
+  // Counts one result's answer; false when it is worth sending again.
+  bool settle(const Result& r, const grpc::Status& s, bool accepted) {
+    if (s.ok()) {
+      if (r.corrupt && accepted) ++g_count.corrupt_accepted;
+      (accepted ? g_count.merged : g_count.not_needed)++;
+      return true;
+    }
+    switch (s.error_code()) {
+      case grpc::StatusCode::INVALID_ARGUMENT:
+      case grpc::StatusCode::DATA_LOSS:
+        ++g_count.refused;
+        if (!r.corrupt)
+          spdlog::error("sim-{}: task {}: a sound result refused: {}", index_, r.task->task_id(),
+                        s.error_message());
+        return true;
+      case grpc::StatusCode::FAILED_PRECONDITION:
+      case grpc::StatusCode::NOT_FOUND:
+      case grpc::StatusCode::PERMISSION_DENIED:  // barred from the job after its refusals
+        (r.late ? g_count.late_refused : g_count.refused)++;
+        return true;
+      default:
+        return false;
     }
   }
 
@@ -339,6 +388,8 @@ class SimulatedWorker {
   std::string worker_id_;
   uint32_t lease_seconds_ = 30;
   double keepalive_seconds_ = 10;
+  size_t max_results_ = 1;  // per upload: --batch, within the coordinator's bound
+  uint64_t max_upload_bytes_ = 0;
 };
 
 // This process's CPU time (user + system), seconds.
@@ -367,6 +418,10 @@ int main(int argc, char** argv) {
   app.add_option("--timeline", o.timeline, "write per-interval JSON lines here");
   app.add_option("--interval", o.interval, "seconds per timeline line")
       ->check(CLI::Range(0.1, 3600.0));
+  app.add_option("--batch", o.batch,
+                 "tasks asked for per lease and results sent per upload, at most (batched "
+                 "leases; the coordinator decides how many it hands out)")
+      ->check(CLI::Range(1, 64));
   CLI11_PARSE(app, argc, argv);
 
   signal(SIGTERM, [](int) { g_stop = true; });

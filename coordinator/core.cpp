@@ -351,6 +351,8 @@ CoordinatorMetrics Coordinator::metrics() const {
   m.counters = counters_;
   m.counters.calls_refused = refused_calls_;
   m.counters.refusal_lines_suppressed = suppressed_refusal_lines_;
+  m.counters.result_flushes = results_sync_->flushes();
+  m.counters.store_commits = journal_->batches();
   m.storage_ok = storage_problem_.empty();
   m.blob_store_bytes = blob_store_bytes_;
   m.pools[kAnyPool];  // always shown, 0 when idle

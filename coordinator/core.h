@@ -137,6 +137,7 @@ struct TaskAssignment {
 struct LeaseResult {
   std::optional<TaskAssignment> task;  // nothing to do now when absent
   bool no_more_work = false;           // nothing queued or leased that this worker could get
+  std::vector<TaskAssignment> more;    // further tasks of task's job (batched leases)
 };
 
 // A task's result as uploaded: the encoded sample buffer, its transfer checksum already checked.
@@ -209,6 +210,8 @@ struct CoordinatorMetrics {
     uint64_t jobs_expired = 0;              // finished jobs retention removed (--keep-finished)
     uint64_t blobs_collected = 0;           // blobs no job referenced, removed
     uint64_t blob_bytes_collected = 0;
+    uint64_t result_flushes = 0;  // syncfs calls that made results durable (group commit)
+    uint64_t store_commits = 0;   // job store transactions (the journal's batches)
   };
   static constexpr double kLeaseBuckets[] = {0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025,
                                              0.05,   0.1,   0.25,   0.5,   1,    2.5};
@@ -355,7 +358,15 @@ class Coordinator {
   // principal, and a lease is renewed, failed or completed only by the worker holding it.
   // Its tags are checked (InvalidArgument naming a bad one; at most kMaxTags) and stored.
   Registration register_worker(const WorkerInfo& worker, const Caller& caller = {});
-  LeaseResult lease(const std::string& worker_id, const Caller& caller = {});
+  // Up to max_tasks tasks (batched leases), each under its own lease: more than one only of a
+  // job whose results so far took the worker under kLeaseBatchSeconds all together (its mean
+  // CPU seconds a task over the worker's cores, at least kTasksBeforeBatching results merged),
+  // so that a batch never holds back work that other workers could share.
+  LeaseResult lease(const std::string& worker_id, const Caller& caller = {},
+                    uint32_t max_tasks = 1);
+  static constexpr uint32_t kMaxTasksPerLease = 64;
+  static constexpr double kLeaseBatchSeconds = 0.25;
+  static constexpr uint64_t kTasksBeforeBatching = 4;
   // The lease's length from now, in seconds.
   uint32_t renew(const std::string& worker_id, const std::string& lease_id,
                  const Caller& caller = {});
@@ -375,6 +386,17 @@ class Coordinator {
   // returns true. A result that does not match its task (tile, pass, header, sample counts) or
   // holds a non-finite sum is refused with InvalidArgument and logged against its worker.
   bool complete(TaskResult result, const Caller& caller = {});
+  // A batched upload's results (at most kMaxResultsPerUpload): each checked and its record
+  // written as complete() does, then one flush for them all, each merged, and one wait for the
+  // ledger's rows. Each has its own outcome: merged, not needed, or the error complete() would
+  // have thrown for it alone.
+  struct ResultOutcome {
+    bool accepted = false;
+    std::optional<CoordinatorError> error;
+  };
+  std::vector<ResultOutcome> complete_batch(std::vector<TaskResult> results,
+                                            const Caller& caller = {});
+  static constexpr uint32_t kMaxResultsPerUpload = 64;
   void fail(const TaskFailureReport& report, const Caller& caller = {});
   // An upload that check_upload let start was refused before it became a result (its chunks
   // out of order, over the size limit, or failing their checksum): as a refused result, its lease
@@ -492,6 +514,14 @@ class Coordinator {
   // The result decoded where it lies (its bytes move out of r) and checked against its task and
   // the frame's header `base`.
   EncodedBuffer checked_buffer(const JobRecord& job, const BufferHeader& base, TaskResult& r) const;
+  // complete()'s halves. stage_result: the answer when the result needs no flush (not needed,
+  // or held for verification); else nullopt, with its record written unflushed and `staged` set.
+  // commit_result, once a flush covered the record (`flush_error` when it failed): the ledger's
+  // verdict, the merge, the prefix checkpoint; `ticket` is the journal's ticket to wait for.
+  struct StagedResult;
+  std::optional<bool> stage_result(TaskResult r, const Caller& caller,
+                                   std::unique_ptr<StagedResult>& staged);
+  bool commit_result(StagedResult& s, const std::string& flush_error, uint64_t& ticket);
   bool record_result(JobRecord& job, const TaskResult& r,  // under mu_
                      const BufferHeader& header);
   void publish_frame(JobRecord& job, FrameRecord& f);                          // under mu_

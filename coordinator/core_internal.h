@@ -73,6 +73,10 @@ struct JobRecord {
   std::string error;
   int64_t submitted_unix = 0;
   double core_seconds = 0;
+  // Results merged by this run of the coordinator and their worker CPU seconds: how long its
+  // tasks take, which decides whether a lease hands out several (Coordinator::lease).
+  uint64_t tasks_timed = 0;
+  double timed_core_seconds = 0;
   std::string tenant;
   std::string build_id;        // results of this build only; empty: the first merged result's
   std::string cpu_kind;        // and of this CPU kind only (BufferHeader::isa), the same way

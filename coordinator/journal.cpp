@@ -66,11 +66,25 @@ uint64_t Journal::batches() const {
   return batches_;
 }
 
+Journal::Hold::Hold(Journal& j) : j_(j) {
+  std::lock_guard lock(j_.mu_);
+  ++j_.holds_;
+}
+
+Journal::Hold::~Hold() {
+  std::lock_guard lock(j_.mu_);
+  --j_.holds_;
+  j_.changed_.notify_all();
+}
+
 void Journal::run() {
   double retry = kRetryFirst;
   std::unique_lock lock(mu_);
   for (;;) {
     changed_.wait(lock, [&] { return !queue_.empty() || stopping_; });
+    if (holds_ > 0)  // a batch being appended: take it whole
+      changed_.wait_for(lock, std::chrono::duration<double>(kHoldSeconds),
+                        [&] { return holds_ == 0 || stopping_; });
     if (queue_.empty()) return;
     if (queue_.front().ahead && queue_.front().ahead->cancelled) {  // its writer gave up on it
       stored_ = queue_.front().ticket;

@@ -53,6 +53,21 @@ class Journal {
   // Batches stored so far (each one transaction), for tests of the grouping.
   uint64_t batches() const;
 
+  // Held while one call appends many transitions (a batch of leases or results): the writer
+  // thread waits for it to end, up to kHoldSeconds, so that they go in one transaction instead
+  // of the first in one and the rest in the next.
+  class Hold {
+   public:
+    explicit Hold(Journal& j);
+    ~Hold();
+    Hold(const Hold&) = delete;
+    Hold& operator=(const Hold&) = delete;
+
+   private:
+    Journal& j_;
+  };
+  static constexpr double kHoldSeconds = 0.005;
+
  private:
   // A write ahead's fate, shared by its writer and the journal's thread.
   struct Ahead {
@@ -75,6 +90,7 @@ class Journal {
   Ticket next_ = 1, stored_ = 0;
   std::string problem_;
   uint64_t batches_ = 0;
+  int holds_ = 0;
   bool stopping_ = false;
   std::thread writer_;
 };

@@ -86,6 +86,13 @@ std::vector<MetricFamily> metric_families(const CoordinatorMetrics& m) {
                        double(c.bytes_merged)));
   out.push_back(single("rayfarm_core_seconds_total",
                        "Worker CPU seconds spent on the merged results", C, c.core_seconds));
+  out.push_back(single("rayfarm_result_flushes_total",
+                       "Flushes (syncfs) that made task results durable, each covering every "
+                       "result written before it",
+                       C, double(c.result_flushes)));
+  out.push_back(single("rayfarm_store_commits_total",
+                       "Job store transactions, each one flush for the ledger rows queued", C,
+                       double(c.store_commits)));
   out.push_back(single("rayfarm_workers_registered", "Workers registered and not refused", G,
                        double(m.workers_registered)));
   out.push_back(single("rayfarm_workers_connected", "Workers heard from within one lease time", G,

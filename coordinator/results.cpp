@@ -276,7 +276,79 @@ void Coordinator::refuse_upload(const std::string& worker_id, const std::string&
   ledger_->refuse_result(worker_id, lease_id, task, why, now(), bounded_log(log));
 }
 
+// A result between its check and its merge: decoded, its record written to the frame's log
+// (unflushed), its key marked as storing.
+struct Coordinator::StagedResult {
+  TaskResult r;
+  std::shared_ptr<JobRecord> job;
+  FrameRecord* f = nullptr;
+  uint32_t run = 0;
+  EncodedBuffer buffer;
+  std::pair<uint32_t, uint32_t> key;
+  std::unique_ptr<GroupSync::Writer> writer;  // announced before the write (group_sync.h)
+};
+
 bool Coordinator::complete(TaskResult r, const Caller& caller) {
+  std::unique_ptr<StagedResult> s;
+  if (std::optional<bool> answered = stage_result(std::move(r), caller, s)) return *answered;
+  std::string flush_error;
+  try {
+    s->writer->sync();
+  } catch (const std::exception& e) {
+    flush_error = e.what();
+  }
+  uint64_t ticket = 0;
+  bool merged = commit_result(*s, flush_error, ticket);
+  wait_stored(ticket, "the result's record");
+  return merged;
+}
+
+std::vector<Coordinator::ResultOutcome> Coordinator::complete_batch(std::vector<TaskResult> results,
+                                                                    const Caller& caller) {
+  std::vector<ResultOutcome> out(results.size());
+  std::vector<std::pair<size_t, std::unique_ptr<StagedResult>>> staged;
+  for (size_t i = 0; i < results.size(); ++i) {
+    try {
+      std::unique_ptr<StagedResult> s;
+      if (std::optional<bool> answered = stage_result(std::move(results[i]), caller, s)) {
+        out[i].accepted = *answered;
+        continue;
+      }
+      s->writer.reset();  // written: the one sync below covers it
+      staged.emplace_back(i, std::move(s));
+    } catch (const CoordinatorError& e) {
+      out[i].error = e;
+    }
+  }
+  if (staged.empty()) return out;
+  std::string flush_error;
+  try {
+    results_sync_->sync();  // after every write above: one flush for the batch
+  } catch (const std::exception& e) {
+    flush_error = e.what();
+  }
+  uint64_t ticket = 0;
+  {
+    Journal::Hold hold(*journal_);  // the batch's rows in one transaction
+    for (auto& [i, s] : staged) {
+      try {
+        out[i].accepted = commit_result(*s, flush_error, ticket);
+      } catch (const CoordinatorError& e) {
+        out[i].error = e;
+      }
+    }
+  }
+  try {
+    wait_stored(ticket, "the results' records");
+  } catch (const CoordinatorError& e) {
+    for (auto& [i, s] : staged)
+      if (!out[i].error) out[i] = {false, e};
+  }
+  return out;
+}
+
+std::optional<bool> Coordinator::stage_result(TaskResult r, const Caller& caller,
+                                              std::unique_ptr<StagedResult>& staged) {
   if (!check_upload(r.worker_id, r.lease_id, r.task, caller)) return false;  // not needed
   std::shared_ptr<JobRecord> job;
   FrameRecord* f = nullptr;
@@ -353,7 +425,7 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
   // which tasks an image holds), then the ledger's transition and its rows, then the answer once
   // they are stored. The record is appended unflushed under the frame's lock, and flushed with
   // the other results that arrive meanwhile (group commit: results_sync_) with no lock held.
-  GroupSync::Writer durable(*results_sync_);  // a flush about to start waits for this write
+  auto writer = std::make_unique<GroupSync::Writer>(*results_sync_);  // a flush waits for it
   try {
     f->checkpoint->save_task(r.task.pass, r.task.tile, buffer.bytes());
   } catch (const std::exception& e) {
@@ -364,15 +436,17 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
            std::string("the coordinator cannot store results now (") + e.what() + "); retry later");
   }
   f->storing.insert(key);
-  frame_lock.unlock();
-  std::string flush_error;
-  try {
-    durable.sync();
-  } catch (const std::exception& e) {
-    flush_error = e.what();
-  }
-  frame_lock.lock();
-  f->storing.erase(key);
+  staged = std::make_unique<StagedResult>(
+      StagedResult{std::move(r), job, f, run, std::move(buffer), key, std::move(writer)});
+  return std::nullopt;
+}
+
+bool Coordinator::commit_result(StagedResult& s, const std::string& flush_error, uint64_t& ticket) {
+  JobRecord* job = s.job.get();
+  FrameRecord* f = s.f;
+  const TaskResult& r = s.r;
+  std::unique_lock frame_lock(f->m);
+  f->storing.erase(s.key);
   if (!flush_error.empty()) {
     // Its record stays in the log, recorded nowhere else: after a restart it counts as a merged
     // result (as a result stored just before a crash does); here its task is leased again.
@@ -385,18 +459,20 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
     std::lock_guard lock(mu_);
     // Deleted, or requeued (its old run's folder goes), while the file was flushed.
     if (job->deleted) refuse(ErrorCode::NotFound, "no job '" + clip(job->id) + "'");
-    if (f->run != run) return false;
+    if (f->run != s.run) return false;
     if (journal_->problem().empty()) storage_ok();
-    if (!record_result(*job, r, buffer.header())) return false;
+    if (!record_result(*job, r, s.buffer.header())) return false;
     ++counters_.tasks_completed;
-    counters_.samples_merged += buffer.view().total_samples();
-    counters_.bytes_merged += buffer.bytes().size();
-    counters_.core_seconds += buffer.header().core_seconds;
+    counters_.samples_merged += s.buffer.view().total_samples();
+    counters_.bytes_merged += s.buffer.bytes().size();
+    counters_.core_seconds += s.buffer.header().core_seconds;
+    ++job->tasks_timed;
+    job->timed_core_seconds += s.buffer.header().core_seconds;
   }
   // The merge and the prefix checkpoint hold this frame's lock only: leases, renewals and other
   // frames' merges go on meanwhile.
   // (No accumulator: the frame ended while the file was flushed, its image in its checkpoint.)
-  bool merged = f->acc && f->acc->add(std::move(buffer)) == FrameAccumulator::AddResult::Merged;
+  bool merged = f->acc && f->acc->add(std::move(s.buffer)) == FrameAccumulator::AddResult::Merged;
   if (merged) {
     try {  // the task files stay until a prefix holding them is durable
       f->checkpoint->save_prefix(*f->acc);
@@ -405,14 +481,10 @@ bool Coordinator::complete(TaskResult r, const Caller& caller) {
       storage_failed(e.what());
     }
   }
-  Ledger::Ticket ticket = 0;
-  {
-    std::lock_guard lock(mu_);
-    publish_frame(*job, *f);
-    if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
-    ticket = journal_->append({});         // the last write queued: this result's and the rest
-  }
-  wait_stored(ticket, "the result's record");
+  std::lock_guard lock(mu_);
+  publish_frame(*job, *f);
+  if (f->progress.done) f->acc.reset();  // its image lives in the checkpoint now
+  ticket = journal_->append({});         // the last write queued: this result's and the rest
   return true;
 }
 

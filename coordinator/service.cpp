@@ -584,15 +584,17 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
       o->set_worker_id(reg.worker_id);
       o->set_lease_seconds(reg.lease_seconds);
       o->set_keepalive_seconds(reg.keepalive_seconds);
+      o->set_max_results_per_upload(Coordinator::kMaxResultsPerUpload);
+      o->set_max_upload_bytes(kMaxUploadBytes);
     });
   }
   Status LeaseTask(ServerContext* ctx, const pb::LeaseRequest* r, pb::LeaseResponse* o) override {
     return guarded(g_, ctx, Access::Worker, "LeaseTask", [&](const Caller& caller) {
-      LeaseResult l = c_.lease(r->worker_id(), caller);
+      LeaseResult l = c_.lease(r->worker_id(), caller, r->max_tasks());
       if (l.task)
         to_wire(*l.task, o->mutable_task());
-      else
-        o->set_no_more_work(l.no_more_work);
+      for (const TaskAssignment& a : l.more) to_wire(a, o->add_more());
+      if (!l.task) o->set_no_more_work(l.no_more_work);
     });
   }
   Status RenewLease(ServerContext* ctx, const pb::RenewRequest* r, pb::RenewResponse* o) override {
@@ -607,38 +609,118 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
                    [](pb::Chunk&& c, bool) { return std::move(c); });
     });
   }
-  // A header, then the sample buffer in chunks. The header is checked (job, task, lease held
-  // by this caller's worker) before a byte of the buffer is read.
+  // A header, then the sample buffer in chunks; in a batched upload the next header and chunks
+  // after them. Each header is checked (job, task, lease held by this caller's worker) before a
+  // byte of its buffer is read. One result is answered as before: a refusal is the call's
+  // status. Several are answered one by one in `results` (a refusal is that result's), once one
+  // flush made them all durable (Coordinator::complete_batch).
   Status CompleteTask(ServerContext* ctx, grpc::ServerReader<pb::CompleteRequest>* r,
                       pb::CompleteResponse* o) override {
     return guarded(g_, ctx, Access::Worker, "CompleteTask", [&](const Caller& caller) {
       pb::CompleteRequest msg;
       if (!r->Read(&msg) || !msg.has_header())
         bad_request("the first message of CompleteTask must be the header");
-      const pb::CompleteHeader header = msg.header();
-      std::optional<TaskRef> task = parse_task_id(header.task_id());
-      if (!task) bad_request("task_id '" + header.task_id().substr(0, 64) + "' is malformed");
-      if (!c_.check_upload(header.worker_id(), header.lease_id(), *task, caller)) {
-        o->set_accepted(false);  // the task needs nothing more: answered without reading on
+      const std::string worker = msg.header().worker_id();
+      const uint32_t count = std::max(1u, msg.header().results());
+      if (count > Coordinator::kMaxResultsPerUpload)
+        bad_request("an upload carries at most " +
+                    std::to_string(Coordinator::kMaxResultsPerUpload) + " results, not " +
+                    std::to_string(count));
+      const bool single = count == 1;
+      std::optional<UploadSlot> slot;
+      // Each result's answer so far (an error, or "not needed"), and what goes on to the core.
+      struct Received {
+        std::optional<CoordinatorError> error;
+        bool read = false;  // its buffer is in `results`
+      };
+      std::vector<Received> received;
+      std::vector<TaskResult> results;
+      uint64_t bytes = 0;
+      bool more = true;  // msg holds the next header
+      while (more) {
+        const pb::CompleteHeader header = msg.header();
+        more = false;
+        if (received.size() == count)
+          bad_request("the upload announced " + std::to_string(count) + " results and sent more");
+        if (header.worker_id() != worker)
+          bad_request("the results of one upload must all be of worker " + worker.substr(0, 64));
+        std::optional<TaskRef> task = parse_task_id(header.task_id());
+        if (!task) bad_request("task_id '" + header.task_id().substr(0, 64) + "' is malformed");
+        Received& got = received.emplace_back();
+        bool wanted = false;
+        try {
+          wanted = c_.check_upload(header.worker_id(), header.lease_id(), *task, caller);
+        } catch (const CoordinatorError& e) {
+          if (single) throw;  // answered as the call's status, without reading on
+          got.error = e;
+        }
+        if (single && !wanted && !got.error) {
+          o->set_accepted(false);  // the task needs nothing more: answered without reading on
+          return;
+        }
+        if (wanted && !slot) slot.emplace(*this, worker);
+        // The buffer's chunks, up to the next header or the end; a result not wanted (settled,
+        // refused) has its chunks read past.
+        const uint64_t limit = single ? o_.max_buffer_bytes : kMaxUploadBytes - bytes;
+        ChunkAssembler chunks(limit, ChunkAssembler::Digest::Optional);
+        std::optional<CoordinatorError> broken;
+        while (r->Read(&msg)) {
+          if (msg.has_header() && !single) {
+            more = true;
+            break;
+          }
+          if (!msg.has_chunk()) bad_request("only chunks may follow the header");
+          if (!wanted || broken) continue;
+          try {
+            check_chunks(chunks.add(msg.chunk()), "sample buffer", chunks);
+          } catch (const CoordinatorError& e) {
+            broken = e;
+          }
+        }
+        if (!wanted) continue;
+        if (!broken) try {
+            check_chunks(chunks.finish(), "sample buffer", chunks);
+          } catch (const CoordinatorError& e) {
+            broken = e;
+          }
+        if (broken) {
+          c_.refuse_upload(header.worker_id(), header.lease_id(), *task, broken->what(),
+                           {header.log().begin(), header.log().end()});
+          if (single) throw *broken;
+          got.error = broken;
+          continue;
+        }
+        std::string buffer = chunks.take();
+        bytes += buffer.size();
+        got.read = true;
+        results.push_back({header.worker_id(), header.lease_id(), std::move(*task),
+                           std::move(buffer),
+                           bounded_log({header.log().begin(), header.log().end()})});
+      }
+      if (single) {  // one result: as before batches
+        o->set_accepted(received[0].read && c_.complete(std::move(results[0]), caller));
         return;
       }
-      UploadSlot slot(*this, header.worker_id());
-      ChunkAssembler chunks(o_.max_buffer_bytes, ChunkAssembler::Digest::Optional);
-      try {
-        while (r->Read(&msg)) {
-          if (!msg.has_chunk()) bad_request("only chunks may follow the header");
-          check_chunks(chunks.add(msg.chunk()), "sample buffer", chunks);
+      if (received.size() != count)
+        bad_request("the upload announced " + std::to_string(count) + " results and sent " +
+                    std::to_string(received.size()));
+      std::vector<Coordinator::ResultOutcome> outcomes =
+          c_.complete_batch(std::move(results), caller);
+      size_t next = 0;
+      for (const Received& got : received) {
+        pb::ResultOutcome* out = o->add_results();
+        std::optional<CoordinatorError> error = got.error;
+        if (got.read) {
+          const Coordinator::ResultOutcome& done = outcomes[next++];
+          error = done.error;
+          out->set_accepted(done.accepted);
         }
-        check_chunks(chunks.finish(), "sample buffer", chunks);
-      } catch (const CoordinatorError& e) {
-        c_.refuse_upload(header.worker_id(), header.lease_id(), *task, e.what(),
-                         {header.log().begin(), header.log().end()});
-        throw;
+        if (error) {
+          out->set_code(int32_t(grpc_code(error->code)));
+          out->set_message(error->what());
+        }
       }
-      o->set_accepted(
-          c_.complete({header.worker_id(), header.lease_id(), std::move(*task), chunks.take(),
-                       bounded_log({header.log().begin(), header.log().end()})},
-                      caller));
+      o->set_accepted(o->results(0).accepted());
     });
   }
   Status FailTask(ServerContext* ctx, const pb::FailRequest* r, pb::FailResponse*) override {
@@ -657,6 +739,8 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
   // refused with RESOURCE_EXHAUSTED over kUploadsPerWorker, so one worker id cannot hold many
   // buffers in memory at once.
   static constexpr int kUploadsPerWorker = 2;
+  // A batched upload's results together (one result alone may be up to max_buffer_bytes).
+  static constexpr uint64_t kMaxUploadBytes = uint64_t(64) << 20;
   class UploadSlot {
    public:
     UploadSlot(WorkerServiceImpl& s, const std::string& worker) : s_(s), worker_(worker) {

@@ -5,6 +5,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cctype>
 #include <filesystem>
 #include "engine/digest.h"
@@ -154,7 +155,8 @@ bool Coordinator::check_lease(const std::string& worker_id, const std::string& l
   return true;
 }
 
-LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& caller) {
+LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& caller,
+                               uint32_t max_tasks) {
   // The call's time in the core, lock wait included, recorded on every way out.
   struct Timed {
     CoordinatorMetrics::Counters& c;
@@ -195,18 +197,38 @@ LeaseResult Coordinator::lease(const std::string& worker_id, const Caller& calle
     out.no_more_work = !ledger_->scheduler().work_left_for(worker_id, may);
     return out;
   }
-  ++counters_.tasks_leased;
   std::shared_ptr<JobRecord> job = find(l->task.job_id);
-  FrameRecord* f = job->by_number.at(l->task.frame);
-  if (f->first_lease_at < 0) f->first_lease_at = now();
   if (job->state == JobState::Queued) set_state(*job, JobState::Running, "");
-  out.task = TaskAssignment{l->task,
-                            l->lease_id,
-                            job->tiles[l->task.tile],
-                            f->scene_path,
-                            job->files_of(f->version),
-                            job->spec.overrides,
-                            f->base.scene_digest};
+  auto assign = [&](const Lease& l) {
+    ++counters_.tasks_leased;
+    FrameRecord* f = job->by_number.at(l.task.frame);
+    if (f->first_lease_at < 0) f->first_lease_at = now();
+    return TaskAssignment{l.task,
+                          l.lease_id,
+                          job->tiles[l.task.tile],
+                          f->scene_path,
+                          job->files_of(f->version),
+                          job->spec.overrides,
+                          f->base.scene_digest};
+  };
+  out.task = assign(*l);
+  // Batched leases: more of the same job while its tasks are known to be short.
+  uint32_t batch = 1;
+  if (max_tasks > 1 && job->tasks_timed >= kTasksBeforeBatching) {
+    double task_seconds =
+        job->timed_core_seconds / double(job->tasks_timed) / double(std::max(1u, me.info.cores));
+    double fits = task_seconds > 0 ? kLeaseBatchSeconds / task_seconds : double(max_tasks);
+    batch = uint32_t(std::clamp(fits, 1.0, double(std::min(max_tasks, kMaxTasksPerLease))));
+  }
+  if (batch > 1) {
+    Journal::Hold hold(*journal_);  // the batch's lease rows in one transaction
+    Scheduler::JobFilter same_job = [&](const std::string& id) { return id == job->id; };
+    while (out.more.size() + 1 < batch)
+      if (std::optional<Lease> next = ledger_->lease(worker_id, now(), same_job))
+        out.more.push_back(assign(*next));
+      else
+        break;
+  }
   return out;
 }
 

@@ -75,7 +75,7 @@ ChunkAssembler::Status ChunkAssembler::finish() {
 }
 
 bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& stream,
-                  const rayfarm::v1::CompleteHeader& header, std::string_view payload) {
+                  const rayfarm::v1::CompleteHeader& header, std::string_view payload, bool last) {
   rayfarm::v1::CompleteRequest head;
   *head.mutable_header() = header;
   bool ok = stream.Write(head);
@@ -88,7 +88,7 @@ bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& str
         ok = stream.Write(m);
       },
       kChunkBytes, /*with_sha256=*/false);
-  if (ok) ok = stream.WritesDone();
+  if (ok && last) ok = stream.WritesDone();
   return ok;
 }
 

@@ -27,10 +27,11 @@ void for_each_chunk(std::string_view payload, const std::function<void(rayfarm::
                     size_t chunk_bytes = kChunkBytes, bool with_sha256 = true);
 
 // A CompleteTask upload's messages: the header, then `payload` (a sample buffer, which carries
-// its own checksum: no SHA-256 in the chunks) in chunks, then WritesDone. False when a write
-// failed (the stream is broken; Finish() says why).
+// its own checksum: no SHA-256 in the chunks) in chunks, then WritesDone unless more results
+// follow (a batched upload). False when a write failed (the stream is broken; Finish() says why).
 bool write_result(grpc::ClientWriterInterface<rayfarm::v1::CompleteRequest>& stream,
-                  const rayfarm::v1::CompleteHeader& header, std::string_view payload);
+                  const rayfarm::v1::CompleteHeader& header, std::string_view payload,
+                  bool last = true);
 
 // Reassembles chunks. Each problem maps to the gRPC status the receiver answers with.
 class ChunkAssembler {

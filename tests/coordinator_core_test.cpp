@@ -798,6 +798,66 @@ TEST(CoordinatorCore, RefusalsCarryTheirCodes) {
   EXPECT_EQ(refusal([&] { core.lease(bench.worker("w")); }), ErrorCode::Unavailable);
 }
 
+// Batched leases and uploads (docs/design.md "Batched leases"): a lease asks for up to 8 tasks
+// and gets one until the job has merged kTasksBeforeBatching results (their time unknown), then
+// 8 of the same job (these tasks take no measured time). Their results go up in one
+// complete_batch: a flush of the results' files covers all of them, each is answered on its own
+// (merged; a wrong buffer refused with its code; a second result of a task in the same batch not
+// needed), and the merged image is what singly completed results give.
+TEST(CoordinatorCore, ABatchOfResultsIsFlushedOnceAndEachIsAnsweredAlone) {
+  CoreBench bench("core-batch");
+  Coordinator& core = bench.core();
+  std::string job = bench.submit(4);  // 4 tiles a pass, 16 tasks
+  const std::string w = bench.worker("w");
+  LeaseResult first = core.lease(w, {}, 8);
+  ASSERT_TRUE(first.task);
+  EXPECT_TRUE(first.more.empty()) << "no batch before the job's tasks were timed";
+  EXPECT_TRUE(bench.complete(*first.task, 1.0f));
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(bench.complete(bench.lease(), 1.0f));
+  LeaseResult batch = core.lease(w, {}, 8);
+  ASSERT_TRUE(batch.task);
+  ASSERT_EQ(batch.more.size(), 7u);
+  std::vector<TaskAssignment> tasks{*batch.task};
+  tasks.insert(tasks.end(), batch.more.begin(), batch.more.end());
+  std::set<std::string> leases;
+  for (const TaskAssignment& a : tasks) {
+    EXPECT_EQ(a.task.job_id, job);
+    leases.insert(a.lease_id);
+  }
+  EXPECT_EQ(leases.size(), 8u) << "each task under its own lease";
+  std::vector<TaskResult> results;
+  for (const TaskAssignment& a : tasks)
+    results.push_back({w, a.lease_id, a.task, bench.result(a, 1.0f + float(a.task.pass))});
+  TaskAssignment wrong = tasks[2];
+  wrong.rect.w = 4;
+  results[2].buffer = bench.result(wrong, 1.0f);  // refused: it does not cover its tile
+  results.push_back(results[0]);                  // the same task again: not needed
+  const uint64_t flushes = core.metrics().counters.result_flushes;
+  std::vector<Coordinator::ResultOutcome> out = core.complete_batch(results);
+  EXPECT_EQ(core.metrics().counters.result_flushes, flushes + 1) << "one flush for the batch";
+  ASSERT_EQ(out.size(), 9u);
+  for (size_t i = 0; i < 8; ++i) {
+    if (i == 2) continue;
+    EXPECT_TRUE(out[i].accepted) << i;
+    EXPECT_FALSE(out[i].error) << i << ": " << out[i].error->what();
+  }
+  ASSERT_TRUE(out[2].error);
+  EXPECT_EQ(out[2].error->code, ErrorCode::InvalidArgument);
+  EXPECT_FALSE(out[2].accepted);
+  EXPECT_FALSE(out[8].accepted);
+  EXPECT_FALSE(out[8].error);
+  // The refused task is leased again; the rest of the job one task at a time.
+  for (int i = 0; i < 5; ++i) {
+    TaskAssignment a = bench.lease();
+    ASSERT_TRUE(bench.complete(a, 1.0f + float(a.task.pass)));
+  }
+  EXPECT_EQ(core.status(job).state, JobState::Completed);
+  SampleBuffer image = bench.image(job);
+  EXPECT_EQ(image.header.passes, PassSet::range(0, 4));
+  for (int y = 0; y < 16; ++y)  // passes of 1, 2, 3 and 4
+    for (int x = 0; x < 16; ++x) ASSERT_EQ(image.estimate(x, y)[0], 2.5f) << x << "," << y;
+}
+
 // Uploads, renewals and failures count only from the worker holding the lease, called by the
 // identity that registered it. Another identity using the holder's worker id, another worker
 // using its lease, invented worker or lease ids, and a lease sent with another task are refused;

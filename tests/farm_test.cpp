@@ -283,14 +283,15 @@ TEST(Farm, AFrameLargerThanTheCoordinatorsMemoryIsKeptInTilesAcrossAKill) {
 
 // Every result acknowledged to a worker survives a SIGKILL of the coordinator: results are
 // acknowledged only once their record is flushed (a group commit covers the results that arrive
-// together). Three workers on tasks of a few milliseconds; the coordinator is killed while
+// together, and a batched upload's results are flushed together). Three workers on tasks of a
+// few milliseconds, which they lease and upload in batches; the coordinator is killed while
 // results arrive by the dozen. Each task a worker logged "merged" before the kill is never
 // leased again after the restart (it is in the restored state), and the finished image holds
 // every task exactly once: the exact spp everywhere, and equal to the local render.
 TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
   Farm farm("farm-acks", /*lease_seconds=*/3);
-  const std::string job_args = kCornell + " --spp 256 --passes 64 --res 32x32";
-  std::string job = farm.submit(job_args + " --tile-size 8");  // 16 tiles x 64 passes
+  const std::string job_args = kCornell + " --spp 1024 --passes 256 --res 32x32";
+  std::string job = farm.submit(job_args + " --tile-size 8");  // 16 tiles x 256 passes
   // Workers that stay through the restart (an idle one would exit with --exit-when-idle while
   // the restored coordinator still holds the old leases).
   std::vector<Process*> workers{&farm.worker({}), &farm.worker({}), &farm.worker({})};
@@ -315,8 +316,11 @@ TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
   }
   farm.restart_coordinator(SIGKILL);  // at once: acks go on arriving until the kill
   ASSERT_GE(acked.size(), 150u);
+  bool batched = false;
+  for (Process* w : workers) batched |= w->log().find(" more\n") != std::string::npos;
+  EXPECT_TRUE(batched) << "no worker was leased a batch of tasks";
   nlohmann::json restored = farm.status(job);
-  ASSERT_LT(restored["frames"][0]["passes_merged"].get<int>(), 64)
+  ASSERT_LT(restored["frames"][0]["passes_merged"].get<int>(), 256)
       << "the job ended before the kill";
   ASSERT_EQ(farm.client("watch " + job).exit_code, 0) << farm.coordinator().log();
   for (size_t w = 0; w < workers.size(); ++w)
@@ -324,8 +328,8 @@ TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
       EXPECT_FALSE(acked.count(id))
           << "task " << id << " was acknowledged before the kill and leased again after";
   nlohmann::json done = farm.status(job);
-  EXPECT_EQ(done["frames"][0]["passes_merged"], 64);
-  EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 256.0);
+  EXPECT_EQ(done["frames"][0]["passes_merged"], 256);
+  EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 1024.0);
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
 }
@@ -709,10 +713,10 @@ TEST(Farm, PausedJobsWaitRaisedJobsGoFirstAndAResumedJobFinishesAsLocally) {
 TEST(Farm, ASmallJobIsNotStarvedByALargeOneOfTheSamePriority) {
   Farm farm("farm-share");
   const std::string large_args =
-      "scenes/cornell-box/scene.json --spp 16 --passes 8 --res 64x64 --tile-size 16";
+      "scenes/cornell-box/scene.json --spp 64 --passes 32 --res 64x64 --tile-size 16";
   const std::string small_args =
       "scenes/cornell-box/scene.json --spp 4 --passes 2 --res 32x32 --tile-size 16";
-  const std::string large = farm.submit(large_args + " --frames 1-8");  // 1,024 tasks
+  const std::string large = farm.submit(large_args + " --frames 1-8");  // 4,096 tasks
   farm.worker();
   farm.worker();
   for (int i = 0; i < 200 && farm.status(large)["state"] != "running"; ++i)
@@ -723,7 +727,7 @@ TEST(Farm, ASmallJobIsNotStarvedByALargeOneOfTheSamePriority) {
   EXPECT_EQ(s["state"], "running") << "the small job finished first";
   int merged = 0;
   for (const auto& f : s["frames"]) merged += f["passes_merged"].get<int>();
-  EXPECT_LT(merged, 64) << s.dump();
+  EXPECT_LT(merged, 256) << s.dump();
   EXPECT_EQ(farm.client("watch " + large).exit_code, 0);
   ASSERT_EQ(farm.client("fetch " + small + " -o " + farm.dir() + "/out-" + small).exit_code, 0);
   expect_same_image(farm.fetched(small, 1), farm.local(small_args, 1));
@@ -1131,7 +1135,7 @@ TEST(Farm, LogsShowEveryAttemptWithItsWorkerOutcomeAndLogLines) {
 // equal the local renders and every frame must have exactly the spp asked.
 TEST(LongFarm, RandomKillsOfWorkersAndCoordinatorLoseNothing) {
   Farm farm("farm-soak", /*lease_seconds=*/2);
-  const std::string job_args = kCornell + " --spp 512 --passes 32 --res 96x96";
+  const std::string job_args = kCornell + " --spp 1024 --passes 64 --res 96x96";
   std::string job = farm.submit(job_args + " --frames 1-4 --tile-size 32");
   std::vector<Process*> live{&farm.worker({}), &farm.worker({}), &farm.worker({})};
   std::mt19937 rng(12345);
@@ -1156,8 +1160,8 @@ TEST(LongFarm, RandomKillsOfWorkersAndCoordinatorLoseNothing) {
   EXPECT_GE(kills, 10);
   nlohmann::json s = farm.status(job);
   for (const auto& f : s["frames"]) {
-    EXPECT_EQ(f["passes_merged"], 32);
-    EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 512.0);
+    EXPECT_EQ(f["passes_merged"], 64);
+    EXPECT_DOUBLE_EQ(f["spp"].get<double>(), 1024.0);
   }
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   for (FrameNumber f = 1; f <= 4; ++f)

@@ -391,6 +391,57 @@ TEST(Security, UploadsAreAcceptedOnlyFromTheWorkerHoldingTheLease) {
     EXPECT_LT(written, 300) << "the stream went on after the refusal";
     EXPECT_LT(during - before, 64 * 1024) << "RSS " << before << " -> " << during << " KiB";
   }
+  {  // batched uploads: a malformed batch fails as a whole; a sound one answers each result
+    std::optional<pb::Task> again = test::lease_task(*stub, me);
+    ASSERT_TRUE(again);
+    pb::Task forged = *again;  // another task under this lease
+    forged.set_task_id(job + "/1/0/" + (again->task_id() == job + "/1/0/2" ? "1" : "2"));
+    struct Sent {
+      std::string worker;
+      pb::Task task;
+    };
+    auto batch = [&](uint32_t announce, const std::vector<Sent>& results,
+                     pb::CompleteResponse* resp) {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+      auto w = stub->CompleteTask(&ctx, resp);
+      for (size_t i = 0; i < results.size(); ++i) {
+        pb::CompleteRequest head;
+        head.mutable_header()->set_worker_id(results[i].worker);
+        head.mutable_header()->set_lease_id(results[i].task.lease_id());
+        head.mutable_header()->set_task_id(results[i].task.task_id());
+        if (i == 0) head.mutable_header()->set_results(announce);
+        if (!w->Write(head)) break;
+        for (const pb::Chunk& c : garbage) {
+          pb::CompleteRequest m;
+          *m.mutable_chunk() = c;
+          w->Write(m);
+        }
+      }
+      w->WritesDone();
+      return w->Finish();
+    };
+    pb::CompleteResponse resp;
+    grpc::Status st = batch(3, {{me, *again}, {me, forged}}, &resp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << "3 announced, 2 sent";
+    EXPECT_NE(st.error_message().find("announced 3 results and sent 2"), std::string::npos)
+        << st.error_message();
+    st = batch(2, {{me, *again}, {me, forged}, {me, forged}}, &resp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << "2 announced, 3 sent";
+    st = batch(65, {{me, *again}}, &resp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << st.error_message();
+    st = batch(2, {{me, *again}, {"invented", forged}}, &resp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << "two workers in one batch";
+    pb::CompleteResponse answered;
+    st = batch(2, {{me, forged}, {me, *again}}, &answered);
+    ASSERT_TRUE(st.ok()) << st.error_message();
+    ASSERT_EQ(answered.results_size(), 2);
+    EXPECT_EQ(answered.results(0).code(), int(grpc::StatusCode::PERMISSION_DENIED))
+        << answered.results(0).message();
+    EXPECT_EQ(answered.results(1).code(), int(grpc::StatusCode::INVALID_ARGUMENT))
+        << "garbage under its own lease: " << answered.results(1).message();
+    EXPECT_FALSE(answered.results(0).accepted() || answered.results(1).accepted());
+  }
   EXPECT_EQ(farm.status(job)["state"], "running");
   farm.worker();
   EXPECT_EQ(farm.client("watch " + job).exit_code, 0);

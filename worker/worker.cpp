@@ -226,14 +226,42 @@ class Worker {
   // Keeps the blob cache within WorkerOptions::cache_bytes: the least recently used blobs go
   // first, never those of `keep` (the bundle being set up).
   void bound_cache(const std::vector<BundleEntry>& keep);
-  // The previous task's upload runs while the next task renders, hiding the round trip and the
-  // coordinator's durable write. At most one upload is in flight.
+  // Uploads run while the next tasks render, hiding the round trip and the coordinator's
+  // durable write. One upload call is in flight at a time; the results finished meanwhile wait
+  // (at most max_results_ of them, or one larger than max_upload_bytes_) and go in the next call
+  // together (a batched upload: one flush on the coordinator for all of them).
+  struct PendingResult {
+    pb::Task task;
+    std::string bytes;  // the encoded sample buffer
+    double core_seconds = 0;
+    std::vector<std::string> log;
+  };
   std::thread uploader_;
+  std::mutex upload_mu_;
+  std::condition_variable upload_cv_;
+  std::deque<PendingResult> pending_;  // under upload_mu_
+  uint64_t pending_bytes_ = 0;         // under upload_mu_
+  bool uploading_ = false;             // under upload_mu_: uploader_ runs
+  size_t max_results_ = 1;             // per upload (the coordinator's bound; 1 before batches)
+  uint64_t max_upload_bytes_ = 0;
   void start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds,
                     std::vector<std::string> log);
+  void upload_loop();
+  void upload(std::vector<PendingResult> batch);
+  // Waits until every result handed to start_upload has been answered.
   void finish_upload() {
+    {
+      std::unique_lock lock(upload_mu_);
+      upload_cv_.wait(lock, [&] { return !uploading_; });
+    }
     if (uploader_.joinable()) uploader_.join();
   }
+  // Batched leases: tasks leased together wait here for their turn (main thread only).
+  std::deque<pb::Task> queued_;
+  static constexpr uint32_t kLeaseBatch = 64;  // tasks asked for per lease
+  // Hands the queued tasks back (shutting down, or at --max-tasks): re-queued, not failures.
+  void hand_back_queued(const std::string& why);
+  void renew(const pb::Task& task, bool& renewing);
   static constexpr size_t kScenesKept = 2;
 };
 
@@ -328,6 +356,8 @@ bool Worker::register_self() {
     worker_id_ = resp.worker_id();
     lease_seconds_ = std::max(1u, resp.lease_seconds());
     keepalive_seconds_ = std::max(1u, resp.keepalive_seconds());
+    max_results_ = std::max<size_t>(1, resp.max_results_per_upload());
+    max_upload_bytes_ = resp.max_upload_bytes();
     return true;
   };
   for (int attempt = 0;; ++attempt) {
@@ -502,30 +532,50 @@ void Worker::fail_task(const pb::Task& task, const std::string& message, bool ha
                  handed_back ? "the hand-back" : "the failure", s.error_message());
 }
 
-void Worker::upload(const pb::Task& task, const SampleBuffer& buffer, double core_seconds,
-                    const std::vector<std::string>& log) {
-  std::string bytes = encode_buffer(buffer);
-  for (int attempt = 0;; ++attempt) {
-    UploadAnswer answer =
-        upload_result(*stub_, worker_id_, task, bytes, core_seconds, 600, kWaitForReady, log);
-    const grpc::Status& s = answer.status;
-    if (s.ok()) {
-      heard_from_coordinator();
-      spdlog::info("task {}: {}", task.task_id(),
-                   answer.accepted ? "merged" : "not needed (another result was merged first)");
+// Sends the results in one call, each answered on its own. A coordinator that went away gets
+// them when it is back (a late result still counts while no one else's was merged), until
+// --give-up-after; a result refused for itself is reported as the task's failure.
+void Worker::upload(std::vector<PendingResult> batch) {
+  auto failed = [&](const PendingResult& r, const std::string& why) {
+    spdlog::error("task {}: {}", r.task.task_id(), why);
+    if (!stopping()) fail_task(r.task, why, false, r.log);
+  };
+  for (int attempt = 0; !batch.empty(); ++attempt) {
+    std::vector<UploadItem> items;
+    for (const PendingResult& r : batch) items.push_back({&r.task, r.bytes, r.core_seconds, r.log});
+    BatchAnswer answer = upload_results(*stub_, worker_id_, items, 600, kWaitForReady);
+    std::vector<PendingResult> again;
+    grpc::Status away;
+    for (size_t i = 0; i < batch.size(); ++i) {
+      const grpc::Status& s = answer.status.ok() ? answer.results[i].status : answer.status;
+      if (s.ok()) {
+        heard_from_coordinator();
+        spdlog::info(
+            "task {}: {}", batch[i].task.task_id(),
+            answer.results[i].accepted ? "merged" : "not needed (another result was merged first)");
+      } else if (!coordinator_away(s)) {
+        failed(batch[i], "upload: " + s.error_message());
+      } else {
+        away = s;
+        again.push_back(std::move(batch[i]));
+      }
+    }
+    batch = std::move(again);
+    if (batch.empty()) return;
+    try {
+      check_give_up(away);
+    } catch (const std::runtime_error& e) {
+      for (const PendingResult& r : batch) failed(r, e.what());
       return;
     }
-    // A coordinator that went away gets the result when it is back (a late result still counts
-    // while no one else's was merged), until --give-up-after.
-    if (!coordinator_away(s)) throw TaskFailure("upload: " + s.error_message());
-    try {
-      check_give_up(s);
-    } catch (const std::runtime_error& e) {
-      throw TaskFailure(e.what());
-    }
     if (attempt == 0)
-      spdlog::warn("task {}: upload failed ({}); retrying", task.task_id(), s.error_message());
-    if (!backoff(attempt)) throw TaskFailure("upload interrupted by shutdown");
+      spdlog::warn("task {}{}: upload failed ({}); retrying", batch[0].task.task_id(),
+                   batch.size() > 1 ? " and " + std::to_string(batch.size() - 1) + " more" : "",
+                   away.error_message());
+    if (!backoff(attempt)) {
+      for (const PendingResult& r : batch) failed(r, "upload interrupted by shutdown");
+      return;
+    }
   }
 }
 
@@ -571,27 +621,22 @@ void Worker::run_task(const pb::Task& task) {
     if (stopping() && Clock::now() >= stop_at_ + std::chrono::duration<double>(o_.drain_seconds)) {
       lock.unlock();
       spdlog::info("task {}: not finished within the drain time; handing it back", task.task_id());
-      finish_upload();  // the previous task's result still counts
+      finish_upload();  // the previous tasks' results still count
       fail_task(task, "worker shutting down", true, attempt_log_->take());
+      hand_back_queued("shutting down");
       // Exit with the render still running (it cannot be interrupted, and its stack frame must
       // outlive it); the coordinator re-queues the task without counting a failure.
       spdlog::shutdown();
       std::_Exit(0);
     }
-    if (renewing && Clock::now() >= next_renew) {
+    if (Clock::now() >= next_renew) {
       lock.unlock();
-      pb::RenewRequest req;
-      req.set_worker_id(worker_id_);
-      req.set_lease_id(task.lease_id());
-      grpc::ClientContext ctx;
-      set_deadline(ctx, within_give_up(10), kWaitForReady);
-      pb::RenewResponse resp;
-      grpc::Status s = stub_->RenewLease(&ctx, req, &resp);
-      if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
-          s.error_code() == grpc::StatusCode::NOT_FOUND) {
-        spdlog::info("task {}: lease ended ({}); finishing anyway", task.task_id(),
-                     s.error_message());
-        renewing = false;
+      if (renewing) renew(task, renewing);
+      // The tasks leased with it wait their turn under leases of their own.
+      for (auto it = queued_.begin(); it != queued_.end();) {
+        bool held = true;
+        renew(*it, held);
+        it = held ? it + 1 : queued_.erase(it);  // ended: re-queued by the coordinator
       }
       lock.lock();
     }
@@ -615,17 +660,67 @@ void Worker::run_task(const pb::Task& task) {
 
 void Worker::start_upload(const pb::Task& task, SampleBuffer&& buffer, double core_seconds,
                           std::vector<std::string> log) {
-  finish_upload();
-  uploader_ =
-      std::thread([this, task, buffer = std::move(buffer), core_seconds, log = std::move(log)] {
-        attempt_log_->skip_this_thread();  // its lines are the previous task's
-        try {
-          upload(task, buffer, core_seconds, log);
-        } catch (const TaskFailure& e) {
-          spdlog::error("task {}: {}", task.task_id(), e.what());
-          if (!stopping()) fail_task(task, e.what(), false, log);
-        }
-      });
+  std::string bytes = encode_buffer(buffer);
+  buffer = SampleBuffer();
+  std::unique_lock lock(upload_mu_);
+  // No more waiting than one call's worth: the render goes on once the uploader takes them.
+  upload_cv_.wait(lock, [&] {
+    return pending_.empty() ||
+           (pending_.size() < max_results_ && pending_bytes_ + bytes.size() <= max_upload_bytes_);
+  });
+  pending_bytes_ += bytes.size();
+  pending_.push_back({task, std::move(bytes), core_seconds, std::move(log)});
+  if (uploading_) return;  // the running uploader takes it next
+  lock.unlock();
+  if (uploader_.joinable()) uploader_.join();  // finished: it cleared uploading_ on its way out
+  lock.lock();
+  uploading_ = true;
+  uploader_ = std::thread([this] { upload_loop(); });
+}
+
+void Worker::upload_loop() {
+  attempt_log_->skip_this_thread();  // its lines are the tasks' already taken
+  std::unique_lock lock(upload_mu_);
+  while (!pending_.empty()) {
+    std::vector<PendingResult> batch;
+    uint64_t bytes = 0;
+    while (!pending_.empty() && batch.size() < max_results_ &&
+           (batch.empty() || bytes + pending_.front().bytes.size() <= max_upload_bytes_)) {
+      bytes += pending_.front().bytes.size();
+      batch.push_back(std::move(pending_.front()));
+      pending_.pop_front();
+    }
+    pending_bytes_ -= bytes;
+    upload_cv_.notify_all();
+    lock.unlock();
+    upload(std::move(batch));
+    lock.lock();
+  }
+  uploading_ = false;
+  upload_cv_.notify_all();
+}
+
+void Worker::hand_back_queued(const std::string& why) {
+  while (!queued_.empty()) {
+    spdlog::info("task {}: {}; handing it back", queued_.front().task_id(), why);
+    fail_task(queued_.front(), "worker " + why, true, {});
+    queued_.pop_front();
+  }
+}
+
+void Worker::renew(const pb::Task& task, bool& renewing) {
+  pb::RenewRequest req;
+  req.set_worker_id(worker_id_);
+  req.set_lease_id(task.lease_id());
+  grpc::ClientContext ctx;
+  set_deadline(ctx, within_give_up(10), kWaitForReady);
+  pb::RenewResponse resp;
+  grpc::Status s = stub_->RenewLease(&ctx, req, &resp);
+  if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
+      s.error_code() == grpc::StatusCode::NOT_FOUND) {
+    spdlog::info("task {}: lease ended ({}); finishing anyway", task.task_id(), s.error_message());
+    renewing = false;
+  }
 }
 
 int Worker::run() {
@@ -665,8 +760,17 @@ int Worker::serve() {
   int tasks = 0, attempt = 0;
   while (!stopping()) {
     beat();
+    if (!queued_.empty()) {  // leased with an earlier task
+      pb::Task task = std::move(queued_.front());
+      queued_.pop_front();
+      run_task(task);
+      if (o_.max_tasks > 0 && ++tasks >= o_.max_tasks) break;
+      continue;
+    }
     pb::LeaseRequest req;
     req.set_worker_id(worker_id_);
+    req.set_max_tasks(o_.max_tasks > 0 ? std::min<uint32_t>(kLeaseBatch, o_.max_tasks - tasks)
+                                       : kLeaseBatch);
     grpc::ClientContext ctx;
     set_deadline(ctx, within_give_up(5), kWaitForReady);
     pb::LeaseResponse resp;
@@ -705,10 +809,17 @@ int Worker::serve() {
       sleep_unless_stopped(o_.idle_poll_seconds);
       continue;
     }
-    spdlog::info("task {}: leased ({})", resp.task().task_id(), resp.task().lease_id());
+    spdlog::info(
+        "task {}: leased ({}){}", resp.task().task_id(), resp.task().lease_id(),
+        resp.more_size() > 0 ? ", with " + std::to_string(resp.more_size()) + " more" : "");
+    for (const pb::Task& more : resp.more()) {
+      spdlog::info("task {}: leased ({})", more.task_id(), more.lease_id());
+      queued_.push_back(more);
+    }
     run_task(resp.task());
     if (o_.max_tasks > 0 && ++tasks >= o_.max_tasks) break;
   }
+  hand_back_queued(stopping() ? "shutting down" : "done");
   finish_upload();
   remove_bundle_dirs();
   spdlog::info("worker {} stopped", worker_id_);
