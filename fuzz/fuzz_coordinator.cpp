@@ -133,7 +133,7 @@ const BufferHeader& valid_header(uint32_t pass, const SceneOverrides& overrides)
   return headers[pass] = frame_header(scene, 1, PassSet::range(pass, pass + 1));
 }
 
-constexpr int kRequests = 24;  // the operations of Farm::request
+constexpr int kRequests = 25;  // the operations of Farm::request
 
 const Caller kCallers[] = {
     {"admin", "ops", true}, {"alice", "shot1", false}, {"bob", "shot2", false}};
@@ -238,8 +238,15 @@ class Farm {
       }
       case 3: {
         std::string w = worker_id(in);
-        LeaseResult l = core_->lease(w, caller);
+        LeaseResult l = core_->lease(w, caller, in.byte() % 70);  // batches, over the bound too
         if (l.task) leases_.push_back({*l.task, w});
+        for (const TaskAssignment& more : l.more) {
+          if (more.task.job_id != l.task->task.job_id)
+            finding("a batched lease handed out tasks of two jobs");
+          leases_.push_back({more, w});
+        }
+        if (l.more.size() >= Coordinator::kMaxTasksPerLease)
+          finding("a lease handed out " + std::to_string(l.more.size() + 1) + " tasks");
         if (trace_ && l.task)
           std::fprintf(stderr, "  %s leased %s (%s)\n", w.c_str(),
                        task_id_text(l.task->task).c_str(), l.task->lease_id.c_str());
@@ -384,10 +391,38 @@ class Farm {
         core_->set_priority(job, int(int32_t(in.u32())), caller);
         return;
       }
+      case 24: {  // a batched upload: up to 8 results, each as upload() makes them
+        std::vector<TaskResult> batch;
+        for (int n = 1 + in.byte() % 8; n > 0; --n)
+          if (std::optional<TaskResult> r = result(caller, in)) batch.push_back(std::move(*r));
+        const size_t sent = batch.size();
+        std::vector<Coordinator::ResultOutcome> out =
+            core_->complete_batch(std::move(batch), caller);
+        if (out.size() != sent)
+          finding("a batch of " + std::to_string(sent) + " got " + std::to_string(out.size()) +
+                  " answers");
+        for (const Coordinator::ResultOutcome& o : out)
+          if (o.accepted && o.error) finding("a batched result both taken and refused");
+        return;
+      }
     }
   }
 
   void upload(const Caller& caller, Reader& in) {
+    std::optional<TaskResult> r = result(caller, in);
+    if (!r) return;
+    const std::string worker = r->worker_id, lease = r->lease_id, task = task_id_text(r->task);
+    // True: merged, or (a verified task) held until a second worker's result agrees.
+    bool taken = core_->complete(std::move(*r), caller);
+    if (trace_)
+      std::fprintf(stderr, "  %s %s lease %s: %s\n", worker.c_str(), task.c_str(), lease.c_str(),
+                   taken ? "taken" : "not needed");
+  }
+
+  // A result as a worker (honest, careless or hostile) sends it: of a held lease or invented,
+  // valid, damaged or arbitrary bytes; none when the service would not read on (its task id does
+  // not parse, or check_upload says it is not needed).
+  std::optional<TaskResult> result(const Caller& caller, Reader& in) {
     const Held* h = pick(leases_, in);
     TaskResult r;
     r.worker_id = h && in.byte() & 1 ? h->worker_id : worker_id(in);
@@ -397,7 +432,7 @@ class Farm {
     } else if (std::optional<TaskRef> t = parse_task_id(in.str())) {
       r.task = *t;
     } else {
-      return;  // the service refuses a task id that does not parse
+      return std::nullopt;  // the service refuses a task id that does not parse
     }
     uint8_t kind = in.byte() % 3;
     if (kind == 2 || !h || r.task.job_id != job0_) {
@@ -417,13 +452,8 @@ class Farm {
         for (int i = in.byte() % 4; i > 0 && !r.buffer.empty(); --i)
           r.buffer[in.u32() % r.buffer.size()] ^= char(in.byte() | 1);
     }
-    if (!core_->check_upload(r.worker_id, r.lease_id, r.task, caller)) return;
-    // True: merged, or (a verified task) held until a second worker's result agrees.
-    bool taken = core_->complete(r, caller);
-    if (trace_)
-      std::fprintf(stderr, "  %s %s lease %s: %s\n", r.worker_id.c_str(),
-                   task_id_text(r.task).c_str(), r.lease_id.c_str(),
-                   taken ? "taken" : "not needed");
+    if (!core_->check_upload(r.worker_id, r.lease_id, r.task, caller)) return std::nullopt;
+    return r;
   }
 
   // The valid job's figures agree with each other.
