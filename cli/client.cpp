@@ -7,6 +7,13 @@
 
 namespace rf::cli {
 
+void add_progress_option(CLI::App* c, std::string* progress) {
+  c->add_option("--progress", *progress,
+                "text (default), or openjd: Open Job Description progress lines "
+                "(openjd_progress: PERCENT, openjd_status: TEXT) for job runners")
+      ->check(CLI::IsMember({"text", "openjd"}));
+}
+
 void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
   auto add_addr = [&](CLI::App* c, double* timeout) {
     c->add_option("--coordinator", shared.coordinator,
@@ -21,12 +28,13 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     OverrideArgs overrides;
     SubmitArgs submit;
     std::string job, fetch_dir, fetch_frames, retry_frames, requeue_scene, health_addr;
-    bool json = false, services = false, force = false;
+    bool json = false, services = false, force = false, wait = false;
+    std::string progress = "text";
     StatusPage page;
     std::optional<FrameNumber> fetch_frame, logs_frame;
     std::string logs_task;
     uint32_t logs_limit = 0;
-    float fetch_exposure = 0;
+    FetchOutput fetch;
     double timeout = 300;
     int priority = 0;
   };
@@ -60,9 +68,15 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                    "a worker tag the job needs: NAME, NAME=VALUE or NAME>=NUMBER (repeatable; "
                    "pool=NAME picks a worker pool)")
       ->check([](const std::string& r) { return requirement_problem(r); });
+  submit->add_flag("--json", a->json, "print {\"job_id\": ...}; with --wait, watch's JSON lines");
+  submit->add_flag("--wait", a->wait,
+                   "then watch the job until it ends (exit status as watch's: 0 completed)");
+  add_progress_option(submit, &a->progress);
   out.push_back({submit, [a, ep] {
                    a->submit.overrides = overrides_of(a->overrides);
-                   return cmd_submit(ep(), a->submit);
+                   std::optional<WatchOutput> wait;
+                   if (a->wait) wait = WatchOutput{a->json, a->progress == "openjd"};
+                   return cmd_submit(ep(), a->submit, a->json, wait);
                  }});
 
   auto* status = app.add_subcommand("status", "all jobs (or one), one line each");
@@ -77,7 +91,11 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   auto* watch = app.add_subcommand("watch", "follow a job until it ends (exit 0: completed)");
   add_addr(watch, &a->timeout);
   watch->add_option("job", a->job, "job id")->required();
-  out.push_back({watch, [a, ep] { return cmd_watch(ep(), a->job); }});
+  watch->add_flag("--json", a->json, "JSON lines: one per frame update, then the job's end");
+  add_progress_option(watch, &a->progress);
+  out.push_back({watch, [a, ep] {
+                   return cmd_watch(ep(), a->job, {a->json, a->progress == "openjd"});
+                 }});
 
   auto* fetch = app.add_subcommand("fetch", "write a job's frames (EXR + PNG), also mid-job");
   add_addr(fetch, &a->timeout);
@@ -91,13 +109,16 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                           ->check(finite_in(-2147483648.0, 2147483647.0));
   fetch->add_option("--frames", a->fetch_frames, "only these frames (1-24, 1-24:2, 1,5,9)")
       ->excludes(fetch_frame);
-  fetch->add_option("--exposure", a->fetch_exposure, "PNG exposure in stops")
+  fetch->add_option("--exposure", a->fetch.exposure, "PNG exposure in stops")
       ->check(finite_in(-64, 64));
+  fetch->add_flag("!--no-png", a->fetch.png, "no PNG preview beside each EXR");
+  fetch->add_flag("--half", a->fetch.half, "half-float EXR channels (half the file)");
+  fetch->add_flag("--json", a->fetch.json, "one JSON line per frame written (files, figures)");
   out.push_back({fetch, [a, ep] {
                    return cmd_fetch(
                        ep(), a->job, a->fetch_dir,
                        a->fetch_frame ? std::to_string(*a->fetch_frame) : a->fetch_frames,
-                       a->fetch_exposure);
+                       a->fetch);
                  }});
 
   auto* cancel = app.add_subcommand("cancel", "cancel a job");
@@ -182,11 +203,12 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                      "plaintext)");
   health->add_option("address", a->health_addr, "HOST:PORT (default: as --coordinator)");
   health->add_flag("--services", a->services, "also list its services (server reflection)");
+  health->add_flag("--json", a->json, "{\"address\": ..., \"status\": ..., \"services\": [...]}");
   out.push_back({health, [a, &shared] {
                    Endpoint e{a->health_addr.empty() ? shared.coordinator : a->health_addr,
                               load_client_credentials("", shared.tls_ca, "", "")};
                    e.creds.token.clear();  // the health service takes none
-                   return cmd_health(e, a->services);
+                   return cmd_health(e, a->services, a->json);
                  }});
 }
 

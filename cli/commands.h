@@ -40,6 +40,8 @@ struct SharedOptions {
 // A CLI11 check: a finite number in [lo, hi]. (CLI11's Range and PositiveNumber let NaN through,
 // and an unsigned option takes "-1" as 2^64-1: every numeric flag gets one of these.)
 CLI::Validator finite_in(double lo, double hi);
+// --progress text|openjd (render, watch, submit --wait): Open Job Description progress lines.
+void add_progress_option(CLI::App* c, std::string* progress);
 // A size in bytes, with an optional binary unit (K, M, G, T). Throws CLI::ValidationError.
 uint64_t byte_size_option(const std::string& name, const std::string& v);
 

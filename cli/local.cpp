@@ -2,9 +2,11 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <regex>
 
@@ -51,32 +53,48 @@ std::string human(double v) {
   return buf;
 }
 
-// Progress on stderr: a bar redrawn in place on a terminal, plain lines every 5 s otherwise.
+// Progress: on stderr, a bar with the ETA redrawn in place on a terminal, plain lines every 5 s
+// otherwise; or (--progress openjd) Open Job Description lines on stdout, `openjd_progress:
+// PERCENT` over all the frames of the render (frame `index` of `count`).
 class ProgressPrinter {
  public:
-  explicit ProgressPrinter(bool quiet) : quiet_(quiet), tty_(::isatty(2)) {}
+  ProgressPrinter(bool quiet, bool openjd, size_t index, size_t count)
+      : quiet_(quiet), openjd_(openjd), tty_(::isatty(2)), index_(index), count_(count) {}
   void operator()(const LocalProgress& p) {
-    if (quiet_ || p.tasks_total == 0) return;
+    if (p.tasks_total == 0) return;
     double frac = double(p.tasks_done) / double(p.tasks_total);
+    if (openjd_) {  // whatever --quiet says: a job runner reads these
+      double percent = std::floor(1000.0 * (double(index_) + frac) / double(count_)) / 10;
+      if (percent != last_percent_) std::printf("openjd_progress: %.1f\n", percent);
+      std::fflush(stdout);
+      last_percent_ = percent;
+      return;
+    }
+    if (quiet_) return;
+    // The time per task so far, over the tasks left (a noise target may stop sooner).
+    const std::string eta = p.tasks_done == p.tasks_total ? "done"
+                            : frac > 0 ? "ETA " + duration_text(p.seconds * (1 - frac) / frac)
+                                       : "ETA ?";
     if (tty_) {
       int width = 30, filled = int(frac * width);
       std::string bar(size_t(filled), '#');
       bar.append(size_t(width - filled), '.');
-      std::fprintf(stderr, "\r[%s] %5.1f%%  passes %u/%u  relMSE %.3g  %.1f s   ", bar.c_str(),
-                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+      std::fprintf(stderr, "\r[%s] %5.1f%%  passes %u/%u  relMSE %.3g  %.1f s  %s   ", bar.c_str(),
+                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds, eta.c_str());
       if (p.tasks_done == p.tasks_total) std::fprintf(stderr, "\n");
     } else if (p.seconds - last_line_ >= 5.0 || p.tasks_done == p.tasks_total) {
       if (p.tasks_done == p.tasks_total && done_printed_) return;
       done_printed_ = p.tasks_done == p.tasks_total;
       last_line_ = p.seconds;
-      std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s\n",
-                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds);
+      std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s, %s\n",
+                   100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds, eta.c_str());
     }
   }
 
  private:
-  bool quiet_, tty_;
-  double last_line_ = -1e9;
+  bool quiet_, openjd_, tty_;
+  size_t index_, count_;
+  double last_line_ = -1e9, last_percent_ = -1;
   bool done_printed_ = false;
 };
 
@@ -100,6 +118,23 @@ void print_summary(const FrameBands& frame, double seconds, uint64_t rays) {
               frame.rel_mse(), info.header.passes.count());
 }
 
+// A double for JSON: null when it is not finite (JSON has no NaN).
+nlohmann::json number_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nullptr; }
+
+// The summary as one JSON line (render --json): a frame's figures and the files written.
+nlohmann::json summary_json(const FrameBands& frame, double seconds, uint64_t rays) {
+  const SampleBuffer& info = frame.info();
+  double spp = samples_per_pixel(frame);
+  uint32_t passes = info.header.passes.count();
+  return {{"spp", spp},
+          {"seconds", seconds},
+          {"samples_per_second", number_or_null(spp * double(info.rect.area()) / seconds)},
+          {"rays_per_second", number_or_null(double(rays) / seconds)},
+          {"rays", rays},
+          {"passes", passes},
+          {"rel_mse", passes >= 2 ? number_or_null(frame.rel_mse()) : nullptr}};
+}
+
 // The default of render --memory: a quarter of the machine's memory (a frame held whole may need
 // about twice its size with a pass of results in flight).
 uint64_t default_memory_budget() {
@@ -117,6 +152,10 @@ struct RenderArgs {
   int tile = 32;
   float exposure = 0;
   bool quiet = false;
+  bool json = false;  // the summary as JSON lines on stdout
+  bool png = true;    // --no-png: the EXR only
+  bool half = false;  // half-float EXR
+  std::string progress = "text";
 };
 
 // One frame of a render: its number and its files (the scene, -o and --partial expanded).
@@ -154,7 +193,8 @@ std::vector<FrameFiles> frame_files(const RenderArgs& a) {
 
 // Renders one frame of a loaded scene and writes its files.
 void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& renderer,
-                  const FrameFiles& f, bool name_frame) {
+                  const FrameFiles& f, size_t index, size_t count) {
+  const bool name_frame = count > 1;
   LocalRenderOptions opt;
   opt.tile_size = a.tile;
   opt.frame = f.frame;
@@ -175,9 +215,11 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
         std::filesystem::path(f.output.empty() ? f.partial : f.output).parent_path();
     opt.spill_dir = beside.empty() ? "." : beside.string();
   }
-  ProgressPrinter printer(a.quiet);
+  ProgressPrinter printer(a.quiet, a.progress == "openjd", index, count);
   opt.progress = [&](const LocalProgress& p) { printer(p); };
   if (name_frame && !a.quiet) std::fprintf(stderr, "frame %d\n", f.frame);
+  if (a.progress == "openjd")
+    std::printf("openjd_status: rendering frame %d (%zu of %zu)\n", f.frame, index + 1, count);
   LocalRenderResult res;
   try {
     res = render_local(renderer, opt);
@@ -211,9 +253,11 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
                  res.frame.header.passes.to_string().c_str());
   }
   if (!f.output.empty()) {
-    write_exr(f.output, image);
-    write_png(png_path_for(f.output), image, a.exposure);
-    std::fprintf(stderr, "wrote %s and %s\n", f.output.c_str(), png_path_for(f.output).c_str());
+    write_exr(f.output, image, {}, a.half ? ExrFormat::Half : ExrFormat::Float);
+    if (a.png) write_png(png_path_for(f.output), image, a.exposure);
+    if (!a.quiet)
+      std::fprintf(stderr, "wrote %s%s\n", f.output.c_str(),
+                   a.png ? (" and " + png_path_for(f.output)).c_str() : "");
   }
   if (res.stopped_on_target)
     std::fprintf(stderr, "noise target %.4g reached after %u of %u passes\n",
@@ -221,7 +265,20 @@ void render_frame(const RenderArgs& a, const Scene& scene, const Renderer& rende
   if (res.stopped_on_time)
     std::fprintf(stderr, "time budget %.1f s reached after %u of %u passes\n", a.time_budget,
                  res.passes_merged, scene.render.passes);
-  print_summary(image, res.seconds, res.rays);
+  if (a.json) {
+    nlohmann::json line = summary_json(image, res.seconds, res.rays);
+    line["frame"] = f.frame;
+    line["scene"] = f.scene;
+    line["exr"] = f.output.empty() ? nullptr : nlohmann::json(f.output);
+    line["png"] = f.output.empty() || !a.png ? nullptr : nlohmann::json(png_path_for(f.output));
+    line["partial"] = f.partial.empty() ? nullptr : nlohmann::json(f.partial);
+    line["stopped_on_target"] = res.stopped_on_target;
+    line["stopped_on_time"] = res.stopped_on_time;
+    std::printf("%s\n", line.dump().c_str());
+    std::fflush(stdout);
+  } else if (a.progress != "openjd") {
+    print_summary(image, res.seconds, res.rays);
+  }
 }
 
 // A frame, or a frame range: frames of one scene file share its parse and its BVH (a frame only
@@ -238,7 +295,7 @@ int cmd_render(const RenderArgs& a) {
   // Each frame's names (distinct frames get distinct names from a template).
   for (const FrameFiles& f : frames)
     check_outputs({{"-o", f.output},
-                   {"the PNG preview", f.output.empty() ? "" : png_path_for(f.output)},
+                   {"the PNG preview", f.output.empty() || !a.png ? "" : png_path_for(f.output)},
                    {"--partial", f.partial}});
   if (frames.size() > 1 && is_frame_pattern(a.scene))
     for (const FrameFiles& f : frames) {
@@ -268,17 +325,29 @@ int cmd_render(const RenderArgs& a) {
             "will be black",
             f.scene, scene->render.integrator.type());
     }
-    render_frame(a, *scene, *renderer, f, frames.size() > 1);
+    render_frame(a, *scene, *renderer, f, size_t(&f - frames.data()), frames.size());
   }
+  if (a.progress == "openjd")
+    std::printf("openjd_status: rendered %zu frame%s\n", frames.size(),
+                frames.size() > 1 ? "s" : "");
   return 0;
 }
 
-int cmd_merge(const std::vector<std::string>& inputs, const std::string& output, float exposure) {
+struct MergeArgs {
+  std::vector<std::string> inputs;
+  std::string output;
+  float exposure = 0;
+  bool png = true, half = false, json = false;
+};
+
+int cmd_merge(const MergeArgs& a) {
+  const std::vector<std::string>& inputs = a.inputs;
+  const std::string& output = a.output;
   if (inputs.empty()) throw UsageError("merge: no input files");
   check_extension("-o", output, {".exr", ".rfb"});
   bool rfb = std::filesystem::path(output).extension() == ".rfb";
   std::vector<std::pair<std::string, std::string>> paths = {
-      {"-o", output}, {"the PNG preview", rfb ? "" : png_path_for(output)}};
+      {"-o", output}, {"the PNG preview", rfb || !a.png ? "" : png_path_for(output)}};
   for (const std::string& in : inputs) {
     std::error_code ec;
     if (std::filesystem::is_directory(in, ec))
@@ -298,10 +367,24 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
   if (std::string ext = std::filesystem::path(output).extension().string(); ext == ".rfb") {
     write_buffer_file(output, merged);
   } else {
-    write_exr(output, merged);
-    write_png(png_path_for(output), merged, exposure);
+    write_exr(output, merged, {}, a.half ? ExrFormat::Half : ExrFormat::Float);
+    if (a.png) write_png(png_path_for(output), merged, a.exposure);
   }
   warn_nonfinite(merged.info());
+  const uint32_t passes = merged.info().header.passes.count();
+  if (a.json) {
+    std::printf(
+        "%s\n",
+        nlohmann::json({{"output", output},
+                        {"png", rfb || !a.png ? nullptr : nlohmann::json(png_path_for(output))},
+                        {"inputs", inputs.size()},
+                        {"passes", merged.info().header.passes.to_string()},
+                        {"spp", samples_per_pixel(merged)},
+                        {"rel_mse", passes >= 2 ? number_or_null(merged.rel_mse()) : nullptr}})
+            .dump()
+            .c_str());
+    return 0;
+  }
   std::fprintf(stderr, "merged %zu files: passes %s, spp %.0f, relMSE %.4g -> %s\n", inputs.size(),
                merged.info().header.passes.to_string().c_str(), samples_per_pixel(merged),
                merged.rel_mse(), output.c_str());
@@ -312,7 +395,7 @@ int cmd_merge(const std::vector<std::string>& inputs, const std::string& output,
 // `window` (x0,y0,x1,y1, pixels, half-open; empty = the whole image) restricts the comparison to
 // a region, e.g. the caustic that one integrator finds and another does not.
 int cmd_compare(const std::string& image, const std::string& reference,
-                const std::vector<int>& window) {
+                const std::vector<int>& window, bool json) {
   // A PNG preview holds tone-mapped 8-bit display values, an EXR linear radiance: their
   // difference measures the tone mapping, not the render.
   auto display = [](const std::string& path) {
@@ -343,7 +426,14 @@ int cmd_compare(const std::string& image, const std::string& reference,
   } catch (const std::invalid_argument& err) {
     throw UsageError("compare: " + image + " against " + reference + ": " + err.what());
   }
-  std::printf("rmse %.6g relmse %.6g mae %.6g\n", e.rmse, e.rel_mse, e.mae);
+  if (json)
+    std::printf("%s\n", nlohmann::json({{"rmse", number_or_null(e.rmse)},
+                                        {"rel_mse", number_or_null(e.rel_mse)},
+                                        {"mae", number_or_null(e.mae)}})
+                            .dump()
+                            .c_str());
+  else
+    std::printf("rmse %.6g relmse %.6g mae %.6g\n", e.rmse, e.rel_mse, e.mae);
   return 0;
 }
 
@@ -352,7 +442,10 @@ int cmd_compare(const std::string& image, const std::string& reference,
 void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Command>& out) {
   auto ra = std::make_shared<RenderArgs>();
   auto* render = app.add_subcommand("render", "render a scene locally to EXR + PNG");
-  render->add_option("scene", ra->scene, "scene file, or a per-frame pattern (shot.####.json)")
+  render
+      ->add_option("scene", ra->scene,
+                   "scene file (rayfarm JSON, pbrt-v4 .pbrt, Mitsuba 3 .xml, glTF .gltf/.glb), "
+                   "or a per-frame pattern (shot.####.json)")
       ->required();
   render->add_option("-o,--output", ra->output, "output EXR (a PNG preview is written beside it)");
   add_override_options(*render, ra->overrides);
@@ -387,23 +480,27 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   render->add_option("--exposure", ra->exposure, "PNG exposure in stops")
       ->check(finite_in(-64, 64));
   render->add_flag("-q,--quiet", ra->quiet, "no progress output");
+  render->add_flag("--json", ra->json,
+                   "the summary as one JSON line per frame on stdout (figures and files written)");
+  render->add_flag("!--no-png", ra->png, "no PNG preview beside the EXR");
+  render->add_flag("--half", ra->half, "half-float EXR channels (half the file)");
+  add_progress_option(render, &ra->progress);
   out.push_back({render, [ra] { return cmd_render(*ra); }});
 
-  struct MergeArgs {
-    std::vector<std::string> inputs;
-    std::string output;
-    float exposure = 0;
-  };
   auto ma = std::make_shared<MergeArgs>();
   auto* merge = app.add_subcommand("merge", "merge partial sample buffers (.rfb) into an image");
   merge->add_option("inputs", ma->inputs, "partial results")->required();
   merge->add_option("-o,--output", ma->output, "output .exr (plus .png) or .rfb")->required();
   merge->add_option("--exposure", ma->exposure, "PNG exposure in stops")->check(finite_in(-64, 64));
-  out.push_back({merge, [ma] { return cmd_merge(ma->inputs, ma->output, ma->exposure); }});
+  merge->add_flag("!--no-png", ma->png, "no PNG preview beside the EXR");
+  merge->add_flag("--half", ma->half, "half-float EXR channels (half the file)");
+  merge->add_flag("--json", ma->json, "the result as one JSON line on stdout");
+  out.push_back({merge, [ma] { return cmd_merge(*ma); }});
 
   struct CompareArgs {
     std::string image, reference;
     std::vector<int> window;
+    bool json = false;
   };
   auto ca = std::make_shared<CompareArgs>();
   auto* compare = app.add_subcommand("compare", "error of an image against a reference image");
@@ -412,7 +509,9 @@ void add_local_commands(CLI::App& app, SharedOptions& shared, std::vector<Comman
   compare->add_option("--window", ca->window, "compare only pixels X0,Y0,X1,Y1 (half-open)")
       ->delimiter(',')
       ->check(finite_in(0, 1e6));
-  out.push_back({compare, [ca] { return cmd_compare(ca->image, ca->reference, ca->window); }});
+  compare->add_flag("--json", ca->json, "{\"rmse\": ..., \"rel_mse\": ..., \"mae\": ...}");
+  out.push_back(
+      {compare, [ca] { return cmd_compare(ca->image, ca->reference, ca->window, ca->json); }});
 
   auto bo = std::make_shared<BenchOptions>();
   auto* bench = app.add_subcommand("bench", "throughput of the path tracer vs a bare Embree loop");

@@ -9,6 +9,7 @@
 
 #include "cli/commands.h"
 #include "client/commands.h"
+#include "engine/build_info.h"
 
 int main(int argc, char** argv) {
   // Log lines (warnings of the scene importers, progress of services) go to stderr: stdout
@@ -16,6 +17,8 @@ int main(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("rayfarm"));
   CLI::App app{"rayfarm: a distributed batch renderer"};
   app.require_subcommand(1);
+  app.set_version_flag("--version",
+                       std::string(rf::build_id()) + "; kernels for this CPU: " + rf::cpu_isa());
   rf::cli::SharedOptions shared;
   shared.coordinator = rf::default_coordinator();
   app.add_option("--threads", shared.threads, "worker threads (default: all cores)")

@@ -7,6 +7,8 @@
 #include <filesystem>
 
 #include "cli/commands.h"
+#include "engine/integrators/registry.h"
+#include "engine/scene.h"
 
 namespace rf::cli {
 
@@ -101,11 +103,16 @@ void add_override_options(CLI::App& cmd, OverrideArgs& a) {
   cmd.add_option("--spp", a.spp, "samples per pixel (all passes)")->check(finite_in(1, 1e12));
   cmd.add_option("--passes", a.passes, "number of passes (spp must be a multiple)")
       ->check(finite_in(1, 1e6));
-  cmd.add_option("--integrator", a.integrator, "integrator name");
+  auto joined = [](const std::vector<std::string>& names) {
+    std::string out;
+    for (const std::string& n : names) out += (out.empty() ? "" : ", ") + n;
+    return out;
+  };
+  cmd.add_option("--integrator", a.integrator, "integrator (" + joined(known_integrators()) + ")");
   cmd.add_option("--seed", a.seed, "job seed")->check(finite_in(0, 1.8e19));
   cmd.add_option("--res", a.res, "resolution WIDTHxHEIGHT");
   cmd.add_option("--max-depth", a.max_depth, "max scattering events")->check(finite_in(0, 1e6));
-  cmd.add_option("--filter", a.filter, "pixel filter (box, triangle, gaussian)");
+  cmd.add_option("--filter", a.filter, "pixel filter (" + joined(known_filters()) + ")");
   cmd.add_option("--sampler", a.sampler, "sampler (independent, sobol, sobol-sequence)");
   cmd.add_option("--light-selection", a.light_selection,
                  "light selection for next-event estimation (auto, power, bvh)");

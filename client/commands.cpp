@@ -268,7 +268,8 @@ grpc::Status upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const f
 
 // Retried as a whole (blob query and upload) while the coordinator is unavailable; the request
 // id makes a retry whose first attempt did reach the coordinator get that attempt's job.
-int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
+int cmd_submit(const Endpoint& ep, const SubmitArgs& a, bool json,
+               std::optional<WatchOutput> wait) {
   const std::string& addr = ep.address;
   JobSpec spec = job_spec(a);
   spec.request_id = new_request_id();
@@ -288,8 +289,12 @@ int cmd_submit(const Endpoint& ep, const SubmitArgs& a) {
         upload_job(*stub, spec, fs::path(a.scene).parent_path(),
                    {missing.sha256().begin(), missing.sha256().end()}, retry.left(), &id);
     if (s.ok()) {
-      std::printf("%s\n", id.c_str());
-      return 0;
+      if (json)
+        std::printf("%s\n", nlohmann::json({{"job_id", id}}).dump().c_str());
+      else
+        std::printf("%s\n", id.c_str());
+      std::fflush(stdout);
+      return wait ? cmd_watch(ep, id, *wait) : 0;
     }
     if (!retry.retry_after(s, attempt)) check(s, "submit", ep, &retry);
   }
@@ -351,7 +356,9 @@ std::string job_line(const pb::JobStatus& j) {
                 printable(j.job_id()).c_str(), printable(j.name()).c_str(), state.c_str(), done,
                 j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
                 j.core_seconds(), j.priority(),
-                j.paused()  ? "paused"
+                j.paused()                                                      ? "paused"
+                : j.state() == pb::JOB_COMPLETED                                ? "0s"
+                : j.state() == pb::JOB_FAILED || j.state() == pb::JOB_CANCELLED ? "-"
                 : eta_known ? duration_text(eta).c_str()
                             : "?");
   std::string line = buf;
@@ -402,11 +409,103 @@ int cmd_status(const Endpoint& ep, const std::string& job, bool json, const Stat
   return 0;
 }
 
-int cmd_watch(const Endpoint& ep, const std::string& job) {
+namespace {
+
+// A frame's relMSE as shown: it cannot be estimated from fewer than two passes.
+bool rel_mse_known(const pb::FrameStatus& f) { return f.passes_merged() >= 2; }
+
+// What `watch` prints of each update, in its three forms (WatchOutput).
+class WatchPrinter {
+ public:
+  WatchPrinter(const std::string& job, const WatchOutput& o) : job_(job), o_(o) {}
+
+  void update(const pb::JobStatus& s) {
+    uint64_t merged = 0, total = 0;
+    for (const pb::FrameStatus& f : s.frames()) {
+      merged += f.done() ? f.passes_total() : f.passes_merged();
+      total += f.passes_total();
+      // Lines only when something other than the ETA changed.
+      char key[160];
+      std::snprintf(key, sizeof key, "%u/%u %.17g %.17g %d%d", f.passes_merged(), f.passes_total(),
+                    f.spp(), f.rel_mse(), f.done(), f.stopped_on_target());
+      if (last_[f.frame()] == key) continue;
+      last_[f.frame()] = key;
+      if (o_.json) {
+        nlohmann::json line = {{"event", "frame"},
+                               {"job_id", job_},
+                               {"frame", f.frame()},
+                               {"passes_merged", f.passes_merged()},
+                               {"passes_total", f.passes_total()},
+                               {"spp", f.spp()},
+                               {"rel_mse", nullptr},
+                               {"eta_seconds", nullptr},
+                               {"done", f.done()},
+                               {"stopped_on_target", f.stopped_on_target()}};
+        if (rel_mse_known(f)) line["rel_mse"] = f.rel_mse();
+        if (f.eta_seconds() >= 0) line["eta_seconds"] = f.eta_seconds();
+        std::printf("%s\n", line.dump().c_str());
+      } else if (o_.openjd) {
+        if (f.done())
+          std::printf("openjd_status: frame %d done (%.0f spp%s)\n", f.frame(), f.spp(),
+                      f.stopped_on_target() ? ", noise target" : "");
+      } else {
+        std::printf("frame %d: passes %u/%u, %.0f spp, relMSE %s, %s\n", f.frame(),
+                    f.passes_merged(), f.passes_total(), f.spp(),
+                    rel_mse_known(f) ? rel_mse_text(f.rel_mse()).c_str() : "n/a",
+                    f.done()              ? (f.stopped_on_target() ? "done (noise target)" : "done")
+                    : f.eta_seconds() < 0 ? "ETA -"
+                                          : ("ETA " + duration_text(f.eta_seconds())).c_str());
+      }
+    }
+    if (o_.openjd && total > 0) {
+      double percent = std::floor(1000.0 * double(merged) / double(total)) / 10;
+      if (percent != last_percent_) std::printf("openjd_progress: %.1f\n", percent);
+      last_percent_ = percent;
+    }
+    std::fflush(stdout);
+  }
+
+  // The job's end; its exit status (0 completed, 1 failed, 3 cancelled).
+  int end(pb::JobState state, const std::string& error, double core_seconds) {
+    const int status = state == pb::JOB_COMPLETED ? 0 : state == pb::JOB_FAILED ? 1 : 3;
+    if (o_.json) {
+      std::printf("%s\n", nlohmann::json({{"event", "end"},
+                                          {"job_id", job_},
+                                          {"state", state_name(state)},
+                                          {"error", error},
+                                          {"core_seconds", core_seconds}})
+                              .dump()
+                              .c_str());
+    } else {
+      std::string text =
+          state == pb::JOB_COMPLETED
+              ? "completed (" + std::to_string(std::lround(core_seconds)) + " core-s)"
+              : std::string(state_name(state)) + (error.empty() ? "" : ": ") + error;
+      std::printf("%sjob %s %s\n", o_.openjd ? "openjd_status: " : "", job_.c_str(), text.c_str());
+    }
+    std::fflush(stdout);
+    return status;
+  }
+
+ private:
+  static std::string rel_mse_text(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.4g", v);
+    return buf;
+  }
+  std::string job_;
+  WatchOutput o_;
+  std::map<FrameNumber, std::string> last_;
+  double last_percent_ = -1;
+};
+
+}  // namespace
+
+int cmd_watch(const Endpoint& ep, const std::string& job, const WatchOutput& output) {
   const std::string& addr = ep.address;
   std::shared_ptr<grpc::Channel> channel = coordinator_channel(ep.address, ep.creds);
   auto stub = pb::JobService::NewStub(channel);
-  std::map<FrameNumber, std::string> last;
+  WatchPrinter printer(job, output);
   std::mt19937 rng(std::random_device{}());
   Clock::time_point lost = Clock::now();  // since when no update came (the start counts)
   auto left = [&] {
@@ -429,34 +528,18 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
     pb::JobState state = pb::JOB_STATE_UNSPECIFIED;
     std::string error;
     bool heard = false;
+    double core_seconds = 0;
     while (reader->Read(&s)) {
       attempt = 0;
       heard = true;
       state = s.state();
       error = s.error();
-      for (const pb::FrameStatus& f : s.frames()) {
-        char buf[256];
-        std::snprintf(buf, sizeof buf, "frame %d: passes %u/%u, %.0f spp, relMSE %.4g, %s",
-                      f.frame(), f.passes_merged(), f.passes_total(), f.spp(), f.rel_mse(),
-                      f.done() ? (f.stopped_on_target() ? "done (noise target)" : "done")
-                               : ("ETA " + duration_text(f.eta_seconds())).c_str());
-        if (last[f.frame()] != buf) {
-          std::printf("%s\n", buf);
-          last[f.frame()] = buf;
-        }
-      }
-      std::fflush(stdout);
+      core_seconds = s.core_seconds();
+      printer.update(s);
     }
     grpc::Status st = reader->Finish();
-    if (state == pb::JOB_COMPLETED) {
-      std::printf("job %s completed (%.0f core-s)\n", job.c_str(), s.core_seconds());
-      return 0;
-    }
-    if (state == pb::JOB_FAILED || state == pb::JOB_CANCELLED) {
-      std::printf("job %s %s%s%s\n", job.c_str(), state_name(state), error.empty() ? "" : ": ",
-                  error.c_str());
-      return state == pb::JOB_FAILED ? 1 : 3;
-    }
+    if (state == pb::JOB_COMPLETED || state == pb::JOB_FAILED || state == pb::JOB_CANCELLED)
+      return printer.end(state, error, core_seconds);
     // The stream broke (a coordinator stopped or restarting, a partition): reconnect unless the
     // job is gone, for as long as --timeout from the last time the coordinator answered.
     if (heard) lost = Clock::now();
@@ -478,7 +561,7 @@ int cmd_watch(const Endpoint& ep, const std::string& job) {
 }
 
 int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out,
-              const std::string& frames, float exposure) {
+              const std::string& frames, const FetchOutput& o) {
   const std::string& addr = ep.address;
   std::set<FrameNumber> wanted;
   if (!frames.empty()) {
@@ -560,11 +643,22 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
     if (!problem.empty())
       throw FarmError("fetch frame " + std::to_string(f.frame()) + ": " + problem, 1);
     BufferFileBands frame(tmp, uint64_t(64) << 20);
-    write_exr(exr, frame, {{"job", job}});
-    write_png(png, frame, exposure);
-    std::fprintf(stderr, "frame %d: %u passes, %.0f spp, relMSE %.4g -> %s\n", f.frame(),
-                 frame.info().header.passes.count(), samples_per_pixel(frame), frame.rel_mse(),
-                 exr.c_str());
+    write_exr(exr, frame, {{"job", job}}, o.half ? ExrFormat::Half : ExrFormat::Float);
+    if (o.png) write_png(png, frame, o.exposure);
+    const uint32_t passes = frame.info().header.passes.count();
+    if (o.json) {
+      nlohmann::json line = {{"job_id", job},      {"frame", f.frame()},
+                             {"exr", exr},         {"png", o.png ? nlohmann::json(png) : nullptr},
+                             {"passes", passes},   {"spp", samples_per_pixel(frame)},
+                             {"rel_mse", nullptr}, {"done", f.done()}};
+      if (passes >= 2 && std::isfinite(frame.rel_mse())) line["rel_mse"] = frame.rel_mse();
+      std::printf("%s\n", line.dump().c_str());
+      std::fflush(stdout);
+    } else {
+      std::fprintf(stderr, "frame %d: %u passes, %.0f spp, relMSE %s -> %s\n", f.frame(), passes,
+                   samples_per_pixel(frame),
+                   passes >= 2 ? std::to_string(frame.rel_mse()).c_str() : "n/a", exr.c_str());
+    }
     ++written;
   }
   if (!wanted.empty() && written == 0)
@@ -807,18 +901,30 @@ int cmd_workers(const Endpoint& ep, bool json) {
   return 0;
 }
 
-int cmd_health(const Endpoint& ep, bool services) {
+int cmd_health(const Endpoint& ep, bool services, bool json) {
   const std::string& addr = ep.address;
   try {
     auto creds = channel_credentials(ep.creds);
     std::string s = check_health(addr, "", 5, creds);
-    std::printf("%s: %s\n", addr.c_str(), s.c_str());
-    if (services)
-      for (const std::string& name : list_services(addr, 5, creds))
-        std::printf("  %s\n", name.c_str());
+    std::vector<std::string> names;
+    if (services) names = list_services(addr, 5, creds);
+    if (json) {
+      nlohmann::json out = {{"address", addr}, {"status", s}};
+      if (services) out["services"] = names;
+      std::printf("%s\n", out.dump().c_str());
+    } else {
+      std::printf("%s: %s\n", addr.c_str(), s.c_str());
+      for (const std::string& name : names) std::printf("  %s\n", name.c_str());
+    }
     return s == "SERVING" ? 0 : 1;
   } catch (const ProbeError& e) {
-    std::printf("%s: unreachable: %s\n", addr.c_str(), e.what());
+    if (json)
+      std::printf("%s\n", nlohmann::json(
+                              {{"address", addr}, {"status", "UNREACHABLE"}, {"error", e.what()}})
+                              .dump()
+                              .c_str());
+    else
+      std::printf("%s: unreachable: %s\n", addr.c_str(), e.what());
     return 1;
   }
 }

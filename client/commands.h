@@ -42,20 +42,38 @@ struct SubmitArgs {
   std::vector<std::string> required_tags;  // worker tags the job needs (farm/tags.h)
 };
 
-int cmd_submit(const Endpoint& ep, const SubmitArgs& args);  // prints the job id
+// How `watch` prints (and `submit --wait`): lines for people (relMSE "n/a" before two passes; a
+// frame's line only when more than its ETA changed), JSON lines (`{"event": "frame", ...}` per
+// changed frame, `{"event": "end", ...}` last), or Open Job Description progress lines
+// (`openjd_progress: 42.0` as passes merge, `openjd_status: ...` as frames and the job end).
+struct WatchOutput {
+  bool json = false;
+  bool openjd = false;
+};
+// Prints the job id (with json: {"job_id": ...}); with `wait`, then watches it as `watch` does
+// and returns its exit status.
+int cmd_submit(const Endpoint& ep, const SubmitArgs& args, bool json = false,
+               std::optional<WatchOutput> wait = std::nullopt);
 // `status` without a job pages through the list: at most `limit` jobs (0: all) after `after`.
 struct StatusPage {
   uint64_t limit = 0;
   std::string after;
 };
 int cmd_status(const Endpoint& ep, const std::string& job, bool json, const StatusPage& page);
-int cmd_watch(const Endpoint& ep,
-              const std::string& job);  // 0 completed, 1 failed, 3 cancelled
+// 0 completed, 1 failed, 3 cancelled.
+int cmd_watch(const Endpoint& ep, const std::string& job, const WatchOutput& output = {});
 // fetch: every frame with a complete pass, or those of `frames` (a frame range; empty: all), to
 // `out`: a directory (JOB.####.exr and .png in it) or an output template ending in .exr
 // (shot.####.exr, shot.%04d.exr; a plain name for one frame only).
+// With json, one line per frame written on stdout (its files and figures).
+struct FetchOutput {
+  float exposure = 0;  // of the PNG
+  bool png = true;     // a PNG preview beside each EXR
+  bool half = false;   // half-float EXR
+  bool json = false;
+};
 int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out,
-              const std::string& frames, float exposure);
+              const std::string& frames, const FetchOutput& output);
 int cmd_cancel(const Endpoint& ep, const std::string& job);
 // pause (no new leases; leases in flight finish) or resume; idempotent.
 int cmd_pause(const Endpoint& ep, const std::string& job, bool pause);
@@ -76,6 +94,6 @@ int cmd_logs(const Endpoint& ep, const std::string& job, std::optional<FrameNumb
              const std::string& task, uint32_t limit, bool json);
 // The registered workers: tasks, failures, last contact (--json: machine-readable).
 int cmd_workers(const Endpoint& ep, bool json);
-int cmd_health(const Endpoint& ep, bool list_services);
+int cmd_health(const Endpoint& ep, bool list_services, bool json = false);
 
 }  // namespace rf

@@ -147,14 +147,17 @@ std::shared_ptr<JobRecord> Coordinator::find_for(const std::string& id,
   return job;
 }
 
-// The last merge's figures, with the ETA from this frame's time per pass in this run so far.
+// The last merge's figures, with the ETA from this frame's time per pass in this run so far;
+// none (-1) while nothing renders it: its job ended (cancelled, failed) or paused, or it is held.
 FrameStatus Coordinator::frame_status(const JobRecord& job, const FrameRecord& f) const {
   FrameStatus s{f.number, f.progress, f.version, f.run};
   FrameProgress& p = s.progress;
   double seconds = f.first_lease_at < 0 ? -1 : now() - f.first_lease_at;
   p.eta_seconds =
       p.done ? 0
-             : eta_seconds(p.passes_merged, p.passes_total, p.rel_mse, job.noise_target, seconds);
+      : terminal(job.state) || job.paused || f.held
+          ? -1
+          : eta_seconds(p.passes_merged, p.passes_total, p.rel_mse, job.noise_target, seconds);
   return s;
 }
 

@@ -165,11 +165,13 @@ uint8_t srgb8(double linear) {
 
 }  // namespace
 
-void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra) {
-  write_exr(path, WholeFrame(frame), extra);
+void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra,
+               ExrFormat format) {
+  write_exr(path, WholeFrame(frame), extra, format);
 }
 
-void write_exr(const std::string& path, const FrameBands& frame, const Attributes& extra) {
+void write_exr(const std::string& path, const FrameBands& frame, const Attributes& extra,
+               ExrFormat format) {
   check_writable(path, frame);
   const Rect& r = frame.info().rect;
   const AovSet& aovs = frame.info().header.aovs;
@@ -178,7 +180,7 @@ void write_exr(const std::string& path, const FrameBands& frame, const Attribute
   if (aovs.normal) names.insert(names.end(), {"N.X", "N.Y", "N.Z"});
   if (aovs.depth) names.insert(names.end(), {"Z", "coverage"});
   const int nch = int(names.size());
-  ImageSpec spec(r.w, r.h, nch, TypeDesc::FLOAT);
+  ImageSpec spec(r.w, r.h, nch, format == ExrFormat::Half ? TypeDesc::HALF : TypeDesc::FLOAT);
   spec.x = r.x0;
   spec.y = r.y0;
   spec.full_x = 0;

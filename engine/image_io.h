@@ -21,12 +21,18 @@ struct ImageIOError : std::runtime_error {
 // relMSE and which variance estimator made the variance channels).
 using Attributes = std::map<std::string, std::string>;
 
-// Writes the frame accumulator as float EXR. Written to a temporary file then renamed, so a
-// reader never sees half a file. Throws ImageIOError naming the path.
-void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra = {});
+// The EXR's channels: 32-bit float, or half float (half the file; every channel, variance and
+// depth included, rounded to 11 significant bits, finite values above 65504 to infinity).
+enum class ExrFormat { Float, Half };
+
+// Writes the frame accumulator as EXR. Written to a temporary file then renamed, so a reader
+// never sees half a file. Throws ImageIOError naming the path.
+void write_exr(const std::string& path, const SampleBuffer& frame, const Attributes& extra = {},
+               ExrFormat format = ExrFormat::Float);
 // The same, a band of rows at a time (scanlines), so a frame kept in tiles on disk is never
 // whole in memory.
-void write_exr(const std::string& path, const FrameBands& frame, const Attributes& extra = {});
+void write_exr(const std::string& path, const FrameBands& frame, const Attributes& extra = {},
+               ExrFormat format = ExrFormat::Float);
 
 // sRGB-encoded 8-bit PNG of the estimate scaled by 2^exposure_stops (clamped), written atomically.
 void write_png(const std::string& path, const SampleBuffer& frame, float exposure_stops = 0.0f);

@@ -12,6 +12,7 @@
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "engine/buffer_file.h"
 #include "engine/digest.h"
@@ -30,6 +31,11 @@ std::string cli(const std::string& args) {
   return "cd " + test::source_dir() + " && " + test::rayfarm_binary() + " " + args;
 }
 
+// The command's stdout alone (run_command adds its stderr).
+test::CommandResult stdout_of(const std::string& args) {
+  return test::run_command("{ " + cli(args) + " 2>/dev/null; }");
+}
+
 TEST(Cli, RenderWritesExrAndPngWithProvenance) {
   std::string dir = test::make_temp_dir("cli-render");
   auto r = test::run_command(cli("render " + kScene + " -o " + dir +
@@ -44,6 +50,76 @@ TEST(Cli, RenderWritesExrAndPngWithProvenance) {
   EXPECT_EQ(e.attr("rayfarm:integrator"), "path");
   EXPECT_EQ(e.attr("rayfarm:passes"), "0-3");
   EXPECT_EQ(e.attr("rayfarm:scene_digest").size(), 64u);
+}
+
+// What scripts and job runners read: --version; render's summary as JSON lines (one per frame,
+// with the files written), --no-png and a half-float EXR; Open Job Description progress lines
+// that climb to 100 over a frame range; merge and compare as JSON.
+TEST(Cli, JsonSummariesOpenJdProgressHalfExrAndNoPng) {
+  std::string dir = test::make_temp_dir("cli-json");
+  auto v = stdout_of("--version");
+  EXPECT_EQ(v.exit_code, 0) << v.output;
+  EXPECT_EQ(v.output.rfind("rayfarm-", 0), 0u) << v.output;
+
+  auto r = stdout_of("render " + kScene + " -o " + dir +
+                     "/c.exr --res 32x32 --spp 16 --passes 4 --json --no-png --half "
+                     "--partial " +
+                     dir + "/c.rfb --pass-range 0-3");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json j = nlohmann::json::parse(r.output);  // one frame: one line, nothing else
+  EXPECT_EQ(j["exr"], dir + "/c.exr");
+  EXPECT_TRUE(j["png"].is_null());
+  EXPECT_EQ(j["partial"], dir + "/c.rfb");
+  EXPECT_EQ(j["spp"], 16.0);
+  EXPECT_EQ(j["passes"], 4);
+  EXPECT_GT(j["rel_mse"].get<double>(), 0);
+  EXPECT_GT(j["rays"].get<double>(), 32 * 32 * 16);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/c.png")) << "--no-png";
+  Exr half = read_exr(dir + "/c.exr");
+  EXPECT_EQ(half.format, "half");
+  EXPECT_EQ(half.nch, 7);
+
+  auto one = stdout_of("render " + kScene + " -o " + dir +
+                       "/one.exr --res 32x32 --spp 1 --passes 1 --json");
+  ASSERT_EQ(one.exit_code, 0) << one.output;
+  EXPECT_TRUE(nlohmann::json::parse(one.output)["rel_mse"].is_null())
+      << "one pass: no error estimate";
+  EXPECT_EQ(read_exr(dir + "/one.exr").format, "float");
+  EXPECT_TRUE(std::filesystem::exists(dir + "/one.png"));
+
+  auto p = stdout_of("render " + kScene + " -o " + dir +
+                     "/s.####.exr --res 32x32 --spp 8 --passes 4 --frames 1-3 "
+                     "--progress openjd");
+  ASSERT_EQ(p.exit_code, 0) << p.output;
+  std::istringstream lines(p.output);
+  std::string line;
+  double last = -1;
+  int statuses = 0;
+  while (std::getline(lines, line)) {
+    if (line.rfind("openjd_progress: ", 0) == 0) {
+      double percent = std::stod(line.substr(17));
+      EXPECT_GT(percent, last) << p.output;
+      last = percent;
+    } else {
+      EXPECT_EQ(line.rfind("openjd_status: ", 0), 0u)
+          << "not an Open Job Description line: " << line;
+      ++statuses;
+    }
+  }
+  EXPECT_EQ(last, 100.0) << p.output;
+  EXPECT_EQ(statuses, 4) << "a line per frame and one at the end: " << p.output;
+
+  auto m = stdout_of("merge " + dir + "/c.rfb -o " + dir + "/m.exr --json --no-png");
+  ASSERT_EQ(m.exit_code, 0) << m.output;
+  nlohmann::json mj = nlohmann::json::parse(m.output);
+  EXPECT_EQ(mj["spp"], 16.0);
+  EXPECT_EQ(mj["passes"], "0-3");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/m.png"));
+  auto c = stdout_of("compare " + dir + "/m.exr " + dir + "/s.0001.exr --json");
+  ASSERT_EQ(c.exit_code, 0) << c.output;
+  nlohmann::json cj = nlohmann::json::parse(c.output);
+  EXPECT_GT(cj["rmse"].get<double>(), 0);
+  EXPECT_GT(cj["mae"].get<double>(), 0);
 }
 
 TEST(Cli, PartialRendersMergeToTheFullRender) {

@@ -23,6 +23,7 @@
 #include <random>
 #include <regex>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include "engine/buffer_file.h"
@@ -332,6 +333,54 @@ TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
   EXPECT_DOUBLE_EQ(done["frames"][0]["spp"].get<double>(), 1024.0);
   ASSERT_EQ(farm.client("fetch " + job + " -o " + farm.dir() + "/out-" + job).exit_code, 0);
   expect_same_image(farm.fetched(job, 0), farm.local(job_args, 0));
+}
+
+// What pipelines read from the client: `submit --json --wait` prints the job id as JSON, then
+// watch's JSON lines (frame updates, relMSE null before two passes, then the end) and exits as
+// watch does; `watch --progress openjd` prints Open Job Description lines up to 100; a frame of
+// one pass shows relMSE "n/a"; a cancelled job shows no ETA (-1 in JSON, "-" in the line).
+TEST(Farm, SubmitWaitAndWatchSpeakJsonAndOpenJobDescription) {
+  Farm farm("farm-json");
+  farm.worker({});
+  const std::string args = kCornell + " --spp 8 --passes 4 --res 32x32 --tile-size 16";
+  test::CommandResult r = farm.client_stdout("submit " + args + " --json --wait");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::istringstream lines(r.output);
+  std::string line, job;
+  std::vector<nlohmann::json> events;
+  while (std::getline(lines, line)) events.push_back(nlohmann::json::parse(line));
+  ASSERT_GE(events.size(), 3u) << r.output;
+  job = events[0]["job_id"];
+  for (size_t i = 1; i + 1 < events.size(); ++i) {
+    EXPECT_EQ(events[i]["event"], "frame") << events[i];
+    EXPECT_EQ(events[i]["job_id"], job);
+    if (events[i]["passes_merged"].get<int>() < 2)
+      EXPECT_TRUE(events[i]["rel_mse"].is_null()) << events[i];
+    else
+      EXPECT_GT(events[i]["rel_mse"].get<double>(), 0) << events[i];
+  }
+  EXPECT_EQ(events.back()["event"], "end");
+  EXPECT_EQ(events.back()["state"], "completed");
+  EXPECT_EQ(events[events.size() - 2]["passes_merged"], 4);
+
+  test::CommandResult o = farm.client_stdout("watch " + job + " --progress openjd");
+  ASSERT_EQ(o.exit_code, 0) << o.output;
+  EXPECT_NE(o.output.find("openjd_progress: 100.0\n"), std::string::npos) << o.output;
+  EXPECT_NE(o.output.find("openjd_status: job " + job + " completed"), std::string::npos)
+      << o.output;
+
+  const std::string one = farm.submit(kCornell + " --spp 4 --passes 1 --res 16x16");
+  test::CommandResult w = farm.client_stdout("watch " + one);
+  ASSERT_EQ(w.exit_code, 0) << w.output;
+  EXPECT_NE(w.output.find("relMSE n/a"), std::string::npos) << w.output;
+
+  const std::string big = farm.submit(kCornell + " --spp 4096 --passes 4096 --res 32x32");
+  ASSERT_EQ(farm.client("cancel " + big).exit_code, 0);
+  nlohmann::json cancelled = farm.status(big);
+  for (const auto& f : cancelled["frames"])
+    if (!f["done"].get<bool>()) EXPECT_EQ(f["eta_seconds"], -1.0) << cancelled.dump();
+  test::CommandResult shown = farm.client_stdout("status " + big);
+  EXPECT_NE(shown.output.find("ETA -"), std::string::npos) << shown.output;
 }
 
 // A graceful stop (SIGTERM) of the coordinator, gone for 3 s, then back: the workers (one

@@ -13,6 +13,7 @@ Exr read_exr(const std::string& path) {
   if (!in) return e;
   const OIIO::ImageSpec& spec = in->spec();
   e.w = spec.width, e.h = spec.height, e.nch = spec.nchannels;
+  e.format = spec.format.c_str();
   e.names = spec.channelnames;
   for (const auto& p : spec.extra_attribs) e.attrs[p.name().string()] = p.get_string();
   e.px.resize(size_t(e.w) * e.h * e.nch);

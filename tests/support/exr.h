@@ -9,6 +9,7 @@ namespace rf::test {
 
 struct Exr {
   int w = 0, h = 0, nch = 0;
+  std::string format;  // the channels' type as OpenImageIO names it: "float", "half"
   std::vector<std::string> names;
   std::vector<float> px;                      // w * h * nch, interleaved
   std::map<std::string, std::string> attrs;   // every attribute, formatted as text

@@ -112,10 +112,14 @@ CommandResult Farm::client(const std::string& args) const {
   return run_command(client_command(args));
 }
 
+CommandResult Farm::client_stdout(const std::string& args) const {
+  // run_command adds 2>&1 outside the braces.
+  return run_command("{ " + client_command(args) + " 2>/dev/null; }");
+}
+
 std::string Farm::submit(const std::string& args) const {
-  // The job id is stdout alone (run_command adds 2>&1 outside the braces; the importers'
-  // warnings go to stderr).
-  CommandResult r = run_command("{ " + client_command("submit " + args) + " 2>/dev/null; }");
+  // The job id is stdout alone (the importers' warnings go to stderr).
+  CommandResult r = client_stdout("submit " + args);
   EXPECT_EQ(r.exit_code, 0) << r.output;
   std::string id = r.output;
   while (!id.empty() && (id.back() == '\n' || id.back() == ' ')) id.pop_back();

@@ -55,6 +55,7 @@ class Farm {
                      const std::vector<std::string>& extra);
   // A client command against this coordinator (run from the source tree), output 2>&1.
   CommandResult client(const std::string& args) const;
+  CommandResult client_stdout(const std::string& args) const;  // its stdout alone
   std::string submit(const std::string& args) const;    // the job id; expects success
   nlohmann::json status(const std::string& job) const;  // "": every job (status --json)
   // A local render of the same job and frame, for comparison; returns the EXR's path.
