@@ -79,6 +79,13 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
                    return cmd_submit(ep(), a->submit, a->json, wait);
                  }});
 
+  auto* bundle = app.add_subcommand(
+      "bundle", "the files a submit of SCENE uploads, with their SHA-256 and size (no upload)");
+  bundle->add_option("scene", a->submit.scene, "scene file, or a per-frame pattern")->required();
+  bundle->add_option("--frames", a->submit.frames, "the frames of a per-frame pattern");
+  bundle->add_flag("--json", a->json, "{\"scene\", \"dir\", \"files\": [{path, sha256, bytes}]}");
+  out.push_back({bundle, [a] { return cmd_bundle(a->submit.scene, a->submit.frames, a->json); }});
+
   auto* status = app.add_subcommand("status", "all jobs (or one), one line each");
   add_addr(status, &a->timeout);
   status->add_option("job", a->job, "one job");

@@ -35,7 +35,15 @@ struct SharedOptions {
   std::string coordinator;
   std::string token_file;  // the token shown to the coordinator (farm/auth.h client_token)
   std::string tls_ca, tls_cert, tls_key;  // PEM files (farm/channel.h load_client_credentials)
+  std::string log_level = "info", log_format = "text";  // the services' (add_log_options)
 };
+
+// `completion bash`: a completion script from the app's own commands and flags.
+void add_completion_command(CLI::App& app, std::vector<Command>& out);
+// --log-level and --log-format (coordinator, worker).
+void add_log_options(CLI::App* c, SharedOptions& shared);
+// spdlog as the options say: JSON lines, or text (timestamped for a service).
+void configure_logging(const SharedOptions& shared, bool long_running);
 
 // A CLI11 check: a finite number in [lo, hi]. (CLI11's Range and PositiveNumber let NaN through,
 // and an unsigned option takes "-1" as 2^64-1: every numeric flag gets one of these.)

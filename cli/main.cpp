@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
   rf::cli::add_local_commands(app, shared, commands);
   rf::cli::add_service_commands(app, shared, commands);
   rf::cli::add_client_commands(app, shared, commands);
+  rf::cli::add_completion_command(app, commands);  // last: it lists the others
 
   // Exit codes, the same for every command (README): 0 success, 1 failure at run time, 2 bad
   // usage (parse errors included), 3 cancelled (watch).
@@ -49,7 +50,7 @@ int main(int argc, char** argv) {
   try {
     for (const rf::cli::Command& c : commands) {
       if (!c.app->parsed()) continue;
-      spdlog::set_pattern(c.long_running ? "[%Y-%m-%d %H:%M:%S.%e] %^%l%$: %v" : "%^%l%$: %v");
+      rf::cli::configure_logging(shared, c.long_running);
       return c.run();
     }
   } catch (const rf::FarmError& e) {

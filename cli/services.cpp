@@ -159,6 +159,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   coord->add_option("--token-file", co->token_file,
                     "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
                     "on SIGHUP (without it: loopback only, no authentication)");
+  add_log_options(coord, shared);
   out.push_back({coord,
                  [co] {
                    if (co->tls_cert.empty() != co->tls_key.empty())
@@ -240,6 +241,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)")
       ->check(finite_in(0, 4096));
   add_credential_options(*worker, shared);
+  add_log_options(worker, shared);
   out.push_back({worker,
                  [wo, &shared] {
                    wo->coordinator = shared.coordinator;

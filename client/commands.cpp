@@ -268,6 +268,26 @@ grpc::Status upload_job(pb::JobService::Stub& stub, const JobSpec& spec, const f
 
 // Retried as a whole (blob query and upload) while the coordinator is unavailable; the request
 // id makes a retry whose first attempt did reach the coordinator get that attempt's job.
+int cmd_bundle(const std::string& scene, const std::string& frames, bool json) {
+  SceneBundle b = scene_bundle(fs::path(scene), frames);
+  const fs::path dir = fs::absolute(fs::path(scene)).parent_path();
+  nlohmann::json files = nlohmann::json::array();
+  for (const BundleEntry& f : b.files) {
+    std::error_code ec;
+    const uint64_t bytes = fs::file_size(dir / f.path, ec);
+    if (json)
+      files.push_back({{"path", f.path}, {"sha256", f.sha256}, {"bytes", ec ? 0 : bytes}});
+    else
+      std::printf("%s %12llu %s\n", f.sha256.c_str(), (unsigned long long)bytes, f.path.c_str());
+  }
+  if (json)
+    std::printf("%s\n",
+                nlohmann::json({{"scene", b.pattern}, {"dir", dir.string()}, {"files", files}})
+                    .dump(2)
+                    .c_str());
+  return 0;
+}
+
 int cmd_submit(const Endpoint& ep, const SubmitArgs& a, bool json,
                std::optional<WatchOutput> wait) {
   const std::string& addr = ep.address;
@@ -302,6 +322,25 @@ int cmd_submit(const Endpoint& ep, const SubmitArgs& a, bool json,
 
 namespace {
 
+// A job's settings as submitted: only those given (the rest are the scene file's).
+nlohmann::json settings_json(const pb::RenderOverrides& o) {
+  nlohmann::json out = nlohmann::json::object();
+  if (o.has_spp()) out["spp"] = o.spp();
+  if (o.has_passes()) out["passes"] = o.passes();
+  if (o.has_integrator()) out["integrator"] = o.integrator();
+  if (o.has_seed()) out["seed"] = o.seed();
+  if (o.has_width()) out["width"] = o.width();
+  if (o.has_height()) out["height"] = o.height();
+  if (o.has_max_depth()) out["max_depth"] = o.max_depth();
+  if (o.has_filter()) out["filter"] = o.filter();
+  if (o.has_noise_target()) out["noise_target"] = o.noise_target();
+  if (o.has_sampler()) out["sampler"] = o.sampler();
+  if (o.has_aovs()) out["aovs"] = o.aovs();
+  if (o.has_light_selection()) out["light_selection"] = o.light_selection();
+  if (o.has_shutter()) out["shutter"] = o.shutter();
+  return out;
+}
+
 nlohmann::json to_json(const pb::JobStatus& j) {
   nlohmann::json frames = nlohmann::json::array();
   for (const pb::FrameStatus& f : j.frames())
@@ -328,6 +367,11 @@ nlohmann::json to_json(const pb::JobStatus& j) {
           {"build_id", j.build_id()},
           {"cpu_kind", j.cpu_kind()},
           {"waiting_for", j.waiting_for()},
+          {"settings", settings_json(j.settings())},
+          {"scene_path", j.scene_path()},
+          {"tile_size", j.tile_size()},
+          {"required_tags", j.required_tags()},
+          {"ended_unix", j.ended_unix() ? nlohmann::json(j.ended_unix()) : nullptr},
           {"frames", frames}};
 }
 

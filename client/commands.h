@@ -52,6 +52,10 @@ struct WatchOutput {
 };
 // Prints the job id (with json: {"job_id": ...}); with `wait`, then watches it as `watch` does
 // and returns its exit status.
+// `bundle SCENE`: the files a submit of the scene uploads (the scene file, or each frame's of a
+// per-frame pattern over `frames`, and every asset they name, found by the importers), with
+// their SHA-256 and size: what another client (clients/python) uploads, by the CLI's rules.
+int cmd_bundle(const std::string& scene, const std::string& frames, bool json);
 int cmd_submit(const Endpoint& ep, const SubmitArgs& args, bool json = false,
                std::optional<WatchOutput> wait = std::nullopt);
 // `status` without a job pages through the list: at most `limit` jobs (0: all) after `after`.

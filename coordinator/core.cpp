@@ -189,6 +189,11 @@ JobStatus Coordinator::status_of(const JobRecord& job) const {
   s.submitted_unix = job.submitted_unix;
   s.paused = job.paused;
   s.priority = job.priority;
+  s.settings = job.spec.overrides;
+  s.scene_path = job.spec.scene_path;
+  s.tile_size = job.spec.tile_size;
+  s.required_tags = job.spec.required_tags;
+  if (terminal(job.state)) s.ended_unix = job.ended_unix;
   if (!terminal(job.state) && !job.paused) s.waiting_for = waiting_for(job);
   for (const auto& f : job.frames) {
     s.frames.push_back(frame_status(job, *f));

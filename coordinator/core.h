@@ -80,6 +80,13 @@ struct JobStatus {
   // pin, met by none), or "" (also for an ended or paused job).
   std::string waiting_for;
   std::vector<FrameStatus> frames;
+  // As submitted: the settings over the scene file's, the scene's path in the bundle, the
+  // tile size (0: the default) and the worker tags required; when it last ended (0: never).
+  SceneOverrides settings;
+  std::string scene_path;
+  uint32_t tile_size = 0;
+  std::vector<std::string> required_tags;
+  int64_t ended_unix = 0;
 };
 
 // The current image of a frame: its merged prefix as an encoded sample buffer

@@ -326,6 +326,11 @@ pb::JobStatus to_wire(const JobStatus& s) {
   out.set_priority(s.priority);
   out.set_held_frames(frame_range_text(s.held));
   for (const FrameStatus& f : s.frames) *out.add_frames() = to_wire(f);
+  *out.mutable_settings() = to_wire_overrides(s.settings);
+  out.set_scene_path(s.scene_path);
+  out.set_tile_size(s.tile_size);
+  for (const std::string& t : s.required_tags) out.add_required_tags(t);
+  out.set_ended_unix(s.ended_unix);
   return out;
 }
 

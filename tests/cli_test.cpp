@@ -12,6 +12,7 @@
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 
 #include "engine/buffer_file.h"
@@ -120,6 +121,72 @@ TEST(Cli, JsonSummariesOpenJdProgressHalfExrAndNoPng) {
   nlohmann::json cj = nlohmann::json::parse(c.output);
   EXPECT_GT(cj["rmse"].get<double>(), 0);
   EXPECT_GT(cj["mae"].get<double>(), 0);
+}
+
+// `bundle --json`: what a submit of the scene uploads, found by the importers (the scene file
+// and the textures it names), each with its size and the SHA-256 of its bytes; a missing scene
+// is a usage error.
+TEST(Cli, BundleListsTheFilesASubmitUploadsWithTheirDigests) {
+  auto r = stdout_of("bundle scenes/materials/scene.json --json");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  nlohmann::json b = nlohmann::json::parse(r.output);
+  EXPECT_EQ(b["scene"], "scene.json");
+  std::set<std::string> paths;
+  for (const auto& f : b["files"]) {
+    const std::string path = b["dir"].get<std::string>() + "/" + f["path"].get<std::string>();
+    const std::string bytes = read_file_bytes(path);
+    EXPECT_EQ(f["sha256"], sha256_hex(bytes)) << path;
+    EXPECT_EQ(f["bytes"], bytes.size()) << path;
+    paths.insert(f["path"]);
+  }
+  EXPECT_EQ(paths, (std::set<std::string>{"scene.json", "textures/floor.png", "textures/sky.exr"}));
+  EXPECT_EQ(test::run_command(cli("bundle scenes/no-such/scene.json")).exit_code, 2);
+}
+
+// The services' logs for a collector: --log-format json makes every line one JSON object (time,
+// level, msg); --log-level warn leaves the info lines out; a level that is not one is refused.
+TEST(Cli, ServicesLogJsonLinesAtTheLevelAsked) {
+  std::string dir = test::make_temp_dir("cli-logs");
+  // Started, given 1.5 s, then stopped (SIGTERM); its stderr is the output.
+  auto run_for_a_while = [&](const std::string& args) {
+    return test::run_command("{ " + test::rayfarm_binary() + " " + args +
+                             " & sleep 1.5; kill $!; wait; }");
+  };
+  auto json = run_for_a_while("coordinator --listen 127.0.0.1:0 --state-dir " + dir +
+                              "/a --log-format json");
+  std::istringstream lines(json.output);
+  std::string line;
+  int parsed = 0;
+  while (std::getline(lines, line)) {
+    nlohmann::json j = nlohmann::json::parse(line);  // throws on a line that is not JSON
+    EXPECT_TRUE(j["time"].is_string() && j["level"].is_string() && j["msg"].is_string()) << line;
+    ++parsed;
+  }
+  EXPECT_GE(parsed, 2) << json.output;
+  EXPECT_NE(json.output.find("coordinator listening on"), std::string::npos) << json.output;
+  auto quiet = run_for_a_while("coordinator --listen 127.0.0.1:0 --state-dir " + dir +
+                               "/b --log-level warn");
+  EXPECT_EQ(quiet.output.find("listening"), std::string::npos) << quiet.output;
+  EXPECT_EQ(test::run_command(cli("worker --log-level loud")).exit_code, 2);
+}
+
+// `completion bash` completes subcommands and each one's own flags, from the binary's own
+// definitions (a flag added to a command appears without touching the script).
+TEST(Cli, BashCompletionKnowsTheCommandsAndTheirFlags) {
+  auto complete = [](const std::string& words, int cword) {
+    return test::run_command(
+        "bash -c 'source <(" + test::rayfarm_binary() + " completion bash); COMP_WORDS=(" + words +
+        "); COMP_CWORD=" + std::to_string(cword) + "; _rayfarm; echo \"${COMPREPLY[*]}\"'");
+  };
+  auto sub = complete("rayfarm wa", 1);
+  ASSERT_EQ(sub.exit_code, 0) << sub.output;
+  EXPECT_EQ(sub.output, "watch\n");
+  auto flags = complete("rayfarm watch j1 --", 3);
+  EXPECT_NE(flags.output.find("--json"), std::string::npos) << flags.output;
+  EXPECT_NE(flags.output.find("--progress"), std::string::npos) << flags.output;
+  EXPECT_EQ(flags.output.find("--spp"), std::string::npos) << "render's flag: " << flags.output;
+  auto render = complete("rayfarm render --h", 2);
+  EXPECT_NE(render.output.find("--half"), std::string::npos) << render.output;
 }
 
 TEST(Cli, PartialRendersMergeToTheFullRender) {

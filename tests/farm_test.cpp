@@ -338,7 +338,8 @@ TEST(Farm, EveryAcknowledgedResultSurvivesACoordinatorKill) {
 // What pipelines read from the client: `submit --json --wait` prints the job id as JSON, then
 // watch's JSON lines (frame updates, relMSE null before two passes, then the end) and exits as
 // watch does; `watch --progress openjd` prints Open Job Description lines up to 100; a frame of
-// one pass shows relMSE "n/a"; a cancelled job shows no ETA (-1 in JSON, "-" in the line).
+// one pass shows relMSE "n/a"; a cancelled job shows no ETA (-1 in JSON, "-" in the line);
+// `status --json` carries the settings as submitted and the end time.
 TEST(Farm, SubmitWaitAndWatchSpeakJsonAndOpenJobDescription) {
   Farm farm("farm-json");
   farm.worker({});
@@ -379,6 +380,13 @@ TEST(Farm, SubmitWaitAndWatchSpeakJsonAndOpenJobDescription) {
   nlohmann::json cancelled = farm.status(big);
   for (const auto& f : cancelled["frames"])
     if (!f["done"].get<bool>()) EXPECT_EQ(f["eta_seconds"], -1.0) << cancelled.dump();
+  // Its settings as submitted (only those given), and when it ended.
+  EXPECT_EQ(cancelled["settings"],
+            nlohmann::json({{"spp", 4096}, {"passes", 4096}, {"width", 32}, {"height", 32}}))
+      << cancelled.dump();
+  EXPECT_EQ(cancelled["scene_path"], "scene.json");
+  EXPECT_GE(cancelled["ended_unix"].get<int64_t>(), cancelled["submitted_unix"].get<int64_t>());
+  EXPECT_TRUE(farm.status(one)["ended_unix"].is_number());
   test::CommandResult shown = farm.client_stdout("status " + big);
   EXPECT_NE(shown.output.find("ETA -"), std::string::npos) << shown.output;
 }
