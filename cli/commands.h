@@ -22,11 +22,16 @@ struct UsageError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+struct LogOptions {
+  std::string level = "info", format = "text";
+};
+
 // A registered subcommand and what runs it; run() returns the process exit status.
 struct Command {
   CLI::App* app;
   std::function<int()> run;
   bool long_running = false;  // a service: its log lines carry timestamps
+  std::shared_ptr<LogOptions> log = {};  // its --log-level and --log-format, if it has them
 };
 
 // Options several groups bind: render threads, the coordinator address.
@@ -35,15 +40,17 @@ struct SharedOptions {
   std::string coordinator;
   std::string token_file;  // the token shown to the coordinator (farm/auth.h client_token)
   std::string tls_ca, tls_cert, tls_key;  // PEM files (farm/channel.h load_client_credentials)
-  std::string log_level = "info", log_format = "text";  // the services' (add_log_options)
 };
 
 // `completion bash`: a completion script from the app's own commands and flags.
 void add_completion_command(CLI::App& app, std::vector<Command>& out);
-// --log-level and --log-format (coordinator, worker).
-void add_log_options(CLI::App* c, SharedOptions& shared);
+// A service's --log-level and --log-format (coordinator, worker). Each command has its own:
+// CLI11 reads a variable (RAYFARM_LOG_LEVEL, RAYFARM_LOG_FORMAT) into every command's option the
+// command line did not set, parsed or not, so one shared by two commands would let the
+// environment overwrite the flag given.
+std::shared_ptr<LogOptions> add_log_options(CLI::App* c);
 // spdlog as the options say: JSON lines, or text (timestamped for a service).
-void configure_logging(const SharedOptions& shared, bool long_running);
+void configure_logging(const LogOptions& log, bool long_running);
 
 // A CLI11 check: a finite number in [lo, hi]. (CLI11's Range and PositiveNumber let NaN through,
 // and an unsigned option takes "-1" as 2^64-1: every numeric flag gets one of these.)

@@ -42,18 +42,22 @@ class JsonLineFormatter : public spdlog::formatter {
 
 }  // namespace
 
-void add_log_options(CLI::App* c, SharedOptions& shared) {
-  c->add_option("--log-level", shared.log_level,
+std::shared_ptr<LogOptions> add_log_options(CLI::App* c) {
+  auto log = std::make_shared<LogOptions>();
+  c->add_option("--log-level", log->level,
                 "the least severe lines logged: trace, debug, info (default), warn, error, off")
+      ->envname("RAYFARM_LOG_LEVEL")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
-  c->add_option("--log-format", shared.log_format,
+  c->add_option("--log-format", log->format,
                 "text (default), or json: one JSON object a line (time, level, msg) on stderr")
+      ->envname("RAYFARM_LOG_FORMAT")
       ->check(CLI::IsMember({"text", "json"}));
+  return log;
 }
 
-void configure_logging(const SharedOptions& shared, bool long_running) {
-  spdlog::set_level(spdlog::level::from_str(shared.log_level));
-  if (shared.log_format == "json")
+void configure_logging(const LogOptions& log, bool long_running) {
+  spdlog::set_level(spdlog::level::from_str(log.level));
+  if (log.format == "json")
     spdlog::set_formatter(std::make_unique<JsonLineFormatter>());
   else
     spdlog::set_pattern(long_running ? "[%Y-%m-%d %H:%M:%S.%e] %^%l%$: %v" : "%^%l%$: %v");

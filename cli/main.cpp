@@ -17,6 +17,13 @@ int main(int argc, char** argv) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("rayfarm"));
   CLI::App app{"rayfarm: a distributed batch renderer"};
   app.require_subcommand(1);
+  // Flags from a file (TOML: `key = value`, a command's own under `[command]`). Precedence: the
+  // command line, then this file (named on the command line, so chosen for this run), then
+  // RAYFARM_* variables (RAYFARM_COORDINATOR, RAYFARM_LOG_LEVEL, RAYFARM_LOG_FORMAT,
+  // RAYFARM_TOKEN_FILE, RAYFARM_TLS_*), then defaults
+  // (Cli.FlagsComeFromTheCommandLineThenTheConfigFileThenTheEnvironment). No render setting is
+  // read from the environment.
+  app.set_config("--config", "", "read flags from this TOML file ([command] sections)");
   app.set_version_flag("--version",
                        std::string(rf::build_id()) + "; kernels for this CPU: " + rf::cpu_isa());
   rf::cli::SharedOptions shared;
@@ -50,7 +57,7 @@ int main(int argc, char** argv) {
   try {
     for (const rf::cli::Command& c : commands) {
       if (!c.app->parsed()) continue;
-      rf::cli::configure_logging(shared, c.long_running);
+      rf::cli::configure_logging(c.log ? *c.log : rf::cli::LogOptions{}, c.long_running);
       return c.run();
     }
   } catch (const rf::FarmError& e) {

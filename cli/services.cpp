@@ -159,7 +159,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   coord->add_option("--token-file", co->token_file,
                     "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
                     "on SIGHUP (without it: loopback only, no authentication)");
-  add_log_options(coord, shared);
+  auto coord_log = add_log_options(coord);
   out.push_back({coord,
                  [co] {
                    if (co->tls_cert.empty() != co->tls_key.empty())
@@ -169,7 +169,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                      throw UsageError("--tls-client-ca needs --tls-cert and --tls-key");
                    return run_coordinator(*co);
                  },
-                 true});
+                 true, coord_log});
 
   // The coordinator's scene check (coordinator/scene_check.h): a child it starts itself, hidden
   // from --help.
@@ -241,7 +241,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
   worker->add_option("--threads", shared.threads, "render threads (default: all cores)")
       ->check(finite_in(0, 4096));
   add_credential_options(*worker, shared);
-  add_log_options(worker, shared);
+  auto worker_log = add_log_options(worker);
   out.push_back({worker,
                  [wo, &shared] {
                    wo->coordinator = shared.coordinator;
@@ -249,7 +249,7 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                                                        shared.tls_cert, shared.tls_key);
                    return run_worker(*wo);
                  },
-                 true});
+                 true, worker_log});
 
   struct TokenArgs {
     std::string role = "client", tenant = "default", expires;

@@ -189,6 +189,32 @@ TEST(Cli, BashCompletionKnowsTheCommandsAndTheirFlags) {
   EXPECT_NE(render.output.find("--half"), std::string::npos) << render.output;
 }
 
+// Where a flag comes from, in order: the command line, then the --config file (named on the
+// command line: a choice made for this run), then a RAYFARM_* variable, then the default; seen
+// through the coordinator's --log-format (JSON lines or text).
+TEST(Cli, FlagsComeFromTheCommandLineThenTheConfigFileThenTheEnvironment) {
+  std::string dir = test::make_temp_dir("cli-config");
+  test::write_text(dir + "/json.toml", "[coordinator]\nlog-format = \"json\"\n");
+  int run = 0;
+  auto logs_json = [&](const std::string& env, const std::string& args,
+                       const std::string& flags = "") {
+    auto r =
+        test::run_command("{ " + env + " " + test::rayfarm_binary() + " " + args +
+                          " coordinator --listen 127.0.0.1:0 --state-dir " + dir + "/s" +
+                          std::to_string(run++) + " " + flags + " & sleep 1.5; kill $!; wait; }");
+    EXPECT_NE(r.output.find("listening"), std::string::npos) << r.output;
+    return r.output.rfind("{\"level\":\"info\"", 0) == 0;
+  };
+  const std::string config = "--config " + dir + "/json.toml";
+  EXPECT_FALSE(logs_json("", "")) << "the default: text";
+  EXPECT_TRUE(logs_json("", config)) << "the file";
+  EXPECT_TRUE(logs_json("RAYFARM_LOG_FORMAT=json", "")) << "the environment";
+  EXPECT_TRUE(logs_json("RAYFARM_LOG_FORMAT=text", config)) << "the file over the environment";
+  EXPECT_FALSE(logs_json("RAYFARM_LOG_FORMAT=json", config, "--log-format text"))
+      << "the command line over both";
+  EXPECT_TRUE(logs_json("RAYFARM_LOG_FORMAT=text", "", "--log-format json"));
+}
+
 TEST(Cli, PartialRendersMergeToTheFullRender) {
   std::string dir = test::make_temp_dir("cli-merge");
   std::string common = " --res 24x24 --spp 16 --passes 8 --max-depth 6 -q";
