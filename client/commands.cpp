@@ -457,6 +457,12 @@ namespace {
 
 // A frame's relMSE as shown: it cannot be estimated from fewer than two passes.
 bool rel_mse_known(const pb::FrameStatus& f) { return f.passes_merged() >= 2; }
+std::string rel_mse_text(uint32_t passes, double v) {
+  if (passes < 2) return "n/a";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.4g", v);
+  return buf;
+}
 
 // What `watch` prints of each update, in its three forms (WatchOutput).
 class WatchPrinter {
@@ -495,7 +501,7 @@ class WatchPrinter {
       } else {
         std::printf("frame %d: passes %u/%u, %.0f spp, relMSE %s, %s\n", f.frame(),
                     f.passes_merged(), f.passes_total(), f.spp(),
-                    rel_mse_known(f) ? rel_mse_text(f.rel_mse()).c_str() : "n/a",
+                    rel_mse_text(f.passes_merged(), f.rel_mse()).c_str(),
                     f.done()              ? (f.stopped_on_target() ? "done (noise target)" : "done")
                     : f.eta_seconds() < 0 ? "ETA -"
                                           : ("ETA " + duration_text(f.eta_seconds())).c_str());
@@ -532,11 +538,6 @@ class WatchPrinter {
   }
 
  private:
-  static std::string rel_mse_text(double v) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%.4g", v);
-    return buf;
-  }
   std::string job_;
   WatchOutput o_;
   std::map<FrameNumber, std::string> last_;
@@ -700,8 +701,8 @@ int cmd_fetch(const Endpoint& ep, const std::string& job, const std::string& out
       std::fflush(stdout);
     } else {
       std::fprintf(stderr, "frame %d: %u passes, %.0f spp, relMSE %s -> %s\n", f.frame(), passes,
-                   samples_per_pixel(frame),
-                   passes >= 2 ? std::to_string(frame.rel_mse()).c_str() : "n/a", exr.c_str());
+                   samples_per_pixel(frame), rel_mse_text(passes, frame.rel_mse()).c_str(),
+                   exr.c_str());
     }
     ++written;
   }
