@@ -55,7 +55,8 @@ void add_completion_command(CLI::App& app, std::vector<Command>& out) {
   auto shell = std::make_shared<std::string>("bash");
   auto* c = app.add_subcommand("completion", "print a shell completion script (bash)");
   c->add_option("shell", *shell, "the shell (bash)")->check(CLI::IsMember({"bash"}));
-  out.push_back({c, [&app] {
+  // The lambda holds `shell`: CLI11 writes the parsed value into it after this returns.
+  out.push_back({c, [&app, shell] {
                    std::fputs(bash_script(app).c_str(), stdout);
                    return 0;
                  }});

@@ -1,0 +1,1 @@
+"""Generated at install time from proto/rayfarm.proto (setup.py); nothing is kept here."""
