@@ -156,6 +156,11 @@ void add_service_commands(CLI::App& app, SharedOptions& shared, std::vector<Comm
                    "serve Prometheus metrics over HTTP at /metrics here (IP:PORT, e.g. "
                    "0.0.0.0:9464; docs/deploy.md)")
       ->check(listen_address());
+  coord
+      ->add_option("--monitor-listen", co->monitor_listen,
+                   "serve the web monitor here (HOST:PORT; HTTPS with --tls-cert; loopback only "
+                   "without --token-file; docs/farm.md)")
+      ->check(listen_address());
   coord->add_option("--token-file", co->token_file,
                     "accepted tokens, one 'SHA256 ROLE TENANT [expires=...]' per line; re-read "
                     "on SIGHUP (without it: loopback only, no authentication)");

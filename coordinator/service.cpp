@@ -29,6 +29,7 @@
 
 #include "coordinator/core.h"
 #include "coordinator/metrics.h"
+#include "coordinator/monitor.h"
 #include "engine/digest.h"  // read_file_bytes
 #include "farm/auth.h"
 #include "farm/chunking.h"
@@ -118,6 +119,28 @@ class Gate {
     auto fresh = std::make_shared<const TokenTable>(TokenTable::load(file_));
     std::lock_guard lock(mu_);
     table_ = std::move(fresh);
+  }
+
+  // The principal of a token presented to the web monitor, or nothing with the reason.
+  std::optional<Principal> principal(const std::string& token, std::string* why) const {
+    std::shared_ptr<const TokenTable> table;
+    {
+      std::lock_guard lock(mu_);
+      table = table_;
+    }
+    Principal who;
+    switch (table ? table->check(token, int64_t(std::time(nullptr)), &who)
+                  : TokenTable::Check::Unknown) {
+      case TokenTable::Check::Accepted:
+        return who;
+      case TokenTable::Check::Expired:
+        *why = "token " + token_id(token) + " has expired";
+        return std::nullopt;
+      case TokenTable::Check::Unknown:
+        break;
+    }
+    *why = "token " + token_id(token) + " is not accepted";
+    return std::nullopt;
   }
 
   // The caller of this call, or a refusal: UNAUTHENTICATED without an accepted token,
@@ -794,6 +817,7 @@ struct CoordinatorServer::Impl {
   std::unique_ptr<grpc::Server> server;
   std::unique_ptr<grpc::Server> health_server;  // --health-listen: the health service alone
   std::unique_ptr<MetricsServer> metrics;       // --metrics-listen; goes before the core
+  std::unique_ptr<Monitor> monitor;             // --monitor-listen; goes before the core
   int port = 0, health_port = 0;
   // Retention (Coordinator::collect) at start and then every interval, until shutdown.
   std::thread retention;
@@ -868,6 +892,17 @@ CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
   impl_->core->set_storage_listener(set_storage);
   if (!o.metrics_listen.empty())
     impl_->metrics = std::make_unique<MetricsServer>(o.metrics_listen, *impl_->core);
+  if (!o.monitor_listen.empty()) {
+    MonitorOptions mo;
+    mo.listen = o.monitor_listen;
+    mo.tls_cert = o.tls_cert;
+    mo.tls_key = o.tls_key;
+    mo.open = impl_->gate->open();
+    impl_->monitor = std::make_unique<Monitor>(
+        *impl_->core, mo, [gate = impl_->gate.get()](const std::string& token, std::string* why) {
+          return gate->principal(token, why);
+        });
+  }
   // Often enough that nothing outstays its time by more than a quarter of it (at most a minute).
   const double keep = o.keep_finished_seconds > 0 ? o.keep_finished_seconds : 1e9;
   const double interval = std::clamp(std::min(keep, o.blob_grace_seconds) / 4, 1.0, 60.0);
@@ -897,7 +932,12 @@ int CoordinatorServer::health_port() const { return impl_->health_port; }
 
 int CoordinatorServer::metrics_port() const { return impl_->metrics ? impl_->metrics->port() : 0; }
 
-void CoordinatorServer::reload_tokens() { impl_->gate->reload(); }
+int CoordinatorServer::monitor_port() const { return impl_->monitor ? impl_->monitor->port() : 0; }
+
+void CoordinatorServer::reload_tokens() {
+  impl_->gate->reload();
+  if (impl_->monitor) impl_->monitor->revoke_sessions();
+}
 
 void CoordinatorServer::wait() { impl_->server->Wait(); }
 
@@ -944,13 +984,16 @@ int run_coordinator(const CoordinatorOptions& o) {
   if (!o.metrics_listen.empty())
     spdlog::info("Prometheus metrics on http://{}/metrics (metrics port {})", o.metrics_listen,
                  server.metrics_port());
+  if (!o.monitor_listen.empty())
+    spdlog::info("web monitor on {}://{}/ (monitor port {})", o.tls_cert.empty() ? "http" : "https",
+                 o.monitor_listen, server.monitor_port());
   int sig = 0;
   for (;;) {
     sigwait(&set, &sig);
     if (sig != SIGHUP) break;
     try {
       server.reload_tokens();
-      spdlog::info("SIGHUP: token file {} re-read", o.token_file);
+      spdlog::info("SIGHUP: token file {} re-read; monitor sessions ended", o.token_file);
     } catch (const std::exception& e) {
       spdlog::error("SIGHUP: {}; keeping the tokens read before", e.what());
     }

@@ -25,6 +25,8 @@ struct CoordinatorOptions {
   std::string health_listen;
   // Prometheus metrics over plain HTTP at /metrics (coordinator/metrics.h); empty: none.
   std::string metrics_listen;
+  // The web monitor (coordinator/monitor.h) over HTTP, HTTPS with --tls-cert; empty: none.
+  std::string monitor_listen;
   double lease_seconds = 30;
   uint32_t window_frames = 4;
   FairShare share = FairShare::Tenants;    // between jobs of equal priority (scheduler.h)
@@ -51,9 +53,11 @@ class CoordinatorServer {
   int port() const;          // the bound port (useful with --listen HOST:0)
   int health_port() const;   // --health-listen's bound port (0 without it)
   int metrics_port() const;  // --metrics-listen's bound port (0 without it)
+  int monitor_port() const;  // --monitor-listen's bound port (0 without it)
   void wait();               // until shutdown() is called
   void shutdown();           // stops accepting, ends streams, waits for handlers
-  // Re-reads the token file; on an error keeps the tokens it has and rethrows.
+  // Re-reads the token file and ends the monitor's sessions; on an error keeps the tokens it
+  // has and rethrows.
   void reload_tokens();
 
  private:

@@ -126,7 +126,7 @@ TokenTable::Check TokenTable::check(std::string_view token, int64_t now_unix,
     if (CRYPTO_memcmp(e.sha256.data(), digest.data(), digest.size()) == 0) match = &e;
   if (!match) return Check::Unknown;
   if (match->expires_unix && now_unix >= *match->expires_unix) return Check::Expired;
-  *who = Principal{match->role, match->tenant, "t:" + digest.substr(0, 12)};
+  *who = Principal{match->role, match->tenant, "t:" + digest.substr(0, 12), match->expires_unix};
   return Check::Accepted;
 }
 

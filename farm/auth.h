@@ -34,6 +34,7 @@ struct Principal {
   Role role = Role::Admin;
   std::string tenant;
   std::string id;
+  std::optional<int64_t> expires_unix;  // the token's expiry, if it has one
 };
 
 struct TokenFileError : std::runtime_error {

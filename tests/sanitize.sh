@@ -49,7 +49,12 @@ status=0
 (cd "$BUILD" && ctest -L unit -E "$SLOW" -j"$(nproc)" --output-on-failure --timeout 1200 \
    >"$BUILD/ctest.log" 2>&1) || status=1
 tail -4 "$BUILD/ctest.log" >&2
-[ $status -eq 0 ] || { grep -E "Failed|\*\*\*|ERROR: AddressSanitizer|runtime error" "$BUILD/ctest.log" | head -40 >&2; }
+# On a failure: which tests, then each failed assertion with a few lines of its values (CI
+# shows only this output's tail, not ctest.log).
+[ $status -eq 0 ] || {
+  grep -E "Failed|\*\*\*|ERROR: AddressSanitizer|runtime error" "$BUILD/ctest.log" | head -40 >&2
+  grep -E -A6 ": Failure$" "$BUILD/ctest.log" | cut -c1-300 | head -60 >&2
+}
 tested=$(date +%s)
 log "tests in $((tested - built)) s: $(grep -o '[0-9]* tests failed out of [0-9]*' "$BUILD/ctest.log" || true)"
 

@@ -1,0 +1,459 @@
+#include "coordinator/monitor.h"
+
+#include <openssl/crypto.h>
+#include <openssl/rand.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "coordinator/errors.h"
+#include "coordinator/monitor_page.h"
+#include "farm/frame_range.h"
+#include "httplib.h"
+
+namespace rf {
+namespace {
+
+constexpr const char* kCookie = "rayfarm_session";
+
+std::string random_hex(size_t bytes) {
+  std::string raw(bytes, '\0');
+  if (RAND_bytes(reinterpret_cast<unsigned char*>(raw.data()), int(bytes)) != 1)
+    throw std::runtime_error("monitor: cannot draw random bytes (OpenSSL RAND_bytes)");
+  static const char* hex = "0123456789abcdef";
+  std::string out;
+  for (unsigned char b : raw) {
+    out.push_back(hex[b >> 4]);
+    out.push_back(hex[b & 15]);
+  }
+  return out;
+}
+
+bool equal_secret(const std::string& a, const std::string& b) {
+  return a.size() == b.size() && CRYPTO_memcmp(a.data(), b.data(), a.size()) == 0;
+}
+
+int64_t now_unix() { return int64_t(std::time(nullptr)); }
+
+const char* state_text(JobState s) {
+  switch (s) {
+    case JobState::Queued:
+      return "queued";
+    case JobState::Running:
+      return "running";
+    case JobState::Completed:
+      return "completed";
+    case JobState::Failed:
+      return "failed";
+    case JobState::Cancelled:
+      return "cancelled";
+  }
+  return "unknown";
+}
+
+nlohmann::json frame_json(const FrameStatus& f) {
+  const FrameProgress& p = f.progress;
+  return {{"frame", f.frame},
+          {"passes_merged", p.passes_merged},
+          {"passes_total", p.passes_total},
+          {"spp", p.spp},
+          // Not estimable before two passes: null, never 0 (as the CLI's --json).
+          {"rel_mse",
+           p.passes_merged >= 2 && std::isfinite(p.rel_mse) ? nlohmann::json(p.rel_mse) : nullptr},
+          {"eta_seconds", p.eta_seconds >= 0 ? nlohmann::json(p.eta_seconds) : nullptr},
+          {"done", p.done},
+          {"stopped_on_target", p.stopped_on_target},
+          {"run", f.run}};
+}
+
+// A job as the page lists it; `frames` adds every frame (the job's own page).
+nlohmann::json job_json(const JobStatus& j, bool frames) {
+  uint64_t merged = 0, total = 0;
+  int done = 0;
+  double eta = 0, worst = 0;
+  bool eta_known = true;
+  for (const FrameStatus& f : j.frames) {
+    const FrameProgress& p = f.progress;
+    done += p.done;
+    total += p.passes_total;
+    merged += p.done ? p.passes_total : p.passes_merged;
+    if (p.passes_merged >= 2 && std::isfinite(p.rel_mse)) worst = std::max(worst, p.rel_mse);
+    if (!p.done) {
+      if (p.eta_seconds < 0) eta_known = false;
+      eta += std::max(0.0, p.eta_seconds);
+    }
+  }
+  const bool ended = terminal(j.state);
+  nlohmann::json out = {{"job_id", j.job_id},
+                        {"name", j.name},
+                        {"tenant", j.tenant},
+                        {"state", state_text(j.state)},
+                        {"paused", j.paused},
+                        {"priority", j.priority},
+                        {"progress", total ? double(merged) / double(total) : 0.0},
+                        {"frames_done", done},
+                        {"frames_total", j.frames.size()},
+                        {"worst_rel_mse", worst > 0 ? nlohmann::json(worst) : nullptr},
+                        {"eta_seconds", j.state == JobState::Completed    ? nlohmann::json(0.0)
+                                        : ended || j.paused || !eta_known ? nlohmann::json(nullptr)
+                                                                          : nlohmann::json(eta)},
+                        {"core_seconds", j.core_seconds},
+                        {"submitted_unix", j.submitted_unix},
+                        {"ended_unix", j.ended_unix ? nlohmann::json(j.ended_unix) : nullptr},
+                        {"error", j.error},
+                        {"waiting_for", j.waiting_for}};
+  if (frames) {
+    nlohmann::json list = nlohmann::json::array();
+    for (const FrameStatus& f : j.frames) list.push_back(frame_json(f));
+    out["frames"] = std::move(list);
+    out["held_frames"] = frame_range_text(j.held);
+    out["scene_path"] = j.scene_path;
+    out["required_tags"] = j.required_tags;
+  }
+  return out;
+}
+
+int http_status(ErrorCode c) {
+  switch (c) {
+    case ErrorCode::InvalidArgument:
+      return 400;
+    case ErrorCode::Unauthenticated:
+      return 401;
+    case ErrorCode::PermissionDenied:
+      return 403;
+    case ErrorCode::NotFound:
+      return 404;
+    case ErrorCode::FailedPrecondition:
+      return 409;
+    case ErrorCode::ResourceExhausted:
+      return 429;
+    case ErrorCode::Unavailable:
+      return 503;
+    default:
+      return 500;
+  }
+}
+
+// The host part of a Host header or listen address, without port or brackets.
+std::string host_of(const std::string& host_port) {
+  std::string h = host_port;
+  if (!h.empty() && h.front() == '[') return h.substr(1, h.find(']') - 1);
+  if (h.find(':') != h.rfind(':')) return h;  // a bare IPv6 address
+  return h.substr(0, h.rfind(':') == std::string::npos ? h.size() : h.rfind(':'));
+}
+
+bool loopback_host(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
+struct Session {
+  Caller caller;
+  std::string csrf;
+  int64_t expires_unix = 0;
+  bool admin = false;
+};
+
+}  // namespace
+
+struct Monitor::Impl {
+  Coordinator& core;
+  MonitorOptions o;
+  TokenCheck check;
+  std::unique_ptr<httplib::Server> server;
+  std::thread thread;
+  int port = 0;
+  mutable std::mutex mu;
+  std::map<std::string, Session> sessions;  // by session id
+
+  Impl(Coordinator& c, MonitorOptions opt, TokenCheck t)
+      : core(c), o(std::move(opt)), check(std::move(t)) {}
+
+  static void reply(httplib::Response& res, int status, const nlohmann::json& body) {
+    res.status = status;
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(body.dump(), "application/json");
+  }
+  static void refuse(httplib::Response& res, int status, const std::string& why) {
+    reply(res, status, {{"error", why}});
+  }
+
+  std::optional<Session> session_of(const httplib::Request& req) {
+    const std::string cookie = req.get_header_value("Cookie");
+    const std::string key = std::string(kCookie) + "=";
+    std::string id;
+    for (size_t at = 0; at < cookie.size();) {
+      size_t end = cookie.find(';', at);
+      if (end == std::string::npos) end = cookie.size();
+      std::string part = cookie.substr(at, end - at);
+      part.erase(0, part.find_first_not_of(' '));
+      if (part.rfind(key, 0) == 0) id = part.substr(key.size());
+      at = end + 1;
+    }
+    if (id.empty()) return std::nullopt;
+    std::lock_guard lock(mu);
+    auto it = sessions.find(id);
+    if (it == sessions.end()) return std::nullopt;
+    if (now_unix() >= it->second.expires_unix) {
+      sessions.erase(it);
+      return std::nullopt;
+    }
+    return it->second;
+  }
+
+  // Requests a browser on another site could make must not act: a POST needs the session's
+  // CSRF token (which only a page of this origin can read) and no foreign Origin.
+  bool same_origin(const httplib::Request& req) const {
+    if (req.get_header_value("Sec-Fetch-Site") == "cross-site") return false;
+    const std::string origin = req.get_header_value("Origin");
+    if (origin.empty()) return true;
+    const std::string scheme = o.tls_cert.empty() ? "http://" : "https://";
+    return origin == scheme + req.get_header_value("Host");
+  }
+
+  std::string cookie(const std::string& id, int64_t max_age) const {
+    std::string c = std::string(kCookie) + "=" + id +
+                    "; Path=/; HttpOnly; SameSite=Strict; Max-Age=" +
+                    std::to_string(std::max<int64_t>(0, max_age));
+    if (!o.tls_cert.empty()) c += "; Secure";
+    return c;
+  }
+
+  nlohmann::json session_json(const Session& s) const {
+    return {{"csrf", s.csrf},   {"principal", s.caller.principal}, {"tenant", s.caller.tenant},
+            {"admin", s.admin}, {"expires_unix", s.expires_unix},  {"open", o.open}};
+  }
+
+  Session new_session(const Caller& caller, bool admin, int64_t expires, std::string* id) {
+    Session s{caller, random_hex(16), expires, admin};
+    *id = random_hex(32);
+    std::lock_guard lock(mu);
+    if (sessions.size() >= o.max_sessions) {
+      const int64_t now = now_unix();
+      for (auto it = sessions.begin(); it != sessions.end();)
+        it = it->second.expires_unix <= now ? sessions.erase(it) : std::next(it);
+      if (sessions.size() >= o.max_sessions)
+        throw CoordinatorError(ErrorCode::ResourceExhausted,
+                               "too many monitor sessions; try again later");
+    }
+    sessions[*id] = s;
+    return s;
+  }
+
+  // Runs an API handler for the request's session; answers 401 without one, 403 for a POST
+  // without its CSRF token or from another site, and each refusal of the core with its code.
+  void api(const httplib::Request& req, httplib::Response& res,
+           const std::function<nlohmann::json(const Session&)>& f) {
+    std::optional<Session> s = session_of(req);
+    if (!s) return refuse(res, 401, "no session: log in with a client token");
+    if (req.method == "POST") {
+      if (!same_origin(req)) return refuse(res, 403, "cross-site request refused");
+      if (!equal_secret(req.get_header_value("X-CSRF-Token"), s->csrf))
+        return refuse(res, 403, "missing or wrong X-CSRF-Token");
+    }
+    try {
+      reply(res, 200, f(*s));
+    } catch (const CoordinatorError& e) {
+      refuse(res, http_status(e.code), e.what());
+    } catch (const std::exception& e) {
+      refuse(res, 500, e.what());
+    }
+  }
+
+  void routes() {
+    httplib::Server& s = *server;
+    // In the open mode (no token file, loopback only) a page of any site could reach the port
+    // by a name that resolves to 127.0.0.1 (DNS rebinding): only loopback Host names pass.
+    s.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+      res.set_header("X-Content-Type-Options", "nosniff");
+      res.set_header("X-Frame-Options", "DENY");
+      res.set_header("Referrer-Policy", "no-referrer");
+      if (o.open && !loopback_host(host_of(req.get_header_value("Host")))) {
+        refuse(res, 403, "this monitor answers only to loopback host names");
+        return httplib::Server::HandlerResponse::Handled;
+      }
+      return httplib::Server::HandlerResponse::Unhandled;
+    });
+    s.Get("/", [](const httplib::Request&, httplib::Response& res) {
+      res.set_header("Content-Security-Policy",
+                     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' "
+                     "data:; connect-src 'self'; form-action 'self'; frame-ancestors 'none'");
+      res.set_header("Cache-Control", "no-store");
+      res.set_content(kMonitorHtml, "text/html; charset=utf-8");
+    });
+    s.Get("/monitor.js", [](const httplib::Request&, httplib::Response& res) {
+      res.set_content(kMonitorJs, "text/javascript; charset=utf-8");
+    });
+    s.Get("/monitor.css", [](const httplib::Request&, httplib::Response& res) {
+      res.set_content(kMonitorCss, "text/css; charset=utf-8");
+    });
+    s.Post("/api/login", [this](const httplib::Request& req, httplib::Response& res) {
+      if (!same_origin(req)) return refuse(res, 403, "cross-site request refused");
+      std::string id;
+      Session session;
+      try {
+        if (o.open) {
+          session = new_session(Caller{}, true, now_unix() + int64_t(o.session_seconds), &id);
+        } else {
+          std::string token;
+          try {
+            token = nlohmann::json::parse(req.body).at("token").get<std::string>();
+          } catch (const std::exception&) {
+            return refuse(res, 400, "the body must be {\"token\": \"...\"}");
+          }
+          std::string why;
+          std::optional<Principal> who = check(token, &why);
+          if (!who) return refuse(res, 401, why);
+          if (who->role == Role::Worker)
+            return refuse(res, 403, "a worker token cannot log in: use a client or admin token");
+          int64_t expires = now_unix() + int64_t(o.session_seconds);
+          if (who->expires_unix) expires = std::min(expires, *who->expires_unix);
+          const bool admin = who->role == Role::Admin;
+          session = new_session(Caller{who->id, who->tenant, admin}, admin, expires, &id);
+          spdlog::info("monitor: {} logged in from {}", who->id, req.remote_addr);
+        }
+      } catch (const CoordinatorError& e) {
+        return refuse(res, http_status(e.code), e.what());
+      }
+      res.set_header("Set-Cookie", cookie(id, session.expires_unix - now_unix()));
+      reply(res, 200, session_json(session));
+    });
+    s.Post("/api/logout", [this](const httplib::Request& req, httplib::Response& res) {
+      api(req, res, [&](const Session& ses) {
+        std::lock_guard lock(mu);
+        for (auto it = sessions.begin(); it != sessions.end(); ++it)
+          if (it->second.csrf == ses.csrf) {
+            sessions.erase(it);
+            break;
+          }
+        res.set_header("Set-Cookie", cookie("", 0));
+        return nlohmann::json::object();
+      });
+    });
+    s.Get("/api/session", [this](const httplib::Request& req, httplib::Response& res) {
+      api(req, res, [&](const Session& ses) { return session_json(ses); });
+    });
+    s.Get("/api/jobs", [this](const httplib::Request& req, httplib::Response& res) {
+      api(req, res, [&](const Session& ses) {
+        size_t limit = 100;
+        if (req.has_param("limit")) {
+          try {
+            limit = std::clamp<size_t>(std::stoul(req.get_param_value("limit")), 1, 1000);
+          } catch (const std::exception&) {
+            throw CoordinatorError(ErrorCode::InvalidArgument, "limit: not a number");
+          }
+        }
+        const std::string after = req.get_param_value("after");
+        bool more = false;
+        std::vector<JobStatus> jobs = core.list(ses.caller, limit, after, &more);
+        nlohmann::json list = nlohmann::json::array();
+        for (const JobStatus& j : jobs) list.push_back(job_json(j, false));
+        return nlohmann::json{
+            {"jobs", std::move(list)},
+            {"next_after", more && !jobs.empty() ? nlohmann::json(jobs.back().job_id) : nullptr}};
+      });
+    });
+    s.Get(R"(/api/jobs/([A-Za-z0-9_.-]{1,64}))",
+          [this](const httplib::Request& req, httplib::Response& res) {
+            api(req, res, [&](const Session& ses) {
+              return job_json(core.status(req.matches[1], ses.caller), true);
+            });
+          });
+    s.Post(R"(/api/jobs/([A-Za-z0-9_.-]{1,64})/(cancel|pause|resume|retry))",
+           [this](const httplib::Request& req, httplib::Response& res) {
+             api(req, res, [&](const Session& ses) {
+               const std::string id = req.matches[1], op = req.matches[2];
+               if (op == "cancel")
+                 core.cancel(id, ses.caller);
+               else if (op == "pause" || op == "resume")
+                 core.set_paused(id, op == "pause", ses.caller);
+               else
+                 core.retry(id, "", ses.caller);
+               spdlog::info("monitor: {} {} job {}", ses.caller.principal, op, id);
+               return job_json(core.status(id, ses.caller), false);
+             });
+           });
+    s.Get("/api/workers", [this](const httplib::Request& req, httplib::Response& res) {
+      api(req, res, [&](const Session& ses) {
+        nlohmann::json list = nlohmann::json::array();
+        for (const WorkerStatus& w : core.workers(ses.caller))
+          list.push_back(
+              {{"worker_id", w.worker_id},
+               {"hostname", w.info.hostname},
+               {"cores", w.info.cores},
+               {"tags", w.info.tags},
+               {"tasks", w.tasks},
+               {"failures", w.failures},
+               {"seconds_since_contact",
+                w.seconds_since_contact >= 0 ? nlohmann::json(w.seconds_since_contact) : nullptr},
+               {"refused", w.refused}});
+        return nlohmann::json{{"workers", std::move(list)}};
+      });
+    });
+  }
+};
+
+Monitor::Monitor(Coordinator& core, const MonitorOptions& o, TokenCheck check)
+    : impl_(std::make_unique<Impl>(core, o, std::move(check))) {
+  const std::string host = host_of(o.listen);
+  if (o.open && !loopback_host(host))
+    throw std::runtime_error("coordinator: refusing --monitor-listen " + o.listen +
+                             " without --token-file: anyone who reaches it could cancel jobs. "
+                             "Give --token-file or listen on a loopback address (127.0.0.1:PORT)");
+  if (o.tls_cert.empty()) {
+    impl_->server = std::make_unique<httplib::Server>();
+  } else {
+    auto tls = std::make_unique<httplib::SSLServer>(o.tls_cert.c_str(), o.tls_key.c_str());
+    if (!tls->is_valid())
+      throw std::runtime_error("coordinator: --monitor-listen: cannot use --tls-cert " +
+                               o.tls_cert + " and --tls-key " + o.tls_key);
+    impl_->server = std::move(tls);
+  }
+  httplib::Server& s = *impl_->server;
+  const int threads = o.threads;
+  s.new_task_queue = [threads] { return new httplib::ThreadPool(size_t(threads)); };
+  s.set_payload_max_length(64 * 1024);
+  s.set_read_timeout(10, 0);
+  s.set_write_timeout(10, 0);
+  s.set_keep_alive_max_count(100);
+  s.set_keep_alive_timeout(5);
+  impl_->routes();
+  const size_t colon = o.listen.rfind(':');
+  if (colon == std::string::npos)
+    throw std::runtime_error("coordinator: --monitor-listen " + o.listen + ": not HOST:PORT");
+  int wanted = 0;
+  try {
+    wanted = std::stoi(o.listen.substr(colon + 1));
+  } catch (const std::exception&) {
+    throw std::runtime_error("coordinator: --monitor-listen " + o.listen + ": bad port");
+  }
+  impl_->port =
+      wanted == 0 ? s.bind_to_any_port(host) : (s.bind_to_port(host, wanted) ? wanted : -1);
+  if (impl_->port <= 0)
+    throw std::runtime_error("coordinator: cannot listen on --monitor-listen " + o.listen);
+  impl_->thread = std::thread([impl = impl_.get()] { impl->server->listen_after_bind(); });
+}
+
+Monitor::~Monitor() {
+  impl_->server->stop();
+  if (impl_->thread.joinable()) impl_->thread.join();
+}
+
+int Monitor::port() const { return impl_->port; }
+
+void Monitor::revoke_sessions() {
+  std::lock_guard lock(impl_->mu);
+  impl_->sessions.clear();
+}
+
+size_t Monitor::sessions() const {
+  std::lock_guard lock(impl_->mu);
+  return impl_->sessions.size();
+}
+
+}  // namespace rf
