@@ -186,6 +186,7 @@ JobStatus Coordinator::status_of(const JobRecord& job) const {
   if (!terminal(job.state) && !storage_problem_.empty())
     s.error = "waiting for the coordinator's storage: " + storage_problem_;
   s.core_seconds = job.core_seconds;
+  s.noise_target = job.noise_target;
   s.submitted_unix = job.submitted_unix;
   s.paused = job.paused;
   s.priority = job.priority;
@@ -271,6 +272,16 @@ FrameImage Coordinator::fetch(const std::string& job_id, FrameNumber frame,
       image.buffer = read_file_bytes(path);
   }
   return image;
+}
+
+std::vector<ProgressPoint> Coordinator::frame_history(const std::string& job_id, FrameNumber frame,
+                                                      const Caller& caller) const {
+  std::lock_guard lock(mu_);
+  std::shared_ptr<JobRecord> job = find_for(job_id, caller);
+  auto it = job->by_number.find(frame);
+  if (it == job->by_number.end())
+    refuse(ErrorCode::NotFound, "job " + job->id + " has no frame " + std::to_string(frame));
+  return it->second->history;
 }
 
 FrameImage::File::~File() {

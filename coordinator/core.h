@@ -64,6 +64,14 @@ struct FrameStatus {
   uint32_t run = 0;            // how many times it was requeued
 };
 
+// One point of a frame's history (Coordinator::frame_history).
+struct ProgressPoint {
+  double unix_time = 0;
+  uint32_t passes = 0;  // the merged prefix
+  float rel_mse = 0;    // of that prefix; 0 before two passes
+};
+inline constexpr size_t kHistoryPoints = 128;
+
 struct JobStatus {
   std::string job_id, name;
   std::string tenant;    // whose job it is
@@ -72,6 +80,7 @@ struct JobStatus {
   JobState state = JobState::Queued;
   std::string error;  // why it failed (the workers' messages) or was cancelled
   double core_seconds = 0;
+  double noise_target = 0;  // the relMSE its frames stop at (0: none), from its settings or scene
   int64_t submitted_unix = 0;
   bool paused = false;
   int priority = 0;
@@ -359,6 +368,10 @@ class Coordinator {
                const std::optional<SceneVersion>& scene, const std::string& request_id = "",
                const Caller& caller = {});
   FrameImage fetch(const std::string& job_id, FrameNumber frame, const Caller& caller = {}) const;
+  // A frame's noise over time in this run of the coordinator: a point each time its merged
+  // prefix grew (at most kHistoryPoints, thinned evenly as it grows), for the monitor's plot.
+  std::vector<ProgressPoint> frame_history(const std::string& job_id, FrameNumber frame,
+                                           const Caller& caller = {}) const;
 
   // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal
   // (stored, so it outlives a restart); every later call naming it must come from the same

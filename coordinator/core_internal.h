@@ -60,6 +60,10 @@ struct FrameRecord {
   bool held = false;            // unfinished and left out of a `retry --frames`: not queued
   uint32_t version = 0;         // the scene version it renders (versions.h)
   uint32_t run = 0;             // requeued this many times: its checkpoint's folder
+  // Under the coordinator's mutex: the prefix's growth in this run (frame_history), every
+  // `history_stride`-th prefix length kept, so at most kHistoryPoints.
+  std::vector<ProgressPoint> history;
+  uint32_t history_stride = 1;
   // Under the frame's lock: tasks (pass, tile) whose results are being made durable, their
   // frame lock let go meanwhile; another result of one of them is not needed.
   std::set<std::pair<uint32_t, uint32_t>> storing;

@@ -4,7 +4,9 @@
 #include <openssl/rand.h>
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <ctime>
 #include <map>
@@ -14,6 +16,8 @@
 
 #include "coordinator/errors.h"
 #include "coordinator/monitor_page.h"
+#include "engine/buffer_file.h"
+#include "engine/image_io.h"
 #include "farm/frame_range.h"
 #include "httplib.h"
 
@@ -113,6 +117,7 @@ nlohmann::json job_json(const JobStatus& j, bool frames) {
     for (const FrameStatus& f : j.frames) list.push_back(frame_json(f));
     out["frames"] = std::move(list);
     out["held_frames"] = frame_range_text(j.held);
+    out["noise_target"] = j.noise_target > 0 ? nlohmann::json(j.noise_target) : nullptr;
     out["scene_path"] = j.scene_path;
     out["required_tags"] = j.required_tags;
   }
@@ -152,6 +157,30 @@ bool loopback_host(const std::string& host) {
   return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
 
+// A frame's preview: one PNG per (frame, merged prefix), rebuilt at most every
+// kPreviewRefreshSeconds however often pages ask, one build at a time per frame.
+constexpr double kPreviewRefreshSeconds = 2.0;
+constexpr int kPreviewSide = 256;
+constexpr size_t kPreviewsKept = 1024;
+
+struct PreviewEntry {
+  std::mutex build;
+  uint32_t passes = 0, run = 0;
+  double built_at = -1e300;
+  std::shared_ptr<const std::string> png;
+};
+
+FrameNumber frame_of(const std::string& text) {
+  const long long n = std::stoll(text);  // the route allows at most 10 digits
+  if (n < INT32_MIN || n > INT32_MAX)
+    throw CoordinatorError(ErrorCode::InvalidArgument, "frame " + text + " is out of range");
+  return FrameNumber(n);
+}
+
+double monotonic_seconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
 struct Session {
   Caller caller;
   std::string csrf;
@@ -170,6 +199,11 @@ struct Monitor::Impl {
   int port = 0;
   mutable std::mutex mu;
   std::map<std::string, Session> sessions;  // by session id
+  std::mutex previews_mu;
+  // By (job, frame), with when each was last asked for (the least recent goes first when full).
+  std::map<std::pair<std::string, FrameNumber>, std::pair<std::shared_ptr<PreviewEntry>, double>>
+      previews;
+  std::atomic<uint64_t> previews_built{0};
 
   Impl(Coordinator& c, MonitorOptions opt, TokenCheck t)
       : core(c), o(std::move(opt)), check(std::move(t)) {}
@@ -263,6 +297,61 @@ struct Monitor::Impl {
     } catch (const std::exception& e) {
       refuse(res, 500, e.what());
     }
+  }
+
+  // The frame's preview PNG for this caller: cached while its merged prefix is the same, and
+  // while the cached one is younger than the refresh interval. Built from the core's fetch
+  // (which holds only the frame's own lock while it encodes), decoded, scaled and encoded here,
+  // outside every lock of the core.
+  std::shared_ptr<const std::string> preview(const Caller& caller, const std::string& job,
+                                             FrameNumber frame, bool* built) {
+    *built = false;
+    JobStatus status = core.status(job, caller);  // NOT_FOUND and tenants, as everywhere
+    const FrameStatus* f = nullptr;
+    for (const FrameStatus& s : status.frames)
+      if (s.frame == frame) f = &s;
+    if (!f)
+      throw CoordinatorError(ErrorCode::NotFound,
+                             "job " + job + " has no frame " + std::to_string(frame));
+    if (f->progress.passes_merged == 0)
+      throw CoordinatorError(ErrorCode::FailedPrecondition,
+                             "frame " + std::to_string(frame) + " has no complete pass yet");
+    std::shared_ptr<PreviewEntry> e;
+    const double now = monotonic_seconds();
+    {
+      std::lock_guard lock(previews_mu);
+      auto& slot = previews[{job, frame}];
+      if (!slot.first) slot.first = std::make_shared<PreviewEntry>();
+      slot.second = now;
+      e = slot.first;
+      if (previews.size() > kPreviewsKept) {
+        auto oldest = previews.begin();
+        for (auto it = previews.begin(); it != previews.end(); ++it)
+          if (it->second.second < oldest->second.second) oldest = it;
+        previews.erase(oldest);
+      }
+    }
+    std::lock_guard build(e->build);
+    if (e->png && e->run == f->run &&
+        (e->passes == f->progress.passes_merged || now - e->built_at < kPreviewRefreshSeconds))
+      return e->png;
+    FrameImage image = core.fetch(job, frame, caller);
+    auto png = std::make_shared<std::string>();
+    if (image.file) {
+      // A frame kept in tiles: read a band at a time from the open checkpoint.
+      BufferFileBands bands("/proc/self/fd/" + std::to_string(image.file->fd), uint64_t(16) << 20);
+      *png = encode_png(make_preview(bands, kPreviewSide));
+    } else {
+      SampleBuffer whole = decode_buffer(image.buffer, "frame " + std::to_string(frame));
+      *png = encode_png(make_preview(WholeFrame(whole), kPreviewSide));
+    }
+    e->png = std::move(png);
+    e->passes = image.status.progress.passes_merged;
+    e->run = image.status.run;
+    e->built_at = monotonic_seconds();
+    ++previews_built;
+    *built = true;
+    return e->png;
   }
 
   void routes() {
@@ -364,6 +453,39 @@ struct Monitor::Impl {
               return job_json(core.status(req.matches[1], ses.caller), true);
             });
           });
+    s.Get(R"(/api/jobs/([A-Za-z0-9_.-]{1,64})/frames/(-?[0-9]{1,10})/preview\.png)",
+          [this](const httplib::Request& req, httplib::Response& res) {
+            std::optional<Session> ses = session_of(req);
+            if (!ses) return refuse(res, 401, "no session: log in with a client token");
+            try {
+              bool built = false;
+              std::shared_ptr<const std::string> png =
+                  preview(ses->caller, req.matches[1], frame_of(req.matches[2]), &built);
+              res.set_header("Cache-Control", "private, no-store");
+              res.set_header("X-Rayfarm-Preview", built ? "built" : "cached");
+              res.set_content(*png, "image/png");
+            } catch (const CoordinatorError& e) {
+              refuse(res, http_status(e.code), e.what());
+            } catch (const std::exception& e) {
+              refuse(res, 500, e.what());
+            }
+          });
+    s.Get(R"(/api/jobs/([A-Za-z0-9_.-]{1,64})/frames/(-?[0-9]{1,10})/history)",
+          [this](const httplib::Request& req, httplib::Response& res) {
+            api(req, res, [&](const Session& ses) {
+              const std::string id = req.matches[1];
+              const FrameNumber frame = frame_of(req.matches[2]);
+              nlohmann::json points = nlohmann::json::array();
+              for (const ProgressPoint& p : core.frame_history(id, frame, ses.caller))
+                points.push_back(
+                    {p.unix_time, p.passes,
+                     p.passes >= 2 && p.rel_mse > 0 ? nlohmann::json(p.rel_mse) : nullptr});
+              JobStatus j = core.status(id, ses.caller);
+              return nlohmann::json{
+                  {"noise_target", j.noise_target > 0 ? nlohmann::json(j.noise_target) : nullptr},
+                  {"points", std::move(points)}};
+            });
+          });
     s.Post(R"(/api/jobs/([A-Za-z0-9_.-]{1,64})/(cancel|pause|resume|retry))",
            [this](const httplib::Request& req, httplib::Response& res) {
              api(req, res, [&](const Session& ses) {
@@ -450,6 +572,8 @@ void Monitor::revoke_sessions() {
   std::lock_guard lock(impl_->mu);
   impl_->sessions.clear();
 }
+
+uint64_t Monitor::previews_built() const { return impl_->previews_built.load(); }
 
 size_t Monitor::sessions() const {
   std::lock_guard lock(impl_->mu);

@@ -45,6 +45,7 @@ class Monitor {
   // browser).
   void revoke_sessions();
   size_t sessions() const;
+  uint64_t previews_built() const;  // PNGs made (the rest came from the cache)
 
  private:
   struct Impl;

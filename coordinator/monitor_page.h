@@ -33,6 +33,12 @@ inline constexpr const char* kMonitorHtml = R"html(<!DOCTYPE html>
 <th>Progress</th><th>Frames</th><th>relMSE</th><th>ETA</th><th></th></tr></thead>
 <tbody></tbody></table>
 <p><button id="more-jobs" hidden>More jobs</button></p>
+<section id="detail" hidden>
+<h2 id="detail-title"></h2>
+<p id="detail-line" class="muted"></p>
+<div id="frames"></div>
+<p><button id="more-frames" hidden>More frames</button></p>
+</section>
 <h2>Workers</h2>
 <table id="workers"><thead><tr><th>Worker</th><th>Host</th><th>Cores</th><th>Tags</th>
 <th>Current tasks</th><th>Failures</th><th>Last contact</th></tr></thead>
@@ -58,6 +64,16 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 .state-cancelled { color: #6b7280; } .state-running { color: #1d4ed8; }
 .error { color: #b91c1c; } .muted { color: #6b7280; }
 button { margin-right: 4px; }
+button.link { background: none; border: none; color: #1d4ed8; cursor: pointer; padding: 0;
+              text-decoration: underline; font: inherit; }
+#frames { display: flex; flex-wrap: wrap; gap: 12px; }
+.frame { background: #fff; border: 1px solid #e3e3e3; padding: 8px; width: 540px; }
+.frame img { width: 256px; image-rendering: pixelated; background: #000; vertical-align: top; }
+.frame .plots { display: inline-flex; flex-direction: column; gap: 4px; margin-left: 8px; }
+.plot { background: #fcfcfc; border: 1px solid #eee; }
+.plot .curve { fill: none; stroke: #1d4ed8; stroke-width: 1.5; }
+.plot .target { stroke: #b91c1c; stroke-dasharray: 4 3; }
+.plot text { font-size: 10px; fill: #6b7280; }
 )css";
 
 inline constexpr const char* kMonitorJs = R"js(
@@ -65,6 +81,8 @@ inline constexpr const char* kMonitorJs = R"js(
 let csrf = "";
 let refreshTimer = null;
 let pages = 1;
+let openJob = null;
+let framesShown = 12;
 const $ = (id) => document.getElementById(id);
 
 function text(tag, value, cls) {
@@ -136,7 +154,11 @@ function jobRow(job) {
   const tr = document.createElement("tr");
   tr.id = "job-" + job.job_id;
   tr.dataset.state = job.state;
-  tr.appendChild(text("td", job.job_id));
+  const idCell = document.createElement("td");
+  const open = text("button", job.job_id, "link");
+  open.addEventListener("click", () => { openJob = job.job_id; framesShown = 12; refreshDetail(); });
+  idCell.appendChild(open);
+  tr.appendChild(idCell);
   tr.appendChild(text("td", job.name));
   tr.appendChild(text("td", job.tenant));
   const state = job.paused ? job.state + ", paused" : job.state;
@@ -186,8 +208,100 @@ async function refresh() {
     $("workers").tBodies[0].replaceChildren(...workers.workers.map(workerRow));
     $("status-line").textContent = jobs.length + " jobs, " + workers.workers.length +
         " workers; updated " + new Date().toLocaleTimeString();
+    await refreshDetail();
   } catch (e) {
     if (e.message !== "logged out") $("status-line").textContent = "update failed: " + e.message;
+  }
+}
+
+const SVG = "http://www.w3.org/2000/svg";
+function svg(tag, attrs) {
+  const el = document.createElementNS(SVG, tag);
+  for (const k in attrs) el.setAttribute(k, attrs[k]);
+  return el;
+}
+
+// relMSE (log scale) against x (passes or seconds since the first point), the noise target
+// dashed.
+function plot(points, xOf, xLabel, target) {
+  const W = 260, H = 110, L = 34, B = 16;
+  const s = svg("svg", { width: W, height: H, class: "plot" });
+  const pts = points.filter((p) => p[2] !== null);
+  s.appendChild(svg("text", { x: L, y: H - 3 })).textContent = xLabel;
+  if (!pts.length) {
+    s.appendChild(svg("text", { x: L, y: H / 2 })).textContent = "relMSE n/a before two passes";
+    return s;
+  }
+  const ys = pts.map((p) => Math.log10(p[2]));
+  if (target) ys.push(Math.log10(target));
+  let y0 = Math.floor(Math.min(...ys)), y1 = Math.ceil(Math.max(...ys));
+  if (y1 === y0) y1 = y0 + 1;
+  const xs = pts.map(xOf), x0 = Math.min(...xs), x1 = Math.max(...xs, x0 + 1e-9);
+  const X = (v) => L + (W - L - 6) * (v - x0) / (x1 - x0);
+  const Y = (v) => 4 + (H - B - 8) * (y1 - v) / (y1 - y0);
+  for (let e = y0; e <= y1; e++) {
+    s.appendChild(svg("text", { x: 2, y: Y(e) + 3 })).textContent = "1e" + e;
+  }
+  if (target) s.appendChild(svg("line", { x1: L, x2: W - 6, y1: Y(Math.log10(target)),
+                                          y2: Y(Math.log10(target)), class: "target" }));
+  s.appendChild(svg("polyline", { class: "curve",
+      points: pts.map((p) => X(xOf(p)).toFixed(1) + "," + Y(Math.log10(p[2])).toFixed(1)).join(" ") }));
+  s.appendChild(svg("text", { x: W - 70, y: H - 3 })).textContent =
+      xOf(pts[pts.length - 1]).toFixed(0) + " " + xLabel.split(" ")[0];
+  return s;
+}
+
+async function frameCard(job, f) {
+  const card = document.createElement("div");
+  card.className = "frame"; card.id = "frame-" + f.frame;
+  card.appendChild(text("div", "frame " + f.frame + ": " + f.passes_merged + "/" + f.passes_total +
+      " passes, " + Math.round(f.spp) + " spp, relMSE " +
+      (f.rel_mse === null ? "n/a" : f.rel_mse.toPrecision(3)) +
+      (f.done ? ", done" : ", ETA " + duration(f.eta_seconds))));
+  if (f.passes_merged > 0) {
+    const img = document.createElement("img");
+    img.alt = "frame " + f.frame;
+    img.className = "preview";
+    // A new URL only when the merged prefix changes: the browser fetches only then.
+    img.src = "/api/jobs/" + encodeURIComponent(job.job_id) + "/frames/" + f.frame +
+        "/preview.png?passes=" + f.passes_merged + "&run=" + f.run;
+    card.appendChild(img);
+    const h = await api("GET", "/api/jobs/" + encodeURIComponent(job.job_id) + "/frames/" +
+        f.frame + "/history");
+    const plots = document.createElement("div"); plots.className = "plots";
+    const t0 = h.points.length ? h.points[0][0] : 0;
+    plots.appendChild(plot(h.points, (p) => p[1], "passes", h.noise_target));
+    plots.appendChild(plot(h.points, (p) => p[0] - t0, "seconds", h.noise_target));
+    card.appendChild(plots);
+  }
+  return card;
+}
+
+async function refreshDetail() {
+  if (!openJob) return;
+  try {
+    const job = await api("GET", "/api/jobs/" + encodeURIComponent(openJob));
+    $("detail").hidden = false;
+    $("detail-title").textContent = job.job_id + " " + job.name;
+    $("detail-line").textContent = job.state + ", scene " + job.scene_path +
+        (job.noise_target ? ", noise target " + job.noise_target : "") +
+        (job.error ? ", " + job.error : "");
+    const frames = job.frames.slice(0, framesShown);
+    const cards = [];
+    for (const f of frames) {
+      const old = document.getElementById("frame-" + f.frame);
+      // Unchanged frames keep their card (and image): no refetch, no flicker.
+      if (old && old.dataset.key === f.passes_merged + "/" + f.run + "/" + f.done) {
+        cards.push(old); continue;
+      }
+      const card = await frameCard(job, f);
+      card.dataset.key = f.passes_merged + "/" + f.run + "/" + f.done;
+      cards.push(card);
+    }
+    $("frames").replaceChildren(...cards);
+    $("more-frames").hidden = job.frames.length <= framesShown;
+  } catch (e) {
+    if (e.message !== "logged out") $("detail-line").textContent = "update failed: " + e.message;
   }
 }
 
@@ -209,6 +323,7 @@ async function start() {
     showLogin("");
   });
   $("more-jobs").addEventListener("click", () => { pages++; refresh(); });
+  $("more-frames").addEventListener("click", () => { framesShown += 12; refreshDetail(); });
   try {
     const res = await fetch("/api/session", { credentials: "same-origin" });
     if (res.ok) return showApp(await res.json());

@@ -176,6 +176,8 @@ void Coordinator::requeue(const std::string& id, const std::string& frames,
       f.checkpoint = std::move(fresh.at(n));
       f.acc.reset();
       f.progress = FrameProgress{};
+      f.history.clear();
+      f.history_stride = 1;
       f.progress.passes_total = job->passes;
       f.first_lease_at = -1;
       f.leases_dropped = false;

@@ -39,9 +39,35 @@ std::set<FrameNumber> core_detail::named_frames(const JobRecord& job, const std:
   return named;
 }
 
+// A point for the frame's history when its prefix grew. Full, it keeps every other point and
+// doubles the stride, so a frame of any number of passes keeps at most kHistoryPoints spread
+// over its whole life, and the last point is always the latest prefix.
+static void note_history(FrameRecord& f) {
+  const uint32_t passes = f.progress.passes_merged;
+  if (passes == 0 || (!f.history.empty() && f.history.back().passes >= passes)) return;
+  ProgressPoint p{
+      double(unix_now()), passes,
+      passes >= 2 && std::isfinite(f.progress.rel_mse) ? float(f.progress.rel_mse) : 0.0f};
+  // The previous point stays only if it is on the stride (or the first): the last point
+  // always moves to the latest prefix.
+  if (f.history.size() >= 2 && f.history.back().passes % f.history_stride != 0)
+    f.history.back() = p;
+  else
+    f.history.push_back(p);
+  if (f.history.size() >= kHistoryPoints) {
+    f.history_stride *= 2;
+    std::vector<ProgressPoint> kept;
+    for (size_t i = 0; i < f.history.size(); ++i)
+      if (i == 0 || i + 1 == f.history.size() || f.history[i].passes % f.history_stride == 0)
+        kept.push_back(f.history[i]);
+    f.history = std::move(kept);
+  }
+}
+
 // After a merge or a restore: the frame's figures, the scheduler's stop, the job's completion.
 void Coordinator::publish_frame(JobRecord& job, FrameRecord& f) {
   if (f.acc) f.progress = frame_progress(*f.acc, job.passes, job.noise_target, -1);
+  note_history(f);
   if (f.progress.done) ledger_->frame_done(job, f, f.progress.passes_merged);
   bool all_done = f.progress.done;  // an unfinished frame: no need to look at the others
   std::vector<FrameNumber> held;

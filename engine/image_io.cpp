@@ -17,6 +17,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
 #include <atomic>
@@ -234,6 +235,51 @@ void write_png(const std::string& path, const FrameBands& frame, float exposure_
           }
         });
   });
+}
+
+Preview make_preview(const FrameBands& frame, int max_side, float exposure_stops) {
+  const Rect& r = frame.info().rect;
+  Preview p;
+  if (r.w <= 0 || r.h <= 0 || max_side <= 0) return p;
+  p.box = std::max(1, (std::max(r.w, r.h) + max_side - 1) / max_side);
+  p.width = (r.w + p.box - 1) / p.box;
+  p.height = (r.h + p.box - 1) / p.box;
+  std::vector<double> sum(size_t(p.width) * size_t(p.height) * 3, 0.0);
+  std::vector<uint32_t> count(size_t(p.width) * size_t(p.height), 0);
+  for (int y0 = r.y0; y0 < r.y1(); y0 += frame.band_height()) {
+    const SampleBuffer& band = frame.band(y0);
+    const int y1 = std::min(y0 + frame.band_height(), r.y1());
+    for (int y = y0; y < y1; ++y) {
+      const size_t row = size_t((y - r.y0) / p.box) * size_t(p.width);
+      for (int x = r.x0; x < r.x1(); ++x) {
+        const size_t i = row + size_t((x - r.x0) / p.box);
+        RGB e = band.estimate(x, y);
+        for (int c = 0; c < 3; ++c)
+          if (std::isfinite(e[c])) sum[3 * i + size_t(c)] += double(e[c]);
+        ++count[i];
+      }
+    }
+  }
+  const double scale = std::exp2(double(exposure_stops));
+  p.rgb.resize(sum.size());
+  for (size_t i = 0; i < count.size(); ++i)
+    for (size_t c = 0; c < 3; ++c)
+      p.rgb[3 * i + c] = srgb8(count[i] ? sum[3 * i + c] / count[i] * scale : 0.0);
+  return p;
+}
+
+std::string encode_png(const Preview& p) {
+  ImageSpec spec(p.width, p.height, 3, TypeDesc::UINT8);
+  spec.attribute("oiio:ColorSpace", "sRGB");
+  std::vector<unsigned char> bytes;
+  OIIO::Filesystem::IOVecOutput sink(bytes);
+  auto out = ImageOutput::create("png");
+  if (!out) throw ImageIOError("PNG preview: " + OIIO::geterror());
+  out->set_ioproxy(&sink);
+  if (!out->open("preview.png", spec) || !out->write_image(TypeDesc::UINT8, p.rgb.data()) ||
+      !out->close())
+    throw ImageIOError("PNG preview: " + out->geterror());
+  return std::string(bytes.begin(), bytes.end());
 }
 
 RgbImage read_rgb(const std::string& path) {

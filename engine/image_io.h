@@ -38,6 +38,19 @@ void write_exr(const std::string& path, const FrameBands& frame, const Attribute
 void write_png(const std::string& path, const SampleBuffer& frame, float exposure_stops = 0.0f);
 void write_png(const std::string& path, const FrameBands& frame, float exposure_stops = 0.0f);
 
+// A small picture of a frame for a monitor (coordinator/monitor.h): the estimate averaged over
+// boxes of whole pixels (the same box in x and y, the smallest that brings the longer side to
+// at most `max_side`), scaled by 2^exposure_stops, sRGB-encoded 8-bit, row-major RGB. Read a band
+// at a time, so a frame kept in tiles is never whole in memory.
+struct Preview {
+  int width = 0, height = 0;
+  int box = 1;               // frame pixels per preview pixel, in x and in y
+  std::vector<uint8_t> rgb;  // 3 per pixel
+};
+Preview make_preview(const FrameBands& frame, int max_side, float exposure_stops = 0.0f);
+// The preview as PNG bytes (OpenImageIO, in memory). Throws ImageIOError.
+std::string encode_png(const Preview& preview);
+
 // An image's RGB as floats, row-major, 3 per pixel.
 struct RgbImage {
   int width = 0, height = 0;

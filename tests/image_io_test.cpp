@@ -158,6 +158,40 @@ TEST(ImageIO, PngIsSrgbEncoded) {
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), {}), 1);
 }
 
+// The monitor's preview: the estimate averaged over boxes of whole pixels, sRGB-encoded, and a
+// PNG in memory that decodes to the same bytes.
+TEST(ImageIO, PreviewAveragesBoxesOfPixelsAndEncodesAPng) {
+  BufferHeader h = test::test_header(PassSet::range(0, 1), 5, 3);
+  SampleBuffer b(h, test::full_frame(h), false);
+  // 5x3 at most 2 on a side: boxes of 3x3 pixels, a 2x1 preview; the left box averages 9
+  // pixels, the right one the 6 of the last two columns.
+  for (int y = 0; y < 3; ++y)
+    for (int x = 0; x < 5; ++x)
+      b.add_sample(x, y, RGB(x < 3 ? 0.18f : (x == 4 && y == 2 ? 0.25f : 0.5f), 0.0f, 2.0f));
+  Preview p = make_preview(WholeFrame(b), 2);
+  EXPECT_EQ(p.box, 3);
+  ASSERT_EQ(p.width, 2);
+  ASSERT_EQ(p.height, 1);
+  ASSERT_EQ(p.rgb.size(), 6u);
+  EXPECT_EQ(p.rgb[0], 118);  // 0.18
+  EXPECT_EQ(p.rgb[2], 255);  // 2.0 clamps
+  // (0.5 * 5 + 0.25) / 6 = 0.4583 -> sRGB 0.7072 * 255 = 180.3 (a box of the right size: a
+  // 2x2 box over the same pixels would give another value)
+  EXPECT_EQ(p.rgb[3], 180);
+  // Small frames are not enlarged.
+  EXPECT_EQ(make_preview(WholeFrame(b), 256).width, 5);
+  const std::string png = encode_png(p);
+  ASSERT_GT(png.size(), 8u);
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+  std::string dir = test::make_temp_dir("preview-png");
+  test::write_text(dir + "/p.png", png);
+  auto in = OIIO::ImageInput::open(dir + "/p.png");
+  ASSERT_TRUE(in) << OIIO::geterror();
+  std::vector<uint8_t> px(6);
+  ASSERT_TRUE(in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, px.data()));
+  EXPECT_EQ(px, p.rgb);
+}
+
 // read_rgb gives back what write_exr stored (the estimate, as float).
 TEST(ImageIO, ReadRgbReadsTheExrEstimate) {
   BufferHeader h = test::test_header(PassSet::range(0, 1), 5, 3);

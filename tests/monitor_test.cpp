@@ -10,6 +10,7 @@
 #include <regex>
 #include <thread>
 
+#include "engine/image_io.h"
 #include "tests/support/farm.h"
 
 namespace rf::test {
@@ -32,8 +33,9 @@ int monitor_port(Process& coordinator) {
 
 // A browser's view of the monitor: its cookie and CSRF token once logged in.
 struct Browser {
-  explicit Browser(int port) : http("127.0.0.1", port) {}
+  explicit Browser(int port) : http("127.0.0.1", port), port(port) {}
   httplib::Client http;
+  int port;
   std::string cookie, csrf;
 
   httplib::Result login(const std::string& token) {
@@ -158,6 +160,79 @@ TEST(Monitor, SessionsCookiesCsrfAndTenants) {
   EXPECT_EQ(status_of(alice.get("/api/jobs")), 401) << "SIGHUP revokes sessions";
   ASSERT_EQ(status_of(alice.login(a.token)), 200) << "and a fresh login works";
   EXPECT_EQ(status_of(alice.get("/api/jobs")), 200);
+}
+
+// A frame's preview and noise history: the PNG is built once per merged prefix (a second ask is
+// the cache's), changes as passes land, and the history has a point per prefix with the noise
+// target beside it.
+TEST(Monitor, PreviewsFollowThePassesAndAreCachedAndTheHistoryHasEveryPrefix) {
+  std::string dir = make_temp_dir("monitor-preview");
+  Token a = make_token(dir, "a", "--role client --tenant a");
+  Token b = make_token(dir, "b", "--role client --tenant b");
+  Token w = make_token(dir, "w", "--role worker --tenant farm");
+  write_token_file(dir + "/tokens", {&a, &b, &w});
+  Farm farm("monitor-preview", 30, dir + "/tokens", {"--monitor-listen", "127.0.0.1:0"});
+  farm.client_token_file = a.file;
+  farm.worker_token_file = w.file;
+  Browser alice(monitor_port(farm.coordinator()));
+  ASSERT_EQ(status_of(alice.login(a.token)), 200);
+  const std::string job =
+      farm.submit(kCornell + " --spp 512 --passes 16 --res 192x128 --noise-target 0.0001");
+  const std::string preview = "/api/jobs/" + job + "/frames/0/preview.png";
+  EXPECT_EQ(status_of(alice.get(preview)), 409) << "no pass merged yet";
+  Process& worker = farm.worker();
+  std::string first;
+  auto first_at = std::chrono::steady_clock::now();
+  for (int i = 0; i < 1000 && first.empty(); ++i) {
+    auto r = alice.get(preview);
+    if (status_of(r) == 200) {
+      first = r->body;
+      first_at = std::chrono::steady_clock::now();
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+  }
+  ASSERT_FALSE(first.empty()) << worker.log();
+  EXPECT_EQ(first.substr(1, 3), "PNG");
+  ASSERT_LT(farm.status(job)["frames"][0]["passes_merged"].get<int>(), 16)
+      << "the job ended before its first preview: it needs to be longer";
+  ASSERT_EQ(farm.client("watch " + job).exit_code, 0);
+  // A preview is rebuilt at most every 2 s (the refresh interval), whatever has merged.
+  std::this_thread::sleep_until(first_at + std::chrono::milliseconds(2100));
+  auto built = alice.get(preview);
+  ASSERT_EQ(status_of(built), 200);
+  EXPECT_EQ(built->get_header_value("X-Rayfarm-Preview"), "built");
+  EXPECT_TRUE(built->body != first) << "the preview follows the merged passes";
+  auto again = alice.get(preview);
+  ASSERT_EQ(status_of(again), 200);
+  EXPECT_EQ(again->get_header_value("X-Rayfarm-Preview"), "cached");
+  EXPECT_TRUE(again->body == built->body);
+  // 192x128 is under 256 on a side: the preview is the frame's size.
+  write_text(dir + "/p.png", built->body);
+  RgbImage img = read_rgb(dir + "/p.png");
+  EXPECT_EQ(img.width, 192);
+  EXPECT_EQ(img.height, 128);
+  Browser bob(alice.port);
+  ASSERT_EQ(status_of(bob.login(b.token)), 200);
+  EXPECT_EQ(status_of(bob.get(preview)), 404) << "another tenant's frame";
+
+  auto history = alice.get("/api/jobs/" + job + "/frames/0/history");
+  ASSERT_EQ(status_of(history), 200);
+  nlohmann::json h = nlohmann::json::parse(history->body);
+  EXPECT_DOUBLE_EQ(h["noise_target"].get<double>(), 0.0001);
+  const auto& points = h["points"];
+  ASSERT_GE(points.size(), 2u);
+  EXPECT_LE(points.size(), 16u);
+  EXPECT_EQ(points.back()[1], 16) << "the last point is the whole frame";
+  for (size_t i = 1; i < points.size(); ++i) {
+    EXPECT_GT(points[i][1].get<int>(), points[i - 1][1].get<int>());
+    EXPECT_GE(points[i][0].get<double>(), points[i - 1][0].get<double>());
+  }
+  EXPECT_TRUE(points.back()[2].is_number());
+  EXPECT_EQ(status_of(bob.get("/api/jobs/" + job + "/frames/0/history")), 404);
+  EXPECT_EQ(status_of(alice.get("/api/jobs/" + job + "/frames/7/preview.png")), 404);
+  EXPECT_EQ(status_of(alice.get("/api/jobs/" + job + "/frames/99999999999/history")), 404)
+      << "not a route: more than 10 digits";
 }
 
 // A session lasts no longer than its token.
