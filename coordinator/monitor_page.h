@@ -238,7 +238,7 @@ function plot(points, xOf, xLabel, target) {
   if (y1 === y0) y1 = y0 + 1;
   const xs = pts.map(xOf), x0 = Math.min(...xs), x1 = Math.max(...xs, x0 + 1e-9);
   const X = (v) => L + (W - L - 6) * (v - x0) / (x1 - x0);
-  const Y = (v) => 4 + (H - B - 8) * (y1 - v) / (y1 - y0);
+  const Y = (v) => 10 + (H - B - 14) * (y1 - v) / (y1 - y0);
   for (let e = y0; e <= y1; e++) {
     s.appendChild(svg("text", { x: 2, y: Y(e) + 3 })).textContent = "1e" + e;
   }

@@ -17,7 +17,7 @@ log() { printf 'python-venv: %s\n' "$*" >&2; }
 
 "$ROOT/tools/install-debian-packages.sh" python3-venv python3-grpcio \
   python3-protobuf python3-numpy python3-pytest python3-openimageio python3-cffi \
-  protobuf-compiler protobuf-compiler-grpc
+  protobuf-compiler protobuf-compiler-grpc chromium chromium-driver python3-selenium
 
 # Debian's interpreter, whatever python3 comes first on PATH: the system packages are its.
 if [ ! -x "$VENV/bin/python" ]; then

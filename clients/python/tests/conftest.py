@@ -45,8 +45,10 @@ class Process:
 class LocalFarm:
     """A coordinator with a token file (tenants "a" and "b", a worker token), and workers."""
 
-    def __init__(self, root, lease_seconds=10):
+    def __init__(self, root, lease_seconds=10, monitor=False):
         self.root = root
+        self.monitor = monitor
+        self.monitor_port = 0
         self.tokens = {}
         lines = []
         for name, role, tenant in (("a", "client", "a"), ("b", "client", "b"),
@@ -69,15 +71,20 @@ class LocalFarm:
         self.start_coordinator()
 
     def start_coordinator(self):
-        self.coordinator = Process(
-            ["coordinator", "--listen", f"127.0.0.1:{self.port}", "--state-dir",
-             os.path.join(self.root, "state"), "--token-file", self.token_file,
-             "--lease-seconds", str(self.lease_seconds)],
-            os.path.join(self.root, f"coordinator-{time.monotonic_ns()}.log"))
+        args = ["coordinator", "--listen", f"127.0.0.1:{self.port}", "--state-dir",
+                os.path.join(self.root, "state"), "--token-file", self.token_file,
+                "--lease-seconds", str(self.lease_seconds)]
+        if self.monitor:
+            args += ["--monitor-listen", f"127.0.0.1:{self.monitor_port}"]
+        self.coordinator = Process(args, os.path.join(self.root,
+                                                      f"coordinator-{time.monotonic_ns()}.log"))
         for _ in range(500):
-            m = re.search(r"\(port ([0-9]+)\)", self.coordinator.log())
-            if m:
+            log = self.coordinator.log()
+            m = re.search(r"\(port ([0-9]+)\)", log)
+            w = re.search(r"\(monitor port ([0-9]+)\)", log)
+            if m and (w or not self.monitor):
                 self.port = int(m.group(1))
+                self.monitor_port = int(w.group(1)) if w else 0
                 return
             assert self.coordinator.proc.poll() is None, self.coordinator.log()
             time.sleep(0.02)
