@@ -143,6 +143,35 @@ TEST(Cli, BundleListsTheFilesASubmitUploadsWithTheirDigests) {
   EXPECT_EQ(test::run_command(cli("bundle scenes/no-such/scene.json")).exit_code, 2);
 }
 
+// The shipped glTF scene (scenes/gltf-still-life): its file is what its script writes, it
+// renders without one importer warning, its cube turns between frames, and a submit bundles the
+// texture beside it.
+TEST(Cli, TheShippedGltfSceneIsItsScriptsAndRendersWithoutWarnings) {
+  std::string dir = test::make_temp_dir("cli-gltf-scene");
+  const std::string src = test::source_dir() + "/scenes/gltf-still-life";
+  auto made = test::run_command("cd " + dir + " && python3 " + src + "/make_scene.py");
+  ASSERT_EQ(made.exit_code, 0) << made.output;
+  for (const char* f : {"scene.gltf", "checker.png"})
+    EXPECT_TRUE(read_file_bytes(dir + "/" + f) == read_file_bytes(src + "/" + f))
+        << f << " differs from what make_scene.py writes: run it again";
+  std::string images[2];
+  for (int i = 0; i < 2; ++i) {
+    const std::string out = dir + "/f" + std::to_string(i) + ".exr";
+    auto r = test::run_command(cli("render scenes/gltf-still-life/scene.gltf --res 48x32 --spp 4 "
+                                   "--passes 1 --frame " + std::to_string(4 * i) + " -o " + out));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_EQ(r.output.find("warn"), std::string::npos) << r.output;
+    images[i] = read_file_bytes(out.substr(0, out.size() - 4) + ".png");
+  }
+  EXPECT_TRUE(images[0] != images[1]) << "frame 4 turns the cube";
+  auto b = stdout_of("bundle scenes/gltf-still-life/scene.gltf --json");
+  ASSERT_EQ(b.exit_code, 0) << b.output;
+  std::set<std::string> paths;
+  const nlohmann::json bundle = nlohmann::json::parse(b.output);
+  for (const auto& f : bundle["files"]) paths.insert(f["path"]);
+  EXPECT_EQ(paths, (std::set<std::string>{"scene.gltf", "checker.png"}));
+}
+
 // The services' logs for a collector: --log-format json makes every line one JSON object (time,
 // level, msg); --log-level warn leaves the info lines out; a level that is not one is refused.
 TEST(Cli, ServicesLogJsonLinesAtTheLevelAsked) {
