@@ -432,7 +432,10 @@ class Coordinator {
 
   // The registered workers, by id. A caller without all_tenants sees other tenants' tasks as
   // "(another tenant's task)" and no principals.
-  std::vector<WorkerStatus> workers(const Caller& caller = {}) const;
+  // In worker id order; a page of at most `limit` after worker `after` (empty: the first), `more`
+  // set when workers follow it.
+  std::vector<WorkerStatus> workers(const Caller& caller = {}, size_t limit = SIZE_MAX,
+                                    const std::string& after = "", bool* more = nullptr) const;
 
   // Refuses leases and ends watches from now on.
   void shut_down();

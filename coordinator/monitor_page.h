@@ -43,6 +43,7 @@ inline constexpr const char* kMonitorHtml = R"html(<!DOCTYPE html>
 <table id="workers"><thead><tr><th>Worker</th><th>Host</th><th>Cores</th><th>Tags</th>
 <th>Current tasks</th><th>Failures</th><th>Last contact</th></tr></thead>
 <tbody></tbody></table>
+<p><button id="more-workers" hidden>More workers</button></p>
 </main>
 </body>
 </html>
@@ -81,6 +82,7 @@ inline constexpr const char* kMonitorJs = R"js(
 let csrf = "";
 let refreshTimer = null;
 let pages = 1;
+let workerPages = 1;
 let openJob = null;
 let framesShown = 12;
 const $ = (id) => document.getElementById(id);
@@ -204,10 +206,16 @@ async function refresh() {
     const tbody = $("jobs").tBodies[0];
     tbody.replaceChildren(...jobs.map(jobRow));
     $("more-jobs").hidden = !next;
-    const workers = await api("GET", "/api/workers");
-    $("workers").tBodies[0].replaceChildren(...workers.workers.map(workerRow));
-    $("status-line").textContent = jobs.length + " jobs, " + workers.workers.length +
-        " workers; updated " + new Date().toLocaleTimeString();
+    let workers = [], wafter = "", wpage = 0, wnext = null;
+    do {
+      const q = "/api/workers?limit=100" + (wafter ? "&after=" + encodeURIComponent(wafter) : "");
+      const data = await api("GET", q);
+      workers = workers.concat(data.workers); wnext = data.next_after; wafter = wnext; wpage++;
+    } while (wnext && wpage < workerPages);
+    $("workers").tBodies[0].replaceChildren(...workers.map(workerRow));
+    $("more-workers").hidden = !wnext;
+    $("status-line").textContent = jobs.length + (next ? "+" : "") + " jobs, " + workers.length +
+        (wnext ? "+" : "") + " workers; updated " + new Date().toLocaleTimeString();
     await refreshDetail();
   } catch (e) {
     if (e.message !== "logged out") $("status-line").textContent = "update failed: " + e.message;
@@ -323,6 +331,7 @@ async function start() {
     showLogin("");
   });
   $("more-jobs").addEventListener("click", () => { pages++; refresh(); });
+  $("more-workers").addEventListener("click", () => { workerPages++; refresh(); });
   $("more-frames").addEventListener("click", () => { framesShown += 12; refreshDetail(); });
   try {
     const res = await fetch("/api/session", { credentials: "same-origin" });

@@ -94,10 +94,18 @@ Registration Coordinator::register_worker(const WorkerInfo& w, const Caller& cal
   return r;
 }
 
-std::vector<WorkerStatus> Coordinator::workers(const Caller& caller) const {
+std::vector<WorkerStatus> Coordinator::workers(const Caller& caller, size_t limit,
+                                               const std::string& after, bool* more) const {
   std::lock_guard lock(mu_);
   std::vector<WorkerStatus> out;
-  for (const auto& [id, w] : workers_) {
+  if (more) *more = false;
+  for (auto it = after.empty() ? workers_.begin() : workers_.upper_bound(after);
+       it != workers_.end(); ++it) {
+    if (out.size() == limit) {
+      if (more) *more = true;
+      break;
+    }
+    const auto& [id, w] = *it;
     WorkerStatus s;
     s.worker_id = id;
     if (caller.all_tenants) s.principal = w.principal;

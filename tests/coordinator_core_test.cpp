@@ -347,6 +347,19 @@ TEST(CoordinatorCore, WorkersListTheirTasksFailuresAndLastContact) {
     EXPECT_TRUE(w.tasks.empty()) << w.worker_id;
     EXPECT_EQ(w.failures, 0) << "failures count in jobs not ended";
   }
+  // Pages (the monitor's): in id order, `more` while workers follow.
+  bench.worker("third");  // registers it
+  std::vector<WorkerStatus> all = bench.core().workers();
+  ASSERT_EQ(all.size(), 3u);
+  bool more = false;
+  std::vector<WorkerStatus> first = bench.core().workers({}, 2, "", &more);
+  ASSERT_EQ(first.size(), 2u);
+  EXPECT_TRUE(more);
+  EXPECT_EQ(first[0].worker_id, all[0].worker_id);
+  std::vector<WorkerStatus> rest = bench.core().workers({}, 2, first[1].worker_id, &more);
+  ASSERT_EQ(rest.size(), 1u);
+  EXPECT_FALSE(more);
+  EXPECT_EQ(rest[0].worker_id, all[2].worker_id);
 }
 
 // A task failing on max_failures (3) different workers fails its job with their messages, also

@@ -261,6 +261,37 @@ TEST(Monitor, ASessionEndsWithItsToken) {
   EXPECT_EQ(status_of(alice.login(a.token)), 401) << "the token itself has expired";
 }
 
+// With the gRPC port's TLS the monitor speaks HTTPS only, and its cookie is Secure.
+TEST(Monitor, UnderTlsItServesHttpsAndSecureCookies) {
+  std::string dir = make_temp_dir("monitor-tls");
+  CommandResult pki =
+      run_command("cd " + dir +
+                  " && openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 "
+                  "-nodes -keyout server.key -out server.pem -days 2 -subj /CN=localhost "
+                  "-addext subjectAltName=DNS:localhost,IP:127.0.0.1");
+  ASSERT_EQ(pki.exit_code, 0) << pki.output;
+  Token a = make_token(dir, "a", "--role client --tenant a");
+  write_token_file(dir + "/tokens", {&a});
+  Farm farm("monitor-tls", 30, dir + "/tokens",
+            {"--monitor-listen", "127.0.0.1:0", "--tls-cert", dir + "/server.pem", "--tls-key",
+             dir + "/server.key"});
+  const int port = monitor_port(farm.coordinator());
+  ASSERT_GT(port, 0);
+  EXPECT_NE(farm.coordinator().log().find("web monitor on https://"), std::string::npos);
+  httplib::SSLClient https("127.0.0.1", port);
+  https.set_ca_cert_path((dir + "/server.pem").c_str());
+  https.enable_server_certificate_verification(true);
+  auto in = https.Post("/api/login", nlohmann::json{{"token", a.token}}.dump(), "application/json");
+  ASSERT_EQ(status_of(in), 200) << (in ? "" : httplib::to_string(in.error()));
+  EXPECT_NE(in->get_header_value("Set-Cookie").find("; Secure"), std::string::npos)
+      << in->get_header_value("Set-Cookie");
+  httplib::Client plain("127.0.0.1", port);
+  plain.set_connection_timeout(5);
+  plain.set_read_timeout(5);
+  auto p = plain.Get("/api/jobs");
+  EXPECT_TRUE(!p || p->status != 200) << "plain HTTP on the HTTPS port";
+}
+
 // Without a token file: loopback only, no login, and only loopback Host names (a page of
 // another site reaching 127.0.0.1 through a DNS name of its own is refused).
 TEST(Monitor, WithoutATokenFileItIsLoopbackOnly) {
