@@ -74,3 +74,11 @@ for workers in 1 2; do
   kill "$COORD" 2>/dev/null || true
   wait "$COORD" 2>/dev/null || true
 done
+
+# 3. the web monitor's cost on the round trips above: 5 open pages against none, interleaved
+#    rounds (bench/monitor_bench.py; needs the client venv, tools/python-venv.sh build/pyvenv).
+if [ -x build/pyvenv/bin/python ]; then
+  RAYFARM_BIN="$B" build/pyvenv/bin/python bench/monitor_bench.py --skip-scale --rounds 4
+else
+  echo "monitor: no build/pyvenv (tools/python-venv.sh build/pyvenv); skipped"
+fi

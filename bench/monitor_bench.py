@@ -2,7 +2,7 @@
 """The web monitor's costs (docs/performance.md "Web monitor"), two benchmarks:
 
 1. overhead: lease + complete round trips per second of one worker on tiny tasks (8x8 pixels,
-   1 spp, as bench/farm_bench.sh) with no page open, against the same with N pages open and
+   1 spp, as bench/farm_bench.sh, which runs this part at its end) with no page open, against the same with N pages open and
    refreshing, in interleaved rounds (the order alternating), as a ratio with its standard
    error. A "page" is a client making the requests the monitor's page makes, at its cadence:
    every 2 s the jobs list (first page), the workers, the open job, its frame's history and,

@@ -11,6 +11,7 @@ void add_progress_option(CLI::App* c, std::string* progress) {
   c->add_option("--progress", *progress,
                 "text (default), or openjd: Open Job Description progress lines "
                 "(openjd_progress: PERCENT, openjd_status: TEXT) for job runners")
+      ->envname("RAYFARM_PROGRESS")
       ->check(CLI::IsMember({"text", "openjd"}));
 }
 
@@ -29,7 +30,9 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
     SubmitArgs submit;
     std::string job, fetch_dir, fetch_frames, retry_frames, requeue_scene, health_addr;
     bool json = false, services = false, force = false, wait = false;
-    std::string progress = "text";
+    // Each command its own: CLI11 writes $RAYFARM_PROGRESS into every command's unset
+    // --progress, parsed or not, so a shared one would let it overwrite a flag given.
+    std::string progress = "text", submit_progress = "text";
     StatusPage page;
     std::optional<FrameNumber> fetch_frame, logs_frame;
     std::string logs_task;
@@ -71,11 +74,11 @@ void add_client_commands(CLI::App& app, SharedOptions& shared, std::vector<Comma
   submit->add_flag("--json", a->json, "print {\"job_id\": ...}; with --wait, watch's JSON lines");
   submit->add_flag("--wait", a->wait,
                    "then watch the job until it ends (exit status as watch's: 0 completed)");
-  add_progress_option(submit, &a->progress);
+  add_progress_option(submit, &a->submit_progress);
   out.push_back({submit, [a, ep] {
                    a->submit.overrides = overrides_of(a->overrides);
                    std::optional<WatchOutput> wait;
-                   if (a->wait) wait = WatchOutput{a->json, a->progress == "openjd"};
+                   if (a->wait) wait = WatchOutput{a->json, a->submit_progress == "openjd"};
                    return cmd_submit(ep(), a->submit, a->json, wait);
                  }});
 

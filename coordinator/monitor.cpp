@@ -1,10 +1,10 @@
 #include "coordinator/monitor.h"
 
 #include <openssl/crypto.h>
-#include <openssl/rand.h>
 #include <spdlog/spdlog.h>
 
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <climits>
 #include <cmath>
@@ -26,18 +26,8 @@ namespace {
 
 constexpr const char* kCookie = "rayfarm_session";
 
-std::string random_hex(size_t bytes) {
-  std::string raw(bytes, '\0');
-  if (RAND_bytes(reinterpret_cast<unsigned char*>(raw.data()), int(bytes)) != 1)
-    throw std::runtime_error("monitor: cannot draw random bytes (OpenSSL RAND_bytes)");
-  static const char* hex = "0123456789abcdef";
-  std::string out;
-  for (unsigned char b : raw) {
-    out.push_back(hex[b >> 4]);
-    out.push_back(hex[b & 15]);
-  }
-  return out;
-}
+// 256 random bits as 64 hex digits (a token's, farm/auth.h, without its "rft_").
+std::string random_hex() { return new_token().substr(4); }
 
 bool equal_secret(const std::string& a, const std::string& b) {
   return a.size() == b.size() && CRYPTO_memcmp(a.data(), b.data(), a.size()) == 0;
@@ -45,20 +35,12 @@ bool equal_secret(const std::string& a, const std::string& b) {
 
 int64_t now_unix() { return int64_t(std::time(nullptr)); }
 
-const char* state_text(JobState s) {
-  switch (s) {
-    case JobState::Queued:
-      return "queued";
-    case JobState::Running:
-      return "running";
-    case JobState::Completed:
-      return "completed";
-    case JobState::Failed:
-      return "failed";
-    case JobState::Cancelled:
-      return "cancelled";
-  }
-  return "unknown";
+// "queued", "running", ... as the CLI's --json spells them ("JOB_QUEUED" without its prefix).
+std::string state_text(JobState s) {
+  std::string name = job_state_name(s);
+  name = name.substr(name.rfind('_') + 1);
+  for (char& c : name) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return name;
 }
 
 nlohmann::json frame_json(const FrameStatus& f) {
@@ -274,8 +256,8 @@ struct Monitor::Impl {
   }
 
   Session new_session(const Caller& caller, bool admin, int64_t expires, std::string* id) {
-    Session s{caller, random_hex(16), expires, admin};
-    *id = random_hex(32);
+    Session s{caller, random_hex().substr(0, 32), expires, admin};  // CSRF: 128 bits
+    *id = random_hex();
     std::lock_guard lock(mu);
     if (sessions.size() >= o.max_sessions) {
       const int64_t now = now_unix();

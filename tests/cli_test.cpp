@@ -242,6 +242,21 @@ TEST(Cli, FlagsComeFromTheCommandLineThenTheConfigFileThenTheEnvironment) {
   EXPECT_FALSE(logs_json("RAYFARM_LOG_FORMAT=json", config, "--log-format text"))
       << "the command line over both";
   EXPECT_TRUE(logs_json("RAYFARM_LOG_FORMAT=text", "", "--log-format json"));
+
+  // An output flag from the environment: $RAYFARM_PROGRESS=openjd for a job runner's renders,
+  // and a --progress given still wins.
+  auto render = [&](const std::string& env, const std::string& flags) {
+    return test::run_command("{ " + env + " " + test::rayfarm_binary() + " render " +
+                             test::source_dir() + "/" + kScene +
+                             " --res 8x8 --spp 2 --passes 2 --no-png -o " + dir + "/p.exr " +
+                             flags + " 2>/dev/null; }")
+        .output;
+  };
+  EXPECT_NE(render("RAYFARM_PROGRESS=openjd", "").find("openjd_progress: 100.0"),
+            std::string::npos);
+  EXPECT_EQ(render("RAYFARM_PROGRESS=openjd", "--progress text").find("openjd_"),
+            std::string::npos);
+  EXPECT_EQ(render("", "").find("openjd_"), std::string::npos);
 }
 
 TEST(Cli, PartialRendersMergeToTheFullRender) {

@@ -62,6 +62,29 @@ struct Browser {
 
 int status_of(const httplib::Result& r) { return r ? r->status : -1; }
 
+// A coordinator with a monitor and a token file of two client tenants, a and b, and a worker;
+// client commands use a's token, workers w's.
+struct TwoTenants {
+  explicit TwoTenants(const std::string& tag)
+      : dir(make_temp_dir(tag)),
+        a(make_token(dir, "a", "--role client --tenant a")),
+        b(make_token(dir, "b", "--role client --tenant b")),
+        w(make_token(dir, "w", "--role worker --tenant farm")),
+        farm(tag, 30, token_file(dir, {&a, &b, &w}), {"--monitor-listen", "127.0.0.1:0"}),
+        port(monitor_port(farm.coordinator())) {
+    farm.client_token_file = a.file;
+    farm.worker_token_file = w.file;
+  }
+  static std::string token_file(const std::string& dir, const std::vector<const Token*>& tokens) {
+    write_token_file(dir + "/tokens", tokens);
+    return dir + "/tokens";
+  }
+  std::string dir;
+  Token a, b, w;
+  Farm farm;
+  int port;
+};
+
 std::vector<std::string> job_ids(const httplib::Result& r) {
   std::vector<std::string> ids;
   if (!r || r->status != 200) return ids;
@@ -71,14 +94,10 @@ std::vector<std::string> job_ids(const httplib::Result& r) {
 }
 
 TEST(Monitor, SessionsCookiesCsrfAndTenants) {
-  std::string dir = make_temp_dir("monitor-auth");
-  Token a = make_token(dir, "a", "--role client --tenant a");
-  Token b = make_token(dir, "b", "--role client --tenant b");
-  Token w = make_token(dir, "w", "--role worker --tenant farm");
-  write_token_file(dir + "/tokens", {&a, &b, &w});
-  Farm farm("monitor", 30, dir + "/tokens", {"--monitor-listen", "127.0.0.1:0"});
-  farm.client_token_file = a.file;
-  const int port = monitor_port(farm.coordinator());
+  TwoTenants t("monitor-auth");
+  Farm& farm = t.farm;
+  const Token &a = t.a, &b = t.b, &w = t.w;
+  const int port = t.port;
   ASSERT_GT(port, 0);
   const std::string job = farm.submit(kCornell + " --spp 4 --passes 2 --res 16x16 --require gpu");
 
@@ -166,15 +185,11 @@ TEST(Monitor, SessionsCookiesCsrfAndTenants) {
 // the cache's), changes as passes land, and the history has a point per prefix with the noise
 // target beside it.
 TEST(Monitor, PreviewsFollowThePassesAndAreCachedAndTheHistoryHasEveryPrefix) {
-  std::string dir = make_temp_dir("monitor-preview");
-  Token a = make_token(dir, "a", "--role client --tenant a");
-  Token b = make_token(dir, "b", "--role client --tenant b");
-  Token w = make_token(dir, "w", "--role worker --tenant farm");
-  write_token_file(dir + "/tokens", {&a, &b, &w});
-  Farm farm("monitor-preview", 30, dir + "/tokens", {"--monitor-listen", "127.0.0.1:0"});
-  farm.client_token_file = a.file;
-  farm.worker_token_file = w.file;
-  Browser alice(monitor_port(farm.coordinator()));
+  TwoTenants t("monitor-preview");
+  Farm& farm = t.farm;
+  const Token &a = t.a, &b = t.b;
+  const std::string& dir = t.dir;
+  Browser alice(t.port);
   ASSERT_EQ(status_of(alice.login(a.token)), 200);
   const std::string job =
       farm.submit(kCornell + " --spp 512 --passes 16 --res 192x128 --noise-target 0.0001");

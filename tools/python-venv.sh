@@ -15,7 +15,7 @@ VENV="${1:-$ROOT/build/pyvenv}"
 PYOIDN=pyoidn==2.5.1.0
 log() { printf 'python-venv: %s\n' "$*" >&2; }
 
-"$ROOT/tools/install-debian-packages.sh" python3-venv python3-grpcio \
+"$ROOT/tools/install-debian-packages.sh" python3-venv python3-setuptools python3-wheel python3-grpcio \
   python3-protobuf python3-numpy python3-pytest python3-openimageio python3-cffi \
   protobuf-compiler protobuf-compiler-grpc chromium chromium-driver python3-selenium
 

@@ -75,18 +75,28 @@ def log_in(driver, farm, tenant):
     wait_for("the jobs table", lambda: driver.find_element(By.ID, "app").is_displayed())
 
 
+# The page rebuilds its tables every 2 s: each look and each click is one script, so no element
+# found in one call goes stale before the next.
 def row_state(driver, job_id):
-    rows = driver.find_elements(By.ID, "job-" + job_id)
-    return rows[0].get_attribute("data-state") if rows else None
+    return driver.execute_script(
+        "const r = document.getElementById('job-' + arguments[0]);"
+        "return r ? r.dataset.state : null;", job_id)
+
+
+def click(driver, selector):
+    """Clicks the element the selector finds now; False when there is none."""
+    return driver.execute_script(
+        "const e = document.querySelector(arguments[0]); if (!e) return false;"
+        "e.click(); return true;", selector)
 
 
 def preview_digest(driver):
     """The SHA-256 of the preview image the page shows, fetched by the page itself (with its
     session cookie), and its URL."""
-    imgs = driver.find_elements(By.CSS_SELECTOR, "img.preview")
-    if not imgs:
+    src = driver.execute_script(
+        "const i = document.querySelector('img.preview'); return i ? i.src : null;")
+    if not src:
         return None
-    src = imgs[0].get_attribute("src")
     data = driver.execute_async_script(
         "const done = arguments[arguments.length - 1];"
         "fetch(arguments[0], {credentials: 'same-origin'}).then(r => r.arrayBuffer())"
@@ -107,7 +117,7 @@ def test_browser_monitor(monitor_farm, browser, tmp_path):
 
     log_in(browser, farm, "a")
     wait_for("the job's row", lambda: row_state(browser, job.id))
-    browser.find_element(By.CSS_SELECTOR, f"#job-{job.id} button.link").click()
+    assert click(browser, f"#job-{job.id} button.link")
     first = wait_for("a preview", lambda: preview_digest(browser), timeout=60)
     assert job.status().frames[0].passes_merged < 16, "the job ended before it could be watched"
     # The preview changes as passes land (a new URL, a new image).
@@ -126,10 +136,7 @@ def test_browser_monitor(monitor_farm, browser, tmp_path):
     second = client.submit(CORNELL, spp=4, passes=2, resolution=(8, 8), tags=["gpu"],
                            name="to-cancel")
     wait_for("the second job's row", lambda: row_state(browser, second.id) == "queued")
-    cancel = [b for b in browser.find_elements(By.CSS_SELECTOR, f"#job-{second.id} button")
-              if b.get_attribute("data-op") == "cancel"]
-    assert cancel, "no Cancel button"
-    cancel[0].click()
+    assert click(browser, f"#job-{second.id} button[data-op=cancel]"), "no Cancel button"
     wait_for("the cancel", lambda: second.status().state == "cancelled", 30)
     wait_for("the page to show it", lambda: row_state(browser, second.id) == "cancelled", 30)
 
