@@ -174,15 +174,26 @@ TEST(Cli, TheShippedGltfSceneIsItsScriptsAndRendersWithoutWarnings) {
 
 // The services' logs for a collector: --log-format json makes every line one JSON object (time,
 // level, msg); --log-level warn leaves the info lines out; a level that is not one is refused.
+// A service's output: `command` (environment assignments first, if any) started, then stopped
+// with SIGTERM once its output holds `until` (at most 60 s: a sanitizer build on a loaded
+// machine starts slowly), or after 1.5 s when `until` is empty.
+test::CommandResult service_output(const std::string& command, const std::string& until,
+                                   const std::string& log) {
+  const std::string wait = until.empty()
+                               ? "sleep 1.5"
+                               : "for i in $(seq 600); do grep -qF '" + until + "' " + log +
+                                     " && break; kill -0 $p 2>/dev/null || break; sleep 0.1; done";
+  return test::run_command("{ " + command + " > " + log + " 2>&1 & p=$!; " + wait +
+                           "; kill $p; wait $p; cat " + log + "; }");
+}
+
 TEST(Cli, ServicesLogJsonLinesAtTheLevelAsked) {
   std::string dir = test::make_temp_dir("cli-logs");
-  // Started, given 1.5 s, then stopped (SIGTERM); its stderr is the output.
-  auto run_for_a_while = [&](const std::string& args) {
-    return test::run_command("{ " + test::rayfarm_binary() + " " + args +
-                             " & sleep 1.5; kill $!; wait; }");
+  auto run_for_a_while = [&](const std::string& args, const std::string& until) {
+    return service_output(test::rayfarm_binary() + " " + args, until, dir + "/out.log");
   };
-  auto json = run_for_a_while("coordinator --listen 127.0.0.1:0 --state-dir " + dir +
-                              "/a --log-format json");
+  auto json = run_for_a_while(
+      "coordinator --listen 127.0.0.1:0 --state-dir " + dir + "/a --log-format json", "listening");
   std::istringstream lines(json.output);
   std::string line;
   int parsed = 0;
@@ -193,8 +204,8 @@ TEST(Cli, ServicesLogJsonLinesAtTheLevelAsked) {
   }
   EXPECT_GE(parsed, 2) << json.output;
   EXPECT_NE(json.output.find("coordinator listening on"), std::string::npos) << json.output;
-  auto quiet = run_for_a_while("coordinator --listen 127.0.0.1:0 --state-dir " + dir +
-                               "/b --log-level warn");
+  auto quiet = run_for_a_while(
+      "coordinator --listen 127.0.0.1:0 --state-dir " + dir + "/b --log-level warn", "");
   EXPECT_EQ(quiet.output.find("listening"), std::string::npos) << quiet.output;
   EXPECT_EQ(test::run_command(cli("worker --log-level loud")).exit_code, 2);
 }
@@ -227,10 +238,10 @@ TEST(Cli, FlagsComeFromTheCommandLineThenTheConfigFileThenTheEnvironment) {
   int run = 0;
   auto logs_json = [&](const std::string& env, const std::string& args,
                        const std::string& flags = "") {
-    auto r =
-        test::run_command("{ " + env + " " + test::rayfarm_binary() + " " + args +
-                          " coordinator --listen 127.0.0.1:0 --state-dir " + dir + "/s" +
-                          std::to_string(run++) + " " + flags + " & sleep 1.5; kill $!; wait; }");
+    auto r = service_output(env + " " + test::rayfarm_binary() + " " + args +
+                                " coordinator --listen 127.0.0.1:0 --state-dir " + dir + "/s" +
+                                std::to_string(run++) + " " + flags,
+                            "listening", dir + "/out.log");
     EXPECT_NE(r.output.find("listening"), std::string::npos) << r.output;
     return r.output.rfind("{\"level\":\"info\"", 0) == 0;
   };
