@@ -274,14 +274,14 @@ FrameImage Coordinator::fetch(const std::string& job_id, FrameNumber frame,
   return image;
 }
 
-std::vector<ProgressPoint> Coordinator::frame_history(const std::string& job_id, FrameNumber frame,
-                                                      const Caller& caller) const {
+FrameHistory Coordinator::frame_history(const std::string& job_id, FrameNumber frame,
+                                        const Caller& caller) const {
   std::lock_guard lock(mu_);
   std::shared_ptr<JobRecord> job = find_for(job_id, caller);
   auto it = job->by_number.find(frame);
   if (it == job->by_number.end())
     refuse(ErrorCode::NotFound, "job " + job->id + " has no frame " + std::to_string(frame));
-  return it->second->history;
+  return {frame_status(*job, *it->second), job->noise_target, it->second->history};
 }
 
 FrameImage::File::~File() {

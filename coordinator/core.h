@@ -72,6 +72,13 @@ struct ProgressPoint {
 };
 inline constexpr size_t kHistoryPoints = 128;
 
+// One frame of a job, without the job's other frames (the monitor's preview and plot).
+struct FrameHistory {
+  FrameStatus status;
+  double noise_target = 0;  // the job's (0: none)
+  std::vector<ProgressPoint> points;
+};
+
 struct JobStatus {
   std::string job_id, name;
   std::string tenant;    // whose job it is
@@ -368,10 +375,11 @@ class Coordinator {
                const std::optional<SceneVersion>& scene, const std::string& request_id = "",
                const Caller& caller = {});
   FrameImage fetch(const std::string& job_id, FrameNumber frame, const Caller& caller = {}) const;
-  // A frame's noise over time in this run of the coordinator: a point each time its merged
-  // prefix grew (at most kHistoryPoints, thinned evenly as it grows), for the monitor's plot.
-  std::vector<ProgressPoint> frame_history(const std::string& job_id, FrameNumber frame,
-                                           const Caller& caller = {}) const;
+  // A frame's status and its noise over time in this run of the coordinator: a point each time
+  // its merged prefix grew (at most kHistoryPoints, thinned evenly as it grows), for the
+  // monitor's plot. NotFound for a frame the job lacks.
+  FrameHistory frame_history(const std::string& job_id, FrameNumber frame,
+                             const Caller& caller = {}) const;
 
   // ---- Workers. A worker id is issued by register_worker and bound to the caller's principal
   // (stored, so it outlives a restart); every later call naming it must come from the same

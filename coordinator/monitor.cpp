@@ -58,8 +58,9 @@ nlohmann::json frame_json(const FrameStatus& f) {
           {"run", f.run}};
 }
 
-// A job as the page lists it; `frames` adds every frame (the job's own page).
-nlohmann::json job_json(const JobStatus& j, bool frames) {
+// A job as the page lists it; with `frames`, its first `frames` frames too (the job's own page,
+// which shows a dozen at a time: a job of 10,000 frames is not sent whole every 2 s).
+nlohmann::json job_json(const JobStatus& j, size_t frames = 0) {
   uint64_t merged = 0, total = 0;
   int done = 0;
   double eta = 0, worst = 0;
@@ -96,7 +97,8 @@ nlohmann::json job_json(const JobStatus& j, bool frames) {
                         {"waiting_for", j.waiting_for}};
   if (frames) {
     nlohmann::json list = nlohmann::json::array();
-    for (const FrameStatus& f : j.frames) list.push_back(frame_json(f));
+    for (size_t i = 0; i < j.frames.size() && i < frames; ++i)
+      list.push_back(frame_json(j.frames[i]));
     out["frames"] = std::move(list);
     out["held_frames"] = frame_range_text(j.held);
     out["noise_target"] = j.noise_target > 0 ? nlohmann::json(j.noise_target) : nullptr;
@@ -125,18 +127,6 @@ int http_status(ErrorCode c) {
     default:
       return 500;
   }
-}
-
-// The host part of a Host header or listen address, without port or brackets.
-std::string host_of(const std::string& host_port) {
-  std::string h = host_port;
-  if (!h.empty() && h.front() == '[') return h.substr(1, h.find(']') - 1);
-  if (h.find(':') != h.rfind(':')) return h;  // a bare IPv6 address
-  return h.substr(0, h.rfind(':') == std::string::npos ? h.size() : h.rfind(':'));
-}
-
-bool loopback_host(const std::string& host) {
-  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
 }
 
 // A frame's preview: one PNG per (frame, merged prefix), rebuilt at most every
@@ -298,13 +288,9 @@ struct Monitor::Impl {
   std::shared_ptr<const std::string> preview(const Caller& caller, const std::string& job,
                                              FrameNumber frame, bool* built) {
     *built = false;
-    JobStatus status = core.status(job, caller);  // NOT_FOUND and tenants, as everywhere
-    const FrameStatus* f = nullptr;
-    for (const FrameStatus& s : status.frames)
-      if (s.frame == frame) f = &s;
-    if (!f)
-      throw CoordinatorError(ErrorCode::NotFound,
-                             "job " + job + " has no frame " + std::to_string(frame));
+    // The frame alone (NOT_FOUND and tenants as everywhere), not the job's every frame.
+    const FrameStatus status = core.frame_history(job, frame, caller).status;
+    const FrameStatus* f = &status;  // (the history's points, at most 128, come along)
     if (f->progress.passes_merged == 0)
       throw CoordinatorError(ErrorCode::FailedPrecondition,
                              "frame " + std::to_string(frame) + " has no complete pass yet");
@@ -426,7 +412,7 @@ struct Monitor::Impl {
         bool more = false;
         std::vector<JobStatus> jobs = core.list(ses.caller, limit, after, &more);
         nlohmann::json list = nlohmann::json::array();
-        for (const JobStatus& j : jobs) list.push_back(job_json(j, false));
+        for (const JobStatus& j : jobs) list.push_back(job_json(j));
         return nlohmann::json{
             {"jobs", std::move(list)},
             {"next_after", more && !jobs.empty() ? nlohmann::json(jobs.back().job_id) : nullptr}};
@@ -435,7 +421,16 @@ struct Monitor::Impl {
     s.Get(R"(/api/jobs/([A-Za-z0-9_.-]{1,64}))",
           [this](const httplib::Request& req, httplib::Response& res) {
             api(req, res, [&](const Session& ses) {
-              return job_json(core.status(req.matches[1], ses.caller), true);
+              // ?frames=N: the first N frames (default 1000, at most 100,000).
+              size_t frames = 1000;
+              if (req.has_param("frames")) {
+                try {
+                  frames = std::clamp<size_t>(std::stoul(req.get_param_value("frames")), 1, 100000);
+                } catch (const std::exception&) {
+                  throw CoordinatorError(ErrorCode::InvalidArgument, "frames: not a number");
+                }
+              }
+              return job_json(core.status(req.matches[1], ses.caller), frames);
             });
           });
     s.Get(R"(/api/jobs/([A-Za-z0-9_.-]{1,64})/frames/(-?[0-9]{1,10})/preview\.png)",
@@ -460,14 +455,14 @@ struct Monitor::Impl {
             api(req, res, [&](const Session& ses) {
               const std::string id = req.matches[1];
               const FrameNumber frame = frame_of(req.matches[2]);
+              const FrameHistory h = core.frame_history(id, frame, ses.caller);
               nlohmann::json points = nlohmann::json::array();
-              for (const ProgressPoint& p : core.frame_history(id, frame, ses.caller))
+              for (const ProgressPoint& p : h.points)
                 points.push_back(
                     {p.unix_time, p.passes,
                      p.passes >= 2 && p.rel_mse > 0 ? nlohmann::json(p.rel_mse) : nullptr});
-              JobStatus j = core.status(id, ses.caller);
               return nlohmann::json{
-                  {"noise_target", j.noise_target > 0 ? nlohmann::json(j.noise_target) : nullptr},
+                  {"noise_target", h.noise_target > 0 ? nlohmann::json(h.noise_target) : nullptr},
                   {"points", std::move(points)}};
             });
           });
@@ -482,7 +477,7 @@ struct Monitor::Impl {
                else
                  core.retry(id, "", ses.caller);
                spdlog::info("monitor: {} {} job {}", ses.caller.principal, op, id);
-               return job_json(core.status(id, ses.caller), false);
+               return job_json(core.status(id, ses.caller));
              });
            });
     s.Get("/api/workers", [this](const httplib::Request& req, httplib::Response& res) {

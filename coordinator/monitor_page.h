@@ -288,7 +288,8 @@ async function frameCard(job, f) {
 async function refreshDetail() {
   if (!openJob) return;
   try {
-    const job = await api("GET", "/api/jobs/" + encodeURIComponent(openJob));
+    const job = await api("GET", "/api/jobs/" + encodeURIComponent(openJob) + "?frames=" +
+        (framesShown + 1));
     $("detail").hidden = false;
     $("detail-title").textContent = job.job_id + " " + job.name;
     $("detail-line").textContent = job.state + ", scene " + job.scene_path +
@@ -307,7 +308,7 @@ async function refreshDetail() {
       cards.push(card);
     }
     $("frames").replaceChildren(...cards);
-    $("more-frames").hidden = job.frames.length <= framesShown;
+    $("more-frames").hidden = job.frames_total <= framesShown;
   } catch (e) {
     if (e.message !== "logged out") $("detail-line").textContent = "update failed: " + e.message;
   }

@@ -796,16 +796,6 @@ class WorkerServiceImpl final : public pb::WorkerService::Service {
   std::map<std::string, int> uploads_;
 };
 
-// Whether a listen address only reaches this machine: 127.0.0.0/8, ::1, localhost, a Unix
-// socket.
-bool loopback_only(const std::string& listen) {
-  if (listen.rfind("unix:", 0) == 0 || listen.rfind("unix-abstract:", 0) == 0) return true;
-  std::string host = listen.substr(0, listen.rfind(':'));
-  if (host.size() >= 2 && host.front() == '[' && host.back() == ']')
-    host = host.substr(1, host.size() - 2);
-  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
-}
-
 }  // namespace
 
 struct CoordinatorServer::Impl {
@@ -829,7 +819,7 @@ struct CoordinatorServer::Impl {
 CoordinatorServer::CoordinatorServer(const CoordinatorOptions& o)
     : impl_(std::make_unique<Impl>()) {
   if (o.state_dir.empty()) throw std::runtime_error("coordinator: --state-dir is required");
-  if (o.token_file.empty() && !loopback_only(o.listen))
+  if (o.token_file.empty() && !loopback_listen(o.listen))
     throw std::runtime_error(
         "coordinator: refusing to listen on " + o.listen +
         " without --token-file: anyone who reaches it could submit, cancel and upload results. "

@@ -152,6 +152,22 @@ std::string token_file_line(const std::string& token, Role role, const std::stri
   return line;
 }
 
+std::string host_of(const std::string& host_port) {
+  const std::string& h = host_port;
+  if (!h.empty() && h.front() == '[') return h.substr(1, h.find(']') - 1);
+  if (h.find(':') != h.rfind(':')) return h;  // a bare IPv6 address
+  return h.substr(0, h.rfind(':') == std::string::npos ? h.size() : h.rfind(':'));
+}
+
+bool loopback_host(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
+bool loopback_listen(const std::string& listen) {
+  if (listen.rfind("unix:", 0) == 0 || listen.rfind("unix-abstract:", 0) == 0) return true;
+  return loopback_host(host_of(listen));
+}
+
 std::string token_id(std::string_view token) { return "t:" + sha256_hex(token).substr(0, 12); }
 
 std::string client_token(const std::string& token_file) {

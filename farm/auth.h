@@ -75,6 +75,13 @@ std::string format_utc_time(int64_t unix_seconds);
 // "t:" + the first 12 hex digits of the token's SHA-256 (Principal::id).
 std::string token_id(std::string_view token);
 
+// Where a coordinator without a token file may listen (its gRPC port and its monitor): a host
+// that only reaches this machine (127.0.0.0/8, ::1, localhost), `host_of` an address or a Host
+// header ("HOST:PORT", "[V6]:PORT", "HOST"); `loopback_listen` also takes Unix sockets.
+std::string host_of(const std::string& host_port);
+bool loopback_host(const std::string& host);
+bool loopback_listen(const std::string& listen);
+
 // The token a client or worker sends: the file given (--token-file), else $RAYFARM_TOKEN_FILE,
 // else $RAYFARM_TOKEN, else none (""). Surrounding whitespace is dropped. Throws
 // std::runtime_error naming the file when it cannot be read or holds no token.

@@ -134,6 +134,17 @@ TEST(Monitor, SessionsCookiesCsrfAndTenants) {
   auto detail = alice.get("/api/jobs/" + job);
   ASSERT_EQ(status_of(detail), 200);
   EXPECT_EQ(nlohmann::json::parse(detail->body)["frames"].size(), 1u);
+  // A job's page asks for the frames it shows: the first N of them.
+  const std::string range = farm.submit(kCornell +
+                                        " --spp 4 --passes 2 --res 16x16 --frames "
+                                        "1-5 --require gpu");
+  auto three = alice.get("/api/jobs/" + range + "?frames=3");
+  ASSERT_EQ(status_of(three), 200);
+  nlohmann::json shown = nlohmann::json::parse(three->body);
+  EXPECT_EQ(shown["frames"].size(), 3u);
+  EXPECT_EQ(shown["frames_total"], 5);
+  EXPECT_EQ(shown["frames"][2]["frame"], 3);
+  EXPECT_EQ(status_of(alice.get("/api/jobs/" + range + "?frames=x")), 400);
   Browser bob(port);
   ASSERT_EQ(status_of(bob.login(b.token)), 200);
   EXPECT_TRUE(job_ids(bob.get("/api/jobs")).empty());

@@ -40,8 +40,7 @@ def monitor_farm():
     if not BINARY or not os.access(BINARY, os.X_OK):
         pytest.skip("RAYFARM_BINARY is not set to the rayfarm binary")
     root = tempfile.mkdtemp(prefix="rayfarm-browser-")
-    f = LocalFarm(root, monitor=True)
-    f.worker()
+    f = LocalFarm(root, monitor=True)  # workers are the test's
     yield f
     f.stop()
     shutil.rmtree(root, ignore_errors=True)
@@ -107,8 +106,13 @@ def preview_digest(driver):
 def test_browser_monitor(monitor_farm, browser, tmp_path):
     farm = monitor_farm
     client = farm.client("a")
-    # Long enough to be seen mid-way: 16 passes of about half a second on two cores.
-    job = client.submit(CORNELL, spp=512, passes=16, resolution=(192, 128), name="browser-test")
+    # Seen mid-way for sure: a first worker renders 4 of the 16 passes (a task is a whole pass:
+    # one tile) and exits; a second one renders the rest while the page watches.
+    job = client.submit(CORNELL, spp=512, passes=16, resolution=(192, 128), tile_size=256,
+                        name="browser-test")
+    first_worker = farm.worker("--max-tasks", "4")
+    first_worker.proc.wait(120)
+    assert job.status().frames[0].passes_merged == 4, first_worker.log()
 
     # The API needs the session cookie.
     with pytest.raises(urllib.error.HTTPError) as refused:
@@ -119,7 +123,8 @@ def test_browser_monitor(monitor_farm, browser, tmp_path):
     wait_for("the job's row", lambda: row_state(browser, job.id))
     assert click(browser, f"#job-{job.id} button.link")
     first = wait_for("a preview", lambda: preview_digest(browser), timeout=60)
-    assert job.status().frames[0].passes_merged < 16, "the job ended before it could be watched"
+    assert "passes=4&" in first[0], first[0]
+    farm.worker()
     # The preview changes as passes land (a new URL, a new image).
     changed = wait_for("a newer preview",
                        lambda: (lambda d: d if d and d[1] != first[1] else None)(
