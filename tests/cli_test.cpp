@@ -176,15 +176,17 @@ TEST(Cli, TheShippedGltfSceneIsItsScriptsAndRendersWithoutWarnings) {
 // level, msg); --log-level warn leaves the info lines out; a level that is not one is refused.
 // A service's output: `command` (environment assignments first, if any) started, then stopped
 // with SIGTERM once its output holds `until` (at most 60 s: a sanitizer build on a loaded
-// machine starts slowly), or after 1.5 s when `until` is empty.
+// machine starts slowly), or after 1.5 s when `until` is empty. The log is removed first (an
+// earlier run's 'listening' must not end this one) and grep -s is quiet until the started shell
+// has made it (its "No such file" went into the output, which must be the service's alone).
 test::CommandResult service_output(const std::string& command, const std::string& until,
                                    const std::string& log) {
   const std::string wait = until.empty()
                                ? "sleep 1.5"
-                               : "for i in $(seq 600); do grep -qF '" + until + "' " + log +
+                               : "for i in $(seq 600); do grep -qsF '" + until + "' " + log +
                                      " && break; kill -0 $p 2>/dev/null || break; sleep 0.1; done";
-  return test::run_command("{ " + command + " > " + log + " 2>&1 & p=$!; " + wait +
-                           "; kill $p; wait $p; cat " + log + "; }");
+  return test::run_command("{ rm -f " + log + "; " + command + " > " + log + " 2>&1 & p=$!; " +
+                           wait + "; kill $p; wait $p; cat " + log + "; }");
 }
 
 TEST(Cli, ServicesLogJsonLinesAtTheLevelAsked) {
