@@ -64,7 +64,9 @@ class ProgressPrinter {
     if (p.tasks_total == 0) return;
     double frac = double(p.tasks_done) / double(p.tasks_total);
     if (openjd_) {  // whatever --quiet says: a job runner reads these
-      double percent = std::floor(1000.0 * (double(index_) + frac) / double(count_)) / 10;
+      // A frame stopped early (noise target, time budget) is a frame done.
+      double percent =
+          std::floor(1000.0 * (double(index_) + (p.finished ? 1.0 : frac)) / double(count_)) / 10;
       if (percent != last_percent_) std::printf("openjd_progress: %.1f\n", percent);
       std::fflush(stdout);
       last_percent_ = percent;
@@ -72,7 +74,7 @@ class ProgressPrinter {
     }
     if (quiet_) return;
     // The time per task so far, over the tasks left (a noise target may stop sooner).
-    const std::string eta = p.tasks_done == p.tasks_total ? "done"
+    const std::string eta = p.finished ? "done"
                             : frac > 0 ? "ETA " + duration_text(p.seconds * (1 - frac) / frac)
                                        : "ETA ?";
     if (tty_) {
@@ -81,10 +83,8 @@ class ProgressPrinter {
       bar.append(size_t(width - filled), '.');
       std::fprintf(stderr, "\r[%s] %5.1f%%  passes %u/%u  relMSE %.3g  %.1f s  %s   ", bar.c_str(),
                    100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds, eta.c_str());
-      if (p.tasks_done == p.tasks_total) std::fprintf(stderr, "\n");
-    } else if (p.seconds - last_line_ >= 5.0 || p.tasks_done == p.tasks_total) {
-      if (p.tasks_done == p.tasks_total && done_printed_) return;
-      done_printed_ = p.tasks_done == p.tasks_total;
+      if (p.finished) std::fprintf(stderr, "\n");
+    } else if (p.seconds - last_line_ >= 5.0 || p.finished) {
       last_line_ = p.seconds;
       std::fprintf(stderr, "progress: %.1f%% tasks, passes %u/%u, relMSE %.3g, %.1f s, %s\n",
                    100 * frac, p.passes_merged, p.passes_total, p.rel_mse, p.seconds, eta.c_str());
@@ -95,7 +95,6 @@ class ProgressPrinter {
   bool quiet_, openjd_, tty_;
   size_t index_, count_;
   double last_line_ = -1e9, last_percent_ = -1;
-  bool done_printed_ = false;
 };
 
 std::string png_path_for(const std::string& exr) {

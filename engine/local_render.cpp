@@ -42,13 +42,14 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   std::mutex mu;
   std::condition_variable cv;
   bool finished = false;
-  auto report = [&] {
+  auto report = [&](bool last) {
     LocalProgress p;
     {
       std::lock_guard<std::mutex> lock(mu);
       p = prog;
     }
     p.tasks_done = tasks_done.load();
+    p.finished = last;
     p.seconds = std::chrono::duration<double>(clock::now() - start).count();
     if (opt.progress) opt.progress(p);
   };
@@ -65,7 +66,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
       if (finished) break;
       lock.unlock();
       if (over_budget()) renderer.request_stop();
-      report();
+      report(false);
       lock.lock();
     }
   });
@@ -112,7 +113,12 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   }
   cv.notify_all();
   monitor.join();
-  report();
+  {
+    std::lock_guard<std::mutex> lock(mu);  // the last pass's merge, and a stop's early end
+    prog.passes_merged = acc.passes_merged();
+    prog.rel_mse = acc.rel_mse_history().empty() ? 0 : acc.rel_mse_history().back();
+  }
+  report(true);
 
   LocalRenderResult res;
   if (acc.tiled()) {

@@ -20,6 +20,10 @@ struct LocalProgress {
   uint32_t passes_merged = 0, passes_total = 0;
   double rel_mse = 0;
   double seconds = 0;
+  // The last report, after the frame's last merge (all passes, or a stop on the noise target or
+  // the time budget). Before it, tasks_done may already equal tasks_total while the last pass's
+  // merge is still under way.
+  bool finished = false;
 };
 
 struct LocalRenderOptions {

@@ -12,6 +12,7 @@
 
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <set>
 #include <sstream>
 
@@ -170,6 +171,38 @@ TEST(Cli, TheShippedGltfSceneIsItsScriptsAndRendersWithoutWarnings) {
   const nlohmann::json bundle = nlohmann::json::parse(b.output);
   for (const auto& f : bundle["files"]) paths.insert(f["path"]);
   EXPECT_EQ(paths, (std::set<std::string>{"scene.gltf", "checker.png"}));
+}
+
+// The text progress's last line is the frame's end, after its last merge: "passes 4/4 ... done"
+// for a full render, and for one stopped on its noise target the passes of that stop. Before,
+// a report made between the last task and its merge printed "100% ... passes 3/4 ... done" and
+// the true end was never printed; a stop on the target printed no end at all.
+TEST(Cli, TheLastProgressLineIsTheFramesEnd) {
+  std::string dir = test::make_temp_dir("cli-progress");
+  auto last_progress = [](const std::string& output) {
+    std::istringstream lines(output);
+    std::string line, last;
+    while (std::getline(lines, line))
+      if (line.rfind("progress: ", 0) == 0) last = line;
+    return last;
+  };
+  auto full = test::run_command(
+      cli("render " + kScene + " -o " + dir + "/full.exr --res 32x32 --spp 8 --passes 4 --no-png"));
+  ASSERT_EQ(full.exit_code, 0) << full.output;
+  std::string end = last_progress(full.output);
+  EXPECT_NE(end.find("passes 4/4,"), std::string::npos) << full.output;
+  EXPECT_NE(end.find(", done"), std::string::npos) << full.output;
+  auto target = test::run_command(
+      cli("render " + kScene + " -o " + dir +
+          "/target.exr --res 32x32 --spp 1024 --passes 256 --noise-target 0.05 --no-png"));
+  ASSERT_EQ(target.exit_code, 0) << target.output;
+  std::smatch stop;
+  ASSERT_TRUE(std::regex_search(target.output, stop,
+                                std::regex("noise target \\S+ reached after (\\d+) of 256")))
+      << target.output;
+  end = last_progress(target.output);
+  EXPECT_NE(end.find("passes " + stop[1].str() + "/256,"), std::string::npos) << target.output;
+  EXPECT_NE(end.find(", done"), std::string::npos) << target.output;
 }
 
 // The services' logs for a collector: --log-format json makes every line one JSON object (time,
