@@ -375,6 +375,14 @@ nlohmann::json to_json(const pb::JobStatus& j) {
           {"frames", frames}};
 }
 
+// Core-seconds as shown: two significant digits below 10 (a small job is not "0"), whole
+// seconds above.
+std::string core_seconds_text(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, v < 10 ? "%.2g" : "%.0f", v);
+  return buf;
+}
+
 std::string job_line(const pb::JobStatus& j) {
   int done = 0;
   uint64_t merged = 0, total = 0;
@@ -395,11 +403,11 @@ std::string job_line(const pb::JobStatus& j) {
                                        : std::string(state_name(j.state()));
   char buf[512];
   std::snprintf(buf, sizeof buf,
-                "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %.0f core-s  "
+                "%-10s %-20s %-10s frames %d/%d  passes %llu/%llu  relMSE<=%.3g  %s core-s  "
                 "priority %d  ETA %s",
                 printable(j.job_id()).c_str(), printable(j.name()).c_str(), state.c_str(), done,
                 j.frames_size(), (unsigned long long)merged, (unsigned long long)total, worst,
-                j.core_seconds(), j.priority(),
+                core_seconds_text(j.core_seconds()).c_str(), j.priority(),
                 j.paused()                                                      ? "paused"
                 : j.state() == pb::JOB_COMPLETED                                ? "0s"
                 : j.state() == pb::JOB_FAILED || j.state() == pb::JOB_CANCELLED ? "-"
@@ -527,10 +535,9 @@ class WatchPrinter {
                               .dump()
                               .c_str());
     } else {
-      std::string text =
-          state == pb::JOB_COMPLETED
-              ? "completed (" + std::to_string(std::lround(core_seconds)) + " core-s)"
-              : std::string(state_name(state)) + (error.empty() ? "" : ": ") + error;
+      std::string text = state == pb::JOB_COMPLETED
+                             ? "completed (" + core_seconds_text(core_seconds) + " core-s)"
+                             : std::string(state_name(state)) + (error.empty() ? "" : ": ") + error;
       std::printf("%sjob %s %s\n", o_.openjd ? "openjd_status: " : "", job_.c_str(), text.c_str());
     }
     std::fflush(stdout);

@@ -369,6 +369,15 @@ TEST(Farm, SubmitWaitAndWatchSpeakJsonAndOpenJobDescription) {
   EXPECT_NE(o.output.find("openjd_progress: 100.0\n"), std::string::npos) << o.output;
   EXPECT_NE(o.output.find("openjd_status: job " + job + " completed"), std::string::npos)
       << o.output;
+  // The text end line's core-seconds: a small job's are not "0" (two significant digits).
+  test::CommandResult text = farm.client_stdout("watch " + job);
+  std::smatch end;
+  ASSERT_TRUE(std::regex_search(text.output, end,
+                                std::regex("job " + job + " completed \\(([0-9.e-]+) core-s\\)")))
+      << text.output;
+  const double core_seconds = farm.status(job)["core_seconds"].get<double>();
+  ASSERT_GT(core_seconds, 0);
+  EXPECT_NEAR(std::stod(end[1].str()), core_seconds, 0.05 * core_seconds) << text.output;
 
   const std::string one = farm.submit(kCornell + " --spp 4 --passes 1 --res 16x16");
   test::CommandResult w = farm.client_stdout("watch " + one);
