@@ -3,9 +3,10 @@
 # (-DRAYFARM_SANITIZE=address,undefined) and libFuzzer instrumentation (-DRAYFARM_FUZZ=ON), in
 # build-san/, that serves both
 #   1. the unit and farm tests, except the statistical ones (SLOW below: convergence and
-#      chi-square tests, whose code the fast tests run too and which would take most of an hour
-#      under the sanitizers), with the CLI, coordinator and worker processes the farm tests start
-#      instrumented as well; a sanitizer report fails the test that triggered it;
+#      chi-square tests, furnace series, motion blur's means of stills; their code the fast
+#      tests run too, and they would take most of an hour under the sanitizers), with the
+#      CLI, coordinator and worker processes the farm tests start instrumented as well; a
+#      sanitizer report fails the test that triggered it;
 #   2. the fuzz targets (fuzz/run.sh, run on the same build).
 #
 #   tests/sanitize.sh            build, run the tests, then fuzz/run.sh
@@ -25,7 +26,7 @@ log() { printf 'sanitize: %s\n' "$*" >&2; }
 SLOW='^(Bdpt|HarnessCornell|HarnessCornellDepth|LightBvh|DirectIntegrator|ProgressivePhotonMapping|'
 SLOW+='FilterTest|BsdfEnergy|BsdfSampling|RoughConductor|RelMse|CornellBox|InstantRadiosity|'
 SLOW+='Furnace|WhiteFurnace|SamplerTest|LightSampling|Integrators|PathTracer)\.|'
-SLOW+='Agree|Converge|MatchesTheReference|ImageMeansMatch'
+SLOW+='Agree|Converge|MatchesTheReference|ImageMeansMatch|MeanOfStills|^AlbedoDepth/Furnace\.'
 
 # clang and libFuzzer from Debian (the bootstrap of ./rayfarm installed everything else).
 "$ROOT/tools/install-debian-packages.sh" clang libfuzzer-14-dev
