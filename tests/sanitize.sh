@@ -12,8 +12,8 @@
 #   tests/sanitize.sh            build, run the tests, then fuzz/run.sh
 #   tests/sanitize.sh --no-fuzz  build and run the tests only
 #
-# Budget on the 2-core CI machine (figures in docs/reliability.md): about 11 minutes to build
-# from scratch, 11 to run the tests, 2 to 3 to fuzz; under 35 minutes in all (24.5 measured).
+# Budget on the 2-core CI machine (figures in docs/reliability.md): about 14 minutes to build
+# from scratch, 13 to run the tests, 1.5 to fuzz; under 35 minutes in all (28.5 measured).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${RAYFARM_SANITIZE_BUILD_DIR:-$ROOT/build-san}"
