@@ -53,6 +53,12 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
     p.seconds = std::chrono::duration<double>(clock::now() - start).count();
     if (opt.progress) opt.progress(p);
   };
+  // The merged prefix's figures, for the reports that follow.
+  auto note_merged = [&] {
+    std::lock_guard<std::mutex> lock(mu);
+    prog.passes_merged = acc.passes_merged();
+    prog.rel_mse = acc.rel_mse_history().empty() ? 0 : acc.rel_mse_history().back();
+  };
   // Over the time budget, the tasks in flight are stopped where they are (a pass may be long),
   // and the passes they belong to are dropped: the image is the prefix completed before.
   auto over_budget = [&] {
@@ -94,9 +100,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
         stopped_on_time = true;
         break;
       }
-      std::lock_guard<std::mutex> lock(mu);
-      prog.passes_merged = acc.passes_merged();
-      prog.rel_mse = acc.rel_mse_history().empty() ? 0 : acc.rel_mse_history().back();
+      note_merged();
     }
   } catch (...) {
     {
@@ -113,11 +117,7 @@ LocalRenderResult render_local(const Renderer& renderer, const LocalRenderOption
   }
   cv.notify_all();
   monitor.join();
-  {
-    std::lock_guard<std::mutex> lock(mu);  // the last pass's merge, and a stop's early end
-    prog.passes_merged = acc.passes_merged();
-    prog.rel_mse = acc.rel_mse_history().empty() ? 0 : acc.rel_mse_history().back();
-  }
+  note_merged();  // the last pass's merge, and a stop's early end
   report(true);
 
   LocalRenderResult res;
