@@ -285,11 +285,16 @@ class SimulatedWorker {
   }
 
   // Renders the task (renewing its lease meanwhile unless told not to); the encoded buffer.
+  // Serially, as the one core each simulated worker registers with: hundreds of threads that
+  // each start TBB anew (this async thread) collapse into TBB's spin-and-yield waits on 2 cores
+  // (1,600 to 110 tasks/s within 30 s, two thirds of the CPU in libtbb and sched_yield; the
+  // soak of CI failed on it once). The image is the same bit for bit
+  // (Determinism.WholeFrameEqualsTilesBitForBit).
   std::string render(const pb::Task& task, bool renew) {
     std::shared_ptr<const rf::Renderer> renderer = scenes_.get(task, *stub_);
     rf::Rect rect = rf::from_wire(task.rect());
     auto done = std::async(std::launch::async, [&] {
-      return renderer->render(rf::TaskKey{task.frame(), rect, task.pass()}, true);
+      return renderer->render(rf::TaskKey{task.frame(), rect, task.pass()}, /*parallel=*/false);
     });
     while (done.wait_for(std::chrono::duration<double>(keepalive_seconds_)) !=
            std::future_status::ready) {
